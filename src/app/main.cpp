@@ -1,0 +1,78 @@
+// hpray command line: parses arguments, dispatches to a subcommand, maps errors to exit codes.
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <exception>
+
+#include "app/commands.h"
+#include "util/error.h"
+#include "util/log.h"
+#include "util/mpi.h"
+
+int main(int argc, char** argv) {
+    using namespace hpray;
+    mpi::Session session(&argc, &argv);
+
+    CLI::App cli{"hpray: pixel-exact, distributed rendering of finite element data"};
+    cli.require_subcommand(1);
+    bool verbose = false, quiet = false;
+    cli.add_flag("-v,--verbose", verbose, "print debug messages");
+    cli.add_flag("-q,--quiet", quiet, "print errors only");
+
+    app::InfoArgs info;
+    auto* infoCmd = cli.add_subcommand("info", "summarise a mesh, builtin or partition");
+    infoCmd->add_option("mesh", info.mesh, "mesh file, builtin:NAME or partition directory")
+        ->required();
+    infoCmd->add_flag("--json", info.json, "print JSON");
+
+    app::ProbeArgs probe;
+    auto* probeCmd = cli.add_subcommand("probe", "evaluate fields at points");
+    probeCmd->add_option("mesh", probe.mesh, "mesh file or builtin:NAME")->required();
+    probeCmd->add_option("--points", probe.pointsCsv, "CSV file, one x,y,z per line")
+        ->required();
+    probeCmd->add_option("--fields", probe.fields, "fields to evaluate (default: all)")
+        ->delimiter(',');
+    probeCmd->add_flag("--gradient", probe.gradient, "also report world gradients");
+    probeCmd->add_flag("--json", probe.json, "print JSON");
+
+    app::RenderArgs render;
+    auto* renderCmd = cli.add_subcommand("render", "render a scene");
+    renderCmd->add_option("scene", render.scene, "scene YAML file")->required();
+    renderCmd->add_option("--set", render.overrides, "override a scene key: key.path=value");
+
+    app::PartitionArgs part;
+    auto* partCmd = cli.add_subcommand("partition", "split a mesh into k-d bricks");
+    partCmd->add_option("mesh", part.mesh, "mesh file")->required();
+    partCmd->add_option("--bricks", part.bricks, "number of bricks")->required();
+    partCmd->add_option("--out", part.outDir, "output directory")->required();
+    partCmd->add_option("--memory-limit", part.memoryLimit, "e.g. 512M, 4G");
+    partCmd->add_option("--fields", part.fields, "fields to keep")->delimiter(',');
+
+    try {
+        cli.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        int code = cli.exit(e);
+        return code == 0 ? 0 : 2;
+    }
+    log::SetLevel(quiet ? log::Level::Error : verbose ? log::Level::Debug : log::Level::Info);
+
+    try {
+        if (*infoCmd) return app::RunInfo(info);
+        if (*probeCmd) return app::RunProbe(probe);
+        if (*renderCmd) return app::RunRender(render);
+        if (*partCmd) return app::RunPartition(part);
+        return 2;
+    } catch (const InputError& e) {
+        log::Error(e.what());
+        if (mpi::WorldSize() > 1) mpi::Abort(e.what(), 2);
+        return 2;
+    } catch (const std::bad_alloc&) {
+        log::Error("out of memory");
+        if (mpi::WorldSize() > 1) mpi::Abort("out of memory", 1);
+        return 1;
+    } catch (const std::exception& e) {
+        log::Error(std::string("internal error: ") + e.what());
+        if (mpi::WorldSize() > 1) mpi::Abort(e.what(), 1);
+        return 1;
+    }
+}

@@ -1,0 +1,19 @@
+// Writing meshes as VTK XML UnstructuredGrid (.vtu), appended raw binary.
+#pragma once
+
+#include <string>
+
+#include "mesh/mesh.h"
+
+namespace hpray {
+
+/// Writes `mesh` as a .vtu (VTK file version 2.2, appended raw binary, UInt64 header,
+/// Float64 points and fields, Int64 connectivity/offsets, UInt8 types). Lagrange cells are
+/// written as VTK 71-74 (with HigherOrderDegrees), serendipity cells as VTK 25-27, linear
+/// cells as 71-74 of order 1 as well, so the file reads back into the same internal order.
+/// `mesh.ghost`, when non-empty, is written as the cell array vtkGhostType (UInt8).
+/// The file is written to `path + ".tmp"` and renamed, so readers never see a partial file.
+/// Throws InputError(path) if it cannot be written.
+void WriteVtu(const std::string& path, const Mesh& mesh);
+
+}  // namespace hpray
