@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
 
     CLI::App cli{"hpray: pixel-exact, distributed rendering of finite element data"};
     cli.require_subcommand(1);
+    cli.fallthrough();  // -v and -q may follow the subcommand
     bool verbose = false, quiet = false;
     cli.add_flag("-v,--verbose", verbose, "print debug messages");
     cli.add_flag("-q,--quiet", quiet, "print errors only");
