@@ -1,1 +1,329 @@
-// Placeholder: implementation in progress.
+// Image channels, the sRGB curve, and NumPy .npy (float64) reading and writing.
+#include "io/image.h"
+
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include "io/output_file.h"
+#include "util/check.h"
+#include "util/error.h"
+
+namespace hpray {
+
+void Image::Resize(int w, int h) {
+    HPRAY_CHECK_GE(w, 0);
+    HPRAY_CHECK_GE(h, 0);
+    width = w;
+    height = h;
+    const std::size_t n = PixelCount();
+    const double inf = std::numeric_limits<double>::infinity();
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    r.assign(n, 0.0);
+    g.assign(n, 0.0);
+    b.assign(n, 0.0);
+    a.assign(n, 0.0);
+    z.assign(n, inf);
+    nx.assign(n, 0.0);
+    ny.assign(n, 0.0);
+    nz.assign(n, 0.0);
+    isoResidual.assign(n, nan);
+    isoId.assign(n, -1.0);
+    volError.assign(n, 0.0);
+}
+
+std::vector<std::pair<std::string, std::vector<double>*>> Image::Channels() {
+    return {{"R", &r},
+            {"G", &g},
+            {"B", &b},
+            {"A", &a},
+            {"Z", &z},
+            {"N.X", &nx},
+            {"N.Y", &ny},
+            {"N.Z", &nz},
+            {"iso.residual", &isoResidual},
+            {"iso.id", &isoId},
+            {"vol.error", &volError}};
+}
+
+std::vector<std::pair<std::string, const std::vector<double>*>> Image::Channels() const {
+    return {{"R", &r},
+            {"G", &g},
+            {"B", &b},
+            {"A", &a},
+            {"Z", &z},
+            {"N.X", &nx},
+            {"N.Y", &ny},
+            {"N.Z", &nz},
+            {"iso.residual", &isoResidual},
+            {"iso.id", &isoId},
+            {"vol.error", &volError}};
+}
+
+double LinearToSrgb(double linear) {
+    // NaN compares false everywhere; map it to black rather than propagate into 8 bits.
+    if (!(linear > 0.0)) return 0.0;
+    if (linear >= 1.0) return 1.0;
+    if (linear <= 0.0031308) return 12.92 * linear;
+    return 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+}
+
+// ---------------------------------------------------------------------------------------
+// NumPy .npy
+// ---------------------------------------------------------------------------------------
+namespace {
+
+constexpr char kNpyMagic[] = "\x93NUMPY";
+constexpr std::size_t kNpyMagicLen = 6;
+constexpr std::size_t kNpyAlign = 64;
+// numpy >= 1.24 leaves room for the first axis to grow to this many digits.
+constexpr std::size_t kNpyGrowthDigits = 21;
+
+std::string ShapeRepr(const std::vector<std::size_t>& shape) {
+    // Python's repr of a tuple: "()", "(7,)", "(3, 4, 5)".
+    std::string s = "(";
+    for (std::size_t k = 0; k < shape.size(); ++k) {
+        if (k > 0) s += ", ";
+        s += std::to_string(shape[k]);
+    }
+    if (shape.size() == 1) s += ",";
+    return s + ")";
+}
+
+bool IsLittleEndianHost() {
+    const std::uint16_t one = 1;
+    unsigned char first = 0;
+    std::memcpy(&first, &one, 1);
+    return first == 1;
+}
+
+/// A minimal reader of the Python dict literal numpy writes as the .npy header.
+class NpyHeaderParser {
+  public:
+    NpyHeaderParser(const std::string& path, const std::string& text)
+        : path_(path), text_(text) {}
+
+    void Parse(std::string& descr, bool& fortranOrder, std::vector<std::size_t>& shape) {
+        bool haveDescr = false, haveOrder = false, haveShape = false;
+        Expect('{');
+        while (true) {
+            SkipSpace();
+            if (Peek() == '}') break;
+            const std::string key = ParseString();
+            Expect(':');
+            SkipSpace();
+            if (key == "descr") {
+                descr = ParseString();
+                haveDescr = true;
+            } else if (key == "fortran_order") {
+                fortranOrder = ParseBool();
+                haveOrder = true;
+            } else if (key == "shape") {
+                shape = ParseTuple();
+                haveShape = true;
+            } else {
+                Fail("unexpected key '" + key + "'");
+            }
+            SkipSpace();
+            if (Peek() == ',') {
+                ++pos_;
+                continue;
+            }
+            SkipSpace();
+            if (Peek() != '}') Fail("expected ',' or '}'");
+        }
+        if (!haveDescr || !haveOrder || !haveShape)
+            Fail("header lacks one of 'descr', 'fortran_order', 'shape'");
+    }
+
+  private:
+    [[noreturn]] void Fail(const std::string& what) const {
+        throw InputError(path_, "byte " + std::to_string(10 + pos_),
+                         "malformed .npy header: " + what);
+    }
+    char Peek() const { return pos_ < text_.size() ? text_[pos_] : '\0'; }
+    void SkipSpace() {
+        while (pos_ < text_.size() &&
+               std::isspace(static_cast<unsigned char>(text_[pos_])))
+            ++pos_;
+    }
+    void Expect(char c) {
+        SkipSpace();
+        if (Peek() != c) Fail(std::string("expected '") + c + "'");
+        ++pos_;
+    }
+    std::string ParseString() {
+        SkipSpace();
+        const char quote = Peek();
+        if (quote != '\'' && quote != '"') Fail("expected a quoted string");
+        const std::size_t end = text_.find(quote, pos_ + 1);
+        if (end == std::string::npos) Fail("unterminated string");
+        std::string s = text_.substr(pos_ + 1, end - pos_ - 1);
+        pos_ = end + 1;
+        return s;
+    }
+    bool ParseBool() {
+        if (text_.compare(pos_, 4, "True") == 0) {
+            pos_ += 4;
+            return true;
+        }
+        if (text_.compare(pos_, 5, "False") == 0) {
+            pos_ += 5;
+            return false;
+        }
+        Fail("expected True or False");
+    }
+    std::vector<std::size_t> ParseTuple() {
+        std::vector<std::size_t> out;
+        Expect('(');
+        while (true) {
+            SkipSpace();
+            if (Peek() == ')') {
+                ++pos_;
+                return out;
+            }
+            if (!std::isdigit(static_cast<unsigned char>(Peek())))
+                Fail("expected a size");
+            std::size_t value = 0;
+            while (std::isdigit(static_cast<unsigned char>(Peek()))) {
+                const std::size_t digit = static_cast<std::size_t>(Peek() - '0');
+                if (value > (std::numeric_limits<std::size_t>::max() - digit) / 10)
+                    Fail("size too large");
+                value = value * 10 + digit;
+                ++pos_;
+            }
+            out.push_back(value);
+            SkipSpace();
+            if (Peek() == ',') {
+                ++pos_;
+            } else if (Peek() != ')') {
+                Fail("expected ',' or ')'");
+            }
+        }
+    }
+
+    const std::string& path_;
+    const std::string& text_;
+    std::size_t pos_ = 0;
+};
+
+}  // namespace
+
+void WriteNpy(const std::string& path, const std::vector<double>& data,
+              const std::vector<std::size_t>& shape) {
+    std::size_t count = 1;
+    for (std::size_t extent : shape) count *= extent;
+    HPRAY_CHECK_EQ(count, data.size());
+    HPRAY_CHECK(IsLittleEndianHost());
+
+    // Byte for byte what numpy.save writes for a C-order float64 array (format 1.0).
+    std::string dict =
+        "{'descr': '<f8', 'fortran_order': False, 'shape': " + ShapeRepr(shape) + ", }";
+    if (!shape.empty()) {
+        const std::size_t digits = std::to_string(shape[0]).size();
+        if (digits < kNpyGrowthDigits) dict.append(kNpyGrowthDigits - digits, ' ');
+    }
+    const std::size_t withNewline = dict.size() + 1;
+    const std::size_t pad = kNpyAlign - (kNpyMagicLen + 4 + withNewline) % kNpyAlign;
+    const std::size_t headerLen = withNewline + pad;
+    if (headerLen > 0xffff)
+        throw InputError(path, "", "array has too many dimensions for .npy format 1.0");
+    std::string header(kNpyMagic, kNpyMagicLen);
+    header += '\x01';
+    header += '\x00';
+    header += static_cast<char>(headerLen & 0xff);
+    header += static_cast<char>((headerLen >> 8) & 0xff);
+    header += dict;
+    header.append(pad, ' ');
+    header += '\n';
+
+    const std::string tmp = detail::BeginOutputFile(path);
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (out) {
+            out.write(header.data(), static_cast<std::streamsize>(header.size()));
+            out.write(reinterpret_cast<const char*>(data.data()),
+                      static_cast<std::streamsize>(data.size() * sizeof(double)));
+            out.flush();
+        }
+        if (!out) {
+            detail::AbandonOutputFile(tmp);
+            throw InputError(path, "", "cannot write '" + tmp + "'");
+        }
+    }
+    detail::CommitOutputFile(tmp, path);
+}
+
+std::vector<double> ReadNpy(const std::string& path, std::vector<std::size_t>& shape) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path, "", "cannot open file");
+    in.seekg(0, std::ios::end);
+    const std::streamoff fileSize = in.tellg();
+    in.seekg(0, std::ios::beg);
+    if (fileSize < 10) throw InputError(path, "byte 0", "too short for a .npy file");
+
+    unsigned char prefix[10];
+    in.read(reinterpret_cast<char*>(prefix), 10);
+    if (std::memcmp(prefix, kNpyMagic, kNpyMagicLen) != 0)
+        throw InputError(path, "byte 0", "not a .npy file (bad magic)");
+    const int major = prefix[6];
+    std::size_t headerLen = 0;
+    std::size_t prefixLen = 10;
+    if (major == 1) {
+        headerLen = prefix[8] | (static_cast<std::size_t>(prefix[9]) << 8);
+    } else if (major == 2 || major == 3) {
+        unsigned char more[2];
+        if (fileSize < 12) throw InputError(path, "byte 8", "truncated header length");
+        in.read(reinterpret_cast<char*>(more), 2);
+        headerLen = prefix[8] | (static_cast<std::size_t>(prefix[9]) << 8) |
+                    (static_cast<std::size_t>(more[0]) << 16) |
+                    (static_cast<std::size_t>(more[1]) << 24);
+        prefixLen = 12;
+    } else {
+        throw InputError(path, "byte 6",
+                         "unsupported .npy version " + std::to_string(major));
+    }
+    const std::size_t size = static_cast<std::size_t>(fileSize);
+    if (headerLen > size - prefixLen)
+        throw InputError(path, "byte 8", "header length exceeds the file size");
+    std::string headerText(headerLen, '\0');
+    in.read(headerText.data(), static_cast<std::streamsize>(headerLen));
+    if (!in) throw InputError(path, "byte 10", "cannot read header");
+
+    std::string descr;
+    bool fortranOrder = false;
+    std::vector<std::size_t> parsedShape;
+    NpyHeaderParser(path, headerText).Parse(descr, fortranOrder, parsedShape);
+    if (descr != "<f8")
+        throw InputError(path, "header", "dtype '" + descr + "' is not '<f8' (float64)");
+    if (fortranOrder)
+        throw InputError(path, "header", "Fortran-order arrays unsupported");
+    HPRAY_CHECK(IsLittleEndianHost());
+
+    // Validate the declared size against the bytes actually present before allocating.
+    const std::size_t available = size - prefixLen - headerLen;
+    std::size_t count = 1;
+    for (std::size_t extent : parsedShape) {
+        if (extent != 0 && count > available / sizeof(double) / extent)
+            throw InputError(
+                path, "header",
+                "shape " + ShapeRepr(parsedShape) + " exceeds the file size");
+        count *= extent;
+    }
+    if (count * sizeof(double) != available)
+        throw InputError(path, "header",
+                         "shape " + ShapeRepr(parsedShape) + " needs " +
+                             std::to_string(count * sizeof(double)) +
+                             " data bytes, file has " + std::to_string(available));
+    std::vector<double> data(count);
+    in.read(reinterpret_cast<char*>(data.data()),
+            static_cast<std::streamsize>(count * sizeof(double)));
+    if (!in) throw InputError(path, "data", "cannot read array data");
+    shape = std::move(parsedShape);
+    return data;
+}
+
+}  // namespace hpray
