@@ -1,0 +1,46 @@
+// Legendre series on an interval: Legendre–Gauss–Lobatto nodes, interpolation, evaluation.
+#pragma once
+
+#include <vector>
+
+namespace hpray {
+
+/// The n + 1 Legendre–Gauss–Lobatto nodes on [-1, 1] (ascending, endpoints exact) and their
+/// quadrature weights. Cached per n; thread-safe. 1 <= n <= kMaxLegendreDegree.
+struct LglRule {
+    std::vector<double> nodes;
+    std::vector<double> weights;
+    /// pk[i * (n + 1) + k] = P_k(nodes[i]): the interpolation transform's matrix.
+    std::vector<double> legendreAtNodes;
+};
+inline constexpr int kMaxLegendreDegree = 64;
+const LglRule& LglNodes(int n);
+
+/// A polynomial of degree coeffs.size() - 1 on [a, b], p(t) = sum_k c_k P_k(x(t)) with
+/// x = (2t - a - b) / (b - a) in [-1, 1].
+struct LegendreSeries {
+    double a = 0, b = 1;
+    std::vector<double> c;
+
+    int Degree() const { return static_cast<int>(c.size()) - 1; }
+    /// Clenshaw evaluation at t (any t; accurate on [a, b]).
+    double operator()(double t) const;
+    /// p(t) and dp/dt.
+    void Eval(double t, double& value, double& derivative) const;
+    /// sum_{k>=1} |c_k|: |p(t) - c_0| <= Tail() on [a, b] since |P_k| <= 1 there.
+    double Tail() const;
+    /// The derivative dp/dt as a series of degree n - 1 on the same interval.
+    LegendreSeries Derivative() const;
+};
+
+/// Interpolates `values` at the n + 1 LGL nodes of [a, b] (values[i] at node i) exactly by
+/// the degree-n Legendre series (discrete Legendre transform with the Lobatto correction
+/// of the last coefficient).
+LegendreSeries InterpolateLgl(const double* values, int n, double a, double b);
+
+/// Re-expands `p` on the sub-interval [lo, hi] (same degree), by evaluating it at the LGL
+/// nodes of [lo, hi]. `scratch` is caller-owned and resized as needed.
+LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,
+                        std::vector<double>& scratch);
+
+}  // namespace hpray

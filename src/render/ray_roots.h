@@ -1,0 +1,298 @@
+// Root finding along a ray segment: adaptive Legendre projection of the true field, root
+// isolation that cannot miss the nearest root, and polishing on the true field.
+//
+// The guarantee. On each piece [a, b] the projection p satisfies |f - p| <= eps (eps is
+// measured: the trailing Legendre coefficients plus the largest discrepancy between f and p
+// at check points between the interpolation nodes, times a safety factor). Isolation
+// discards a sub-interval only when its Legendre re-expansion proves |p - C| > eps there
+// (|P_k| <= 1), so f - C has no root in it. A bracket is accepted only where |p - C| > eps
+// at both ends with opposite signs, which proves a sign change of f - C, and is then
+// polished by TOMS 748 on the true field. The guarantee ends where f - C stays within eps
+// of zero without changing sign (tangency within the tolerance): such a window shrinks to
+// the root tolerance and is reported as a tangent hit when |f - C| there is within the
+// tangent tolerance, else it is a root failure (counted, never silent).
+#pragma once
+
+#include <boost/math/tools/toms748_solve.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "render/legendre.h"
+
+namespace hpray {
+
+struct ProjectionOptions {
+    /// Relative tolerance of the projection against the field's scale on the piece.
+    double tolerance = 1e-12;
+    /// Degree used when the field is a polynomial of known degree along the ray (affine
+    /// cells): the interpolant is then exact. <= 0: choose adaptively.
+    int exactDegree = 0;
+    int startDegree = 8;
+    int maxDegree = 48;
+    /// Pieces are halved when maxDegree does not reach the tolerance, down to this length.
+    int maxSplits = 6;
+};
+
+/// A projected piece of the segment: p approximates f on [p.a, p.b] with |f - p| <= eps.
+struct ProjectedPiece {
+    LegendreSeries p;
+    double eps = 0;
+    bool converged = true;
+};
+
+struct ProjectionStats {
+    std::int64_t evaluations = 0;
+    int maxDegree = 0;
+    double degreeSum = 0;
+    int pieces = 0;
+    int unconverged = 0;
+};
+
+struct RootOptions {
+    /// Stop polishing when the bracket is below this fraction of the segment length.
+    double rootTolerance = 1e-14;
+    /// A tangent (double) root is accepted where |f - C| <= this + the piece's eps.
+    double tangentTolerance = 0;
+};
+
+enum class RootKind : std::uint8_t { None = 0, Simple = 1, Tangent = 2 };
+
+struct RootResult {
+    RootKind kind = RootKind::None;
+    double t = std::numeric_limits<double>::infinity();
+    double residual = std::numeric_limits<double>::quiet_NaN();  ///< |f(t) - C|, true field
+    int failures = 0;  ///< windows that could be neither excluded nor resolved
+};
+
+namespace detail {
+/// Candidate windows of p - C on [p.a, p.b], in increasing t. `visit(lo, hi, kind, tStar)`
+/// returns true to stop. Kinds: 1 a proven sign change (|p - C| > eps at both ends,
+/// opposite signs, p monotone); 2 a tangency within eps at the extremum tStar; 3 a monotone
+/// window with an end tStar within eps of C; 4 an unresolved window of width <= minWidth.
+template <typename Visit>
+void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth,
+                  std::vector<double>& scratch, Visit&& visit);
+
+double TailExcluded(const LegendreSeries& q, double C);
+}  // namespace detail
+
+/// Projects f on [a, b] into pieces (ordered, covering [a, b]). `f(t)` returns the true
+/// field at ray parameter t. Pieces' samples are LGL nodes of each piece.
+template <typename F>
+void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
+                    std::vector<ProjectedPiece>& pieces, ProjectionStats& stats,
+                    std::vector<double>& scratch);
+
+/// The first root of f - C in [a, b] given its projection `pieces`, polished on the true
+/// field f. Never skips a root that changes sign by more than the projection error.
+template <typename F>
+RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
+                     const RootOptions& options, std::vector<double>& scratch);
+
+// ---------------------------------------------------------------------------------------
+// Implementation.
+
+template <typename F>
+void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
+                    std::vector<ProjectedPiece>& pieces, ProjectionStats& stats,
+                    std::vector<double>& scratch) {
+    pieces.clear();
+    if (!(b > a)) return;
+    struct Work {
+        double lo, hi;
+        int depth;
+    };
+    // Depth-first, left first, so pieces come out ordered.
+    Work stack[64];
+    int top = 0;
+    stack[top++] = {a, b, 0};
+    while (top > 0) {
+        const Work w = stack[--top];
+        const double mid = 0.5 * (w.lo + w.hi), half = 0.5 * (w.hi - w.lo);
+        auto sample = [&](int n) {
+            const LglRule& rule = LglNodes(n);
+            scratch.resize(n + 1);
+            for (int i = 0; i <= n; ++i) scratch[i] = f(mid + half * rule.nodes[i]);
+            stats.evaluations += n + 1;
+            return InterpolateLgl(scratch.data(), n, w.lo, w.hi);
+        };
+        ProjectedPiece piece;
+        if (options.exactDegree > 0) {
+            const int n = std::min(options.exactDegree, kMaxLegendreDegree);
+            piece.p = sample(n);
+            // The interpolant is exact up to rounding in the samples and the transform.
+            double scale = 0;
+            for (double v : scratch) scale = std::max(scale, std::abs(v));
+            piece.eps = 64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
+        } else {
+            int n = options.startDegree;
+            for (;;) {
+                piece.p = sample(n);
+                double scale = 0;
+                for (double v : scratch) scale = std::max(scale, std::abs(v));
+                const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
+                const double floor =
+                    64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
+                if (tail <= options.tolerance * scale || n >= options.maxDegree) {
+                    // Measure: f against p halfway between interpolation nodes.
+                    const LglRule& rule = LglNodes(n);
+                    double discrepancy = 0;
+                    for (int i = 0; i < n; i += std::max(1, n / 4)) {
+                        const double x = 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
+                        const double t = mid + half * x;
+                        discrepancy = std::max(discrepancy, std::abs(f(t) - piece.p(t)));
+                        ++stats.evaluations;
+                    }
+                    piece.eps = 2 * std::max({tail, discrepancy, floor});
+                    piece.converged = tail <= options.tolerance * scale;
+                    break;
+                }
+                n = std::min(2 * n, options.maxDegree);
+            }
+            if (!piece.converged && w.depth < options.maxSplits && top + 2 <= 64) {
+                stack[top++] = {mid, w.hi, w.depth + 1};
+                stack[top++] = {w.lo, mid, w.depth + 1};
+                continue;
+            }
+        }
+        stats.maxDegree = std::max(stats.maxDegree, piece.p.Degree());
+        stats.degreeSum += piece.p.Degree();
+        stats.pieces += 1;
+        stats.unconverged += !piece.converged;
+        pieces.push_back(std::move(piece));
+    }
+}
+
+namespace detail {
+
+/// The single root of a series whose derivative keeps one sign on [lo, hi], given
+/// opposite signs at the ends.
+inline double PolishSeriesRoot(const LegendreSeries& q, double lo, double hi, double vlo,
+                               double vhi, double minWidth) {
+    auto tol = [&](double x, double y) { return std::abs(y - x) <= minWidth; };
+    std::uintmax_t iterations = 200;
+    auto r = boost::math::tools::toms748_solve([&](double t) { return q(t); }, lo, hi, vlo, vhi,
+                                               tol, iterations);
+    return 0.5 * (r.first + r.second);
+}
+
+template <typename Visit>
+void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth,
+                  std::vector<double>& scratch, Visit&& visit) {
+    struct Work {
+        LegendreSeries q;
+        double vlo, vhi;  // q(lo) - C, q(hi) - C
+        bool monotone;    // proven: q' keeps one sign on the interval
+        int depth;
+    };
+    std::vector<Work> stack;
+    stack.push_back({p, p(p.a) - C, p(p.b) - C, false, 0});
+    while (!stack.empty()) {
+        Work w = std::move(stack.back());
+        stack.pop_back();
+        const double lo = w.q.a, hi = w.q.b;
+        // |q - C| >= |c0 - C| - tail: exclude when that exceeds the projection error.
+        if (!w.monotone && TailExcluded(w.q, C) > eps) continue;
+        LegendreSeries d;
+        bool monotone = w.monotone;
+        if (!monotone) {
+            d = w.q.Derivative();
+            monotone = TailExcluded(d, 0.0) > 0;
+        }
+        if (monotone) {
+            // The range of q is [min(vlo, vhi), max(vlo, vhi)].
+            if (std::min(w.vlo, w.vhi) > eps || std::max(w.vlo, w.vhi) < -eps) continue;
+            if (std::abs(w.vlo) > eps && std::abs(w.vhi) > eps) {
+                if (visit(lo, hi, 1, lo)) return;  // proven sign change
+                continue;
+            }
+            // An end within eps of C: the root is at that end, within the error.
+            const double t = std::abs(w.vlo) <= eps ? lo : hi;
+            if (visit(lo, hi, 3, t)) return;
+            continue;
+        }
+        // q' changes sign. With a proven single root of q' (q'' keeps one sign), q is
+        // unimodal: split at its extremum t*, where a tangency would be.
+        const double dlo = d(lo), dhi = d(hi);
+        if ((dlo < 0) != (dhi < 0) && dlo != 0 && dhi != 0 &&
+            TailExcluded(d.Derivative(), 0.0) > 0) {
+            const double ts = PolishSeriesRoot(d, lo, hi, dlo, dhi, minWidth);
+            const double vs = w.q(ts) - C;
+            if (std::abs(vs) <= eps && (w.vlo < 0) == (w.vhi < 0) && std::abs(w.vlo) > eps &&
+                std::abs(w.vhi) > eps) {
+                if (visit(lo, hi, 2, ts)) return;  // tangency within the error
+                continue;
+            }
+            if (ts > lo && ts < hi) {
+                stack.push_back({Restrict(w.q, ts, hi, scratch), vs, w.vhi, true, w.depth + 1});
+                stack.push_back({Restrict(w.q, lo, ts, scratch), w.vlo, vs, true, w.depth + 1});
+                continue;
+            }
+        }
+        if (hi - lo <= minWidth || w.depth >= 60) {
+            if (visit(lo, hi, 4, 0.5 * (lo + hi))) return;
+            continue;
+        }
+        const double mid = 0.5 * (lo + hi);
+        const double vmid = w.q(mid) - C;
+        stack.push_back({Restrict(w.q, mid, hi, scratch), vmid, w.vhi, false, w.depth + 1});
+        stack.push_back({Restrict(w.q, lo, mid, scratch), w.vlo, vmid, false, w.depth + 1});
+    }
+}
+
+}  // namespace detail
+
+template <typename F>
+RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
+                     const RootOptions& options, std::vector<double>& scratch) {
+    RootResult result;
+    if (pieces.empty()) return result;
+    const double length = pieces.back().p.b - pieces.front().p.a;
+    const double minWidth = std::max(options.rootTolerance * length,
+                                     4 * std::numeric_limits<double>::epsilon() *
+                                         std::max(std::abs(pieces.front().p.a),
+                                                  std::abs(pieces.back().p.b)));
+    for (const ProjectedPiece& piece : pieces) {
+        const double accept = options.tangentTolerance + 2 * piece.eps;
+        detail::IsolateRoots(
+            piece.p, C, piece.eps, minWidth, scratch,
+            [&](double lo, double hi, int kind, double tStar) {
+                const double glo = f(lo) - C, ghi = f(hi) - C;
+                if ((glo < 0) != (ghi < 0) || glo == 0 || ghi == 0) {
+                    if (glo == 0 || ghi == 0) {
+                        const double t = glo == 0 ? lo : hi;
+                        result = {RootKind::Simple, t, 0.0, result.failures};
+                        return true;
+                    }
+                    auto g = [&](double t) { return f(t) - C; };
+                    auto tol = [&](double x, double y) { return std::abs(y - x) <= minWidth; };
+                    std::uintmax_t iterations = 200;
+                    auto bracket = boost::math::tools::toms748_solve(g, lo, hi, glo, ghi, tol,
+                                                                     iterations);
+                    // Report the bracket end with the smaller true residual.
+                    const double ga = std::abs(g(bracket.first));
+                    const double gb = std::abs(g(bracket.second));
+                    const double t = ga <= gb ? bracket.first : bracket.second;
+                    result = {RootKind::Simple, t, std::min(ga, gb), result.failures};
+                    return true;
+                }
+                // No sign change of the true field across the window: a tangency (kind 2),
+                // a root at the window's end within the error (3), or unresolved (4).
+                const double gs = std::abs(f(tStar) - C);
+                if (gs <= accept) {
+                    result = {kind == 3 ? RootKind::Simple : RootKind::Tangent, tStar, gs,
+                              result.failures};
+                    return true;
+                }
+                if (kind == 4) ++result.failures;
+                return false;
+            });
+        if (result.kind != RootKind::None) return result;
+    }
+    return result;
+}
+
+}  // namespace hpray
