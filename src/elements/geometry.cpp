@@ -1,1 +1,297 @@
-// Placeholder: implementation in progress.
+// Reference-to-world maps of cells: affine classification, evaluation, Newton inversion.
+#include "elements/geometry.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "util/check.h"
+
+namespace hpray {
+namespace {
+
+constexpr double kEps = std::numeric_limits<double>::epsilon();
+
+inline double MaxAbs3(const double v[3]) {
+    return std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])});
+}
+
+inline void MatVec(const double m[9], const double v[3], double out[3]) {
+    for (int i = 0; i < 3; ++i) out[i] = m[3 * i] * v[0] + m[3 * i + 1] * v[1] + m[3 * i + 2] * v[2];
+}
+
+// Moves a start point into the cell (pyramids: away from the apex plane t = 1, where the
+// rational map is singular off the axis).
+void ClampToCell(CellShape shape, double ref[3]) {
+    auto clamp01 = [](double& v) { v = std::min(1.0, std::max(0.0, v)); };
+    switch (shape) {
+        case CellShape::Hex:
+            for (int d = 0; d < 3; ++d) clamp01(ref[d]);
+            break;
+        case CellShape::Tet: {
+            for (int d = 0; d < 3; ++d) ref[d] = std::max(0.0, ref[d]);
+            const double sum = ref[0] + ref[1] + ref[2];
+            if (sum > 1.0)
+                for (int d = 0; d < 3; ++d) ref[d] /= sum;
+            break;
+        }
+        case CellShape::Wedge: {
+            ref[0] = std::max(0.0, ref[0]);
+            ref[1] = std::max(0.0, ref[1]);
+            const double sum = ref[0] + ref[1];
+            if (sum > 1.0) {
+                ref[0] /= sum;
+                ref[1] /= sum;
+            }
+            clamp01(ref[2]);
+            break;
+        }
+        case CellShape::Pyramid: {
+            ref[2] = std::min(0.9, std::max(0.0, ref[2]));
+            const double h = 0.5 * ref[2];
+            for (int d = 0; d < 2; ++d) ref[d] = std::min(1.0 - h, std::max(h, ref[d]));
+            break;
+        }
+    }
+}
+
+struct NewtonOutcome {
+    InversionStatus status = InversionStatus::NotConverged;
+    int iterations = 0;
+};
+
+// Damped Newton on F(ref) = worldFromRef(ref) - target, starting at `ref` (updated).
+NewtonOutcome Newton(const CellGeometry& cell, const double target[3], double ref[3],
+                     EvalWorkspace& ws, const InversionOptions& opt, int maxIterations) {
+    NewtonOutcome out;
+    const CellShape shape = cell.basis->shape;
+    const double roundLevel = 8.0 * kEps * (MaxAbs3(target) + cell.size);
+    double x[3], jac[9], f[3];
+    WorldFromRef(cell, ref, ws, x, jac);
+    for (int d = 0; d < 3; ++d) f[d] = x[d] - target[d];
+    double fn = MaxAbs3(f);
+    for (int it = 0; it < maxIterations; ++it) {
+        double inv[9];
+        const double det = Invert3x3(jac, inv);
+        double jn = 0.0;
+        for (double v : jac) jn = std::max(jn, std::abs(v));
+        if (!(std::abs(det) > 1e-14 * jn * jn * jn) || !std::isfinite(det)) {
+            out.status = InversionStatus::Singular;
+            return out;
+        }
+        double delta[3];
+        MatVec(inv, f, delta);
+        for (double& v : delta) v = -v;
+        ++out.iterations;
+        const double step = MaxAbs3(delta);
+        if (step <= opt.tolerance || fn <= roundLevel) {
+            for (int d = 0; d < 3; ++d) ref[d] += delta[d];
+            out.status = InversionStatus::Converged;
+            return out;
+        }
+        double alpha = 1.0;
+        if (shape == CellShape::Pyramid && ref[2] < 1.0 && ref[2] + delta[2] >= 1.0)
+            alpha = 0.5 * (1.0 - ref[2]) / delta[2];  // stop halfway to the apex plane
+        double cand[3], xc[3], jc[9], fc[3], fcn = 0.0;
+        bool accepted = false;
+        for (int halving = 0; halving < 30; ++halving, alpha *= 0.5) {
+            for (int d = 0; d < 3; ++d) cand[d] = ref[d] + alpha * delta[d];
+            WorldFromRef(cell, cand, ws, xc, jc);
+            for (int d = 0; d < 3; ++d) fc[d] = xc[d] - target[d];
+            fcn = MaxAbs3(fc);
+            if (fcn < fn || alpha * step <= opt.tolerance) {
+                accepted = std::isfinite(fcn);
+                break;
+            }
+        }
+        if (!accepted) {
+            // No decrease along a descent direction: the residual is at rounding level
+            // (converged as far as double precision allows) or the map misbehaves.
+            out.status = fn <= 64.0 * roundLevel ? InversionStatus::Converged
+                                                 : InversionStatus::NotConverged;
+            return out;
+        }
+        std::copy(cand, cand + 3, ref);
+        std::copy(jc, jc + 9, jac);
+        std::copy(fc, fc + 3, f);
+        fn = fcn;
+        if (RefOutsideDistance(shape, ref) > opt.leaveDistance) {
+            out.status = InversionStatus::LeftDomain;
+            return out;
+        }
+    }
+    out.status = InversionStatus::NotConverged;
+    return out;
+}
+
+}  // namespace
+
+double Invert3x3(const double m[9], double inverse[9]) {
+    const double c00 = m[4] * m[8] - m[5] * m[7];
+    const double c01 = m[5] * m[6] - m[3] * m[8];
+    const double c02 = m[3] * m[7] - m[4] * m[6];
+    const double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    if (det == 0.0 || !std::isfinite(det)) return 0.0;
+    const double id = 1.0 / det;
+    inverse[0] = c00 * id;
+    inverse[1] = (m[2] * m[7] - m[1] * m[8]) * id;
+    inverse[2] = (m[1] * m[5] - m[2] * m[4]) * id;
+    inverse[3] = c01 * id;
+    inverse[4] = (m[0] * m[8] - m[2] * m[6]) * id;
+    inverse[5] = (m[2] * m[3] - m[0] * m[5]) * id;
+    inverse[6] = c02 * id;
+    inverse[7] = (m[1] * m[6] - m[0] * m[7]) * id;
+    inverse[8] = (m[0] * m[4] - m[1] * m[3]) * id;
+    return det;
+}
+
+CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
+                              double affineTolerance) {
+    CellGeometry g;
+    g.basis = &basis;
+    g.nodes = nodeXyz;
+    g.lineDegree = basis.lineDegree;
+    g.lineDenominatorPower = basis.lineDenominatorPower;
+    const int n = basis.nodeCount;
+    // Least-squares affine fit about the centroids: x - xBar = A (r - rBar).
+    double rBar[3] = {0, 0, 0}, xBar[3] = {0, 0, 0}, lo[3], hi[3];
+    for (int d = 0; d < 3; ++d) {
+        lo[d] = std::numeric_limits<double>::infinity();
+        hi[d] = -lo[d];
+    }
+    for (int m = 0; m < n; ++m)
+        for (int d = 0; d < 3; ++d) {
+            rBar[d] += basis.refNodes[m][d];
+            const double x = nodeXyz[3 * m + d];
+            xBar[d] += x;
+            lo[d] = std::min(lo[d], x);
+            hi[d] = std::max(hi[d], x);
+        }
+    for (int d = 0; d < 3; ++d) {
+        rBar[d] /= n;
+        xBar[d] /= n;
+    }
+    g.size = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                       (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    double s[9] = {0}, xr[9] = {0};  // s = sum dr dr^T, xr = sum dx dr^T
+    for (int m = 0; m < n; ++m) {
+        double dr[3], dx[3];
+        for (int d = 0; d < 3; ++d) {
+            dr[d] = basis.refNodes[m][d] - rBar[d];
+            dx[d] = nodeXyz[3 * m + d] - xBar[d];
+        }
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+                s[3 * i + j] += dr[i] * dr[j];
+                xr[3 * i + j] += dx[i] * dr[j];
+            }
+    }
+    double sInv[9];
+    HPRAY_CHECK(Invert3x3(s, sInv) != 0.0);  // the lattice always spans 3-D
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            double v = 0.0;
+            for (int k = 0; k < 3; ++k) v += xr[3 * i + k] * sInv[3 * k + j];
+            g.linear[3 * i + j] = v;
+        }
+    double ar[3];
+    MatVec(g.linear.data(), rBar, ar);
+    for (int d = 0; d < 3; ++d) g.origin[d] = xBar[d] - ar[d];
+    double dev = 0.0;
+    for (int m = 0; m < n; ++m) {
+        double x[3];
+        MatVec(g.linear.data(), basis.refNodes[m].data(), x);
+        double e2 = 0.0;
+        for (int d = 0; d < 3; ++d) {
+            const double e = x[d] + g.origin[d] - nodeXyz[3 * m + d];
+            e2 += e * e;
+        }
+        dev = std::max(dev, std::sqrt(e2));
+    }
+    g.affineDeviation = dev;
+    g.linearInvertible = Invert3x3(g.linear.data(), g.inverseLinear.data()) != 0.0;
+    g.affine = g.linearInvertible && dev <= affineTolerance * g.size;
+    return g;
+}
+
+void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& ws,
+                  double world[3], double jacobian[9]) {
+    if (cell.affine) {
+        MatVec(cell.linear.data(), ref, world);
+        for (int d = 0; d < 3; ++d) world[d] += cell.origin[d];
+        if (jacobian) std::copy(cell.linear.begin(), cell.linear.end(), jacobian);
+        return;
+    }
+    const int n = cell.basis->nodeCount;
+    double* v = ws.values.data();
+    double* dv = jacobian ? ws.dRef.data() : nullptr;
+    EvalBasis(*cell.basis, ref, v, dv);
+    double x0 = 0, x1 = 0, x2 = 0;
+    const double* p = cell.nodes;
+    for (int m = 0; m < n; ++m) {
+        x0 += v[m] * p[3 * m];
+        x1 += v[m] * p[3 * m + 1];
+        x2 += v[m] * p[3 * m + 2];
+    }
+    world[0] = x0;
+    world[1] = x1;
+    world[2] = x2;
+    if (!jacobian) return;
+    double j[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+    for (int m = 0; m < n; ++m) {
+        const double* d = dv + 3 * m;
+        for (int i = 0; i < 3; ++i) {
+            const double c = p[3 * m + i];
+            j[3 * i] += c * d[0];
+            j[3 * i + 1] += c * d[1];
+            j[3 * i + 2] += c * d[2];
+        }
+    }
+    std::copy(j, j + 9, jacobian);
+}
+
+InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
+                             EvalWorkspace& ws, const InversionOptions& options) {
+    InversionResult res;
+    const CellShape shape = cell.basis->shape;
+    double affineRef[3] = {0, 0, 0};
+    if (cell.linearInvertible) {
+        const double dx[3] = {world[0] - cell.origin[0], world[1] - cell.origin[1],
+                              world[2] - cell.origin[2]};
+        MatVec(cell.inverseLinear.data(), dx, affineRef);
+    }
+    if (cell.affine) {
+        std::copy(affineRef, affineRef + 3, res.ref.begin());
+        res.status = InversionStatus::Converged;
+    } else {
+        double ref[3];
+        if (options.initialGuess) {
+            std::copy(options.initialGuess, options.initialGuess + 3, ref);
+        } else {
+            std::copy(affineRef, affineRef + 3, ref);
+            ClampToCell(shape, ref);
+        }
+        NewtonOutcome o = Newton(cell, world, ref, ws, options, options.maxIterations);
+        res.iterations = o.iterations;
+        if (o.status != InversionStatus::Converged) {
+            // A second start from the centre before declaring the point outside or failed.
+            const auto c = RefCenter(shape);
+            double ref2[3] = {c[0], c[1], c[2]};
+            NewtonOutcome o2 = Newton(cell, world, ref2, ws, options, options.maxIterations);
+            res.iterations += o2.iterations;
+            if (o2.status == InversionStatus::Converged ||
+                o.status != InversionStatus::LeftDomain) {
+                o = o2;
+                std::copy(ref2, ref2 + 3, ref);
+            }
+        }
+        std::copy(ref, ref + 3, res.ref.begin());
+        res.status = o.status;
+    }
+    res.converged = res.status == InversionStatus::Converged;
+    res.outsideDistance = RefOutsideDistance(shape, res.ref.data());
+    res.inside = res.converged && res.outsideDistance <= options.insideTolerance;
+    return res;
+}
+
+}  // namespace hpray
