@@ -1,1 +1,949 @@
-// Placeholder: implementation in progress.
+// Scene files: YAML parsing with yaml-cpp, --set overrides, schema and range validation.
+#include "scene/scene.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "util/error.h"
+
+namespace hpray {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Vec3 = std::array<double, 3>;
+
+// ---------------------------------------------------------------------------------------
+// Schema: the key tree every scene file is checked against.
+// ---------------------------------------------------------------------------------------
+
+/// A node of the key schema: a mapping with known keys, a list of one item schema, or a
+/// leaf value (a scalar or a fixed-shape sequence such as a colour).
+struct SchemaNode {
+    enum class Kind { Map, List, Leaf };
+    std::string name;
+    Kind kind = Kind::Leaf;
+    std::vector<SchemaNode> children;  // Map: the keys; List: children[0] is the item
+
+    const SchemaNode* Find(const std::string& key) const {
+        for (const SchemaNode& child : children)
+            if (child.name == key) return &child;
+        return nullptr;
+    }
+    std::vector<std::string> KeyNames() const {
+        std::vector<std::string> names;
+        for (const SchemaNode& child : children) names.push_back(child.name);
+        return names;
+    }
+};
+
+SchemaNode Leaf(const std::string& name) { return {name, SchemaNode::Kind::Leaf, {}}; }
+
+SchemaNode MapOf(const std::string& name, const std::vector<std::string>& leaves) {
+    SchemaNode node{name, SchemaNode::Kind::Map, {}};
+    for (const std::string& leaf : leaves) node.children.push_back(Leaf(leaf));
+    return node;
+}
+
+SchemaNode ListOf(const std::string& name, SchemaNode item) {
+    return {name, SchemaNode::Kind::List, {std::move(item)}};
+}
+
+const SchemaNode& Schema() {
+    static const SchemaNode root = [] {
+        SchemaNode r{"", SchemaNode::Kind::Map, {}};
+        r.children = {
+            MapOf("data", {"mesh"}),
+            MapOf("camera", {"position", "look_at", "up", "fov_y", "ortho_height",
+                             "width", "height"}),
+            ListOf("isosurfaces", MapOf("#", {"field", "value", "color", "opacity"})),
+            ListOf("slices",
+                   MapOf("#", {"point", "normal", "field", "color_tf", "opacity"})),
+            MapOf("volume", {"color_field", "extinction_field", "glow", "color_tf",
+                             "extinction_tf"}),
+            MapOf("lighting", {"ambient", "diffuse", "specular", "shininess"}),
+            Leaf("background"),
+            MapOf("accuracy",
+                  {"mapping_tolerance", "projection_order", "projection_tolerance",
+                   "root_tolerance", "volume_tolerance"}),
+            MapOf("clip", {"near", "far", "box"}),
+            MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
+            Leaf("threads"),
+            MapOf("edges", {"color", "width", "opacity"}),
+        };
+        return r;
+    }();
+    return root;
+}
+
+void CollectKeyPaths(const SchemaNode& node, const std::string& prefix,
+                     std::vector<std::string>& out) {
+    for (const SchemaNode& child : node.children) {
+        const std::string path = prefix.empty() ? child.name : prefix + "." + child.name;
+        out.push_back(path);
+        CollectKeyPaths(child, path, out);
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Suggestions for misspelt keys.
+// ---------------------------------------------------------------------------------------
+
+std::size_t EditDistance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t above = row[j];
+            const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                              std::tolower(static_cast<unsigned char>(b[j - 1]));
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (same ? 0 : 1)});
+            diagonal = above;
+        }
+    }
+    return row[b.size()];
+}
+
+bool IsAbbreviation(const std::string& key, const std::string& candidate) {
+    return key.size() >= 3 && key.size() < candidate.size() &&
+           EditDistance(key, candidate.substr(0, key.size())) == 0;
+}
+
+/// "did you mean 'x'?" for the nearest candidate (by edit distance, an abbreviation
+/// counting as distance 1) if it is plausibly a misspelling, otherwise the valid keys.
+std::string Suggestion(const std::string& key,
+                       const std::vector<std::string>& candidates) {
+    std::string best;
+    std::size_t bestDistance = std::string::npos;
+    for (const std::string& candidate : candidates) {
+        const std::size_t d =
+            IsAbbreviation(key, candidate) ? 1 : EditDistance(key, candidate);
+        if (d < bestDistance) {
+            bestDistance = d;
+            best = candidate;
+        }
+    }
+    const std::size_t allowed = std::max<std::size_t>(2, (key.size() + 2) / 3);
+    if (!best.empty() && bestDistance <= allowed) return "did you mean '" + best + "'?";
+    std::string list;
+    for (const std::string& candidate : candidates)
+        list += (list.empty() ? "" : ", ") + candidate;
+    return "valid keys here: " + list;
+}
+
+std::string Join(const std::vector<std::string>& parts, std::size_t count) {
+    std::string out;
+    for (std::size_t k = 0; k < count && k < parts.size(); ++k)
+        out += (k == 0 ? "" : ".") + parts[k];
+    return out;
+}
+
+std::string Describe(const YAML::Node& node) {
+    if (!node.IsDefined() || node.IsNull()) return "nothing";
+    if (node.IsSequence()) return "a list";
+    if (node.IsMap()) return "a mapping";
+    return "'" + node.Scalar() + "'";
+}
+
+std::string FormatNumber(double v) {
+    std::ostringstream os;
+    os.precision(17);
+    os << v;
+    return os.str();
+}
+
+bool AllDigits(const std::string& s) {
+    return !s.empty() && s.size() < 10 &&
+           std::all_of(s.begin(), s.end(),
+                       [](unsigned char c) { return std::isdigit(c) != 0; });
+}
+
+// Refuse alias expansions ("billion laughs") and absurd files before walking them.
+constexpr std::size_t kMaxNodes = 1'000'000;
+constexpr std::uintmax_t kMaxSceneBytes = 16u << 20;
+
+// ---------------------------------------------------------------------------------------
+// The parser.
+// ---------------------------------------------------------------------------------------
+
+class SceneParser {
+  public:
+    SceneParser(std::string source, std::string baseDir)
+        : source_(std::move(source)), baseDir_(std::move(baseDir)) {}
+
+    void ApplyOverride(YAML::Node root, const std::string& text);
+    Scene Build(const YAML::Node& root);
+
+  private:
+    // --- errors ---------------------------------------------------------------------
+    std::string Where(const std::string& path, const YAML::Node& node) const;
+    [[noreturn]] void Fail(const std::string& path, const YAML::Node& node,
+                           const std::string& what) const {
+        throw InputError(source_, Where(path, node), what);
+    }
+
+    // --- generic checks -------------------------------------------------------------
+    void CountNodes(const YAML::Node& node, std::size_t& count) const;
+    void CheckKeys(const YAML::Node& node, const SchemaNode& schema,
+                   const std::string& path) const;
+    void ApplyAt(YAML::Node node, const SchemaNode& schema,
+                 const std::vector<std::string>& segments, std::size_t k,
+                 const YAML::Node& value, const std::string& text);
+
+    // --- typed readers --------------------------------------------------------------
+    static std::string Child(const std::string& path, const std::string& key) {
+        return path.empty() ? key : path + "." + key;
+    }
+    /// The value of `key` in `map`, or an undefined node if absent. `map` is a mapping
+    /// (CheckKeys ran) or null.
+    static YAML::Node Get(const YAML::Node& map, const std::string& key) {
+        if (!map.IsMap()) return YAML::Node(YAML::NodeType::Undefined);
+        for (auto it = map.begin(); it != map.end(); ++it) {
+            const YAML::Node keyNode = it->first;
+            if (keyNode.Scalar() == key) return it->second;
+        }
+        return YAML::Node(YAML::NodeType::Undefined);
+    }
+    static bool Has(const YAML::Node& map, const std::string& key) {
+        return Get(map, key).IsDefined();
+    }
+    void RequireValue(const YAML::Node& node, const std::string& path) const {
+        if (!node.IsDefined()) Fail(path, node, "required key is missing");
+        if (node.IsNull()) Fail(path, node, "has no value");
+    }
+    double Number(const YAML::Node& node, const std::string& path,
+                  bool allowInfinite = false) const;
+    long long Integer(const YAML::Node& node, const std::string& path) const;
+    std::string String(const YAML::Node& node, const std::string& path) const;
+    std::vector<double> Numbers(const YAML::Node& node, const std::string& path,
+                                std::size_t count) const;
+    Vec3 Vector(const YAML::Node& node, const std::string& path) const;
+    Vec3 Color(const YAML::Node& node, const std::string& path) const;
+    double InRange(const YAML::Node& node, const std::string& path, double lo, double hi,
+                   bool openLo, bool openHi) const;
+    double Positive(const YAML::Node& node, const std::string& path) const;
+    double NonNegative(const YAML::Node& node, const std::string& path) const;
+    std::string FieldName(const YAML::Node& node, const std::string& path) const;
+    std::vector<ColorControlPoint> ColorTf(const YAML::Node& node,
+                                           const std::string& path, bool unitRange) const;
+    std::vector<ExtinctionControlPoint> ExtinctionTf(const YAML::Node& node,
+                                                     const std::string& path) const;
+    std::string InputPath(const std::string& path) const;
+    static std::string OutputPath(const std::string& path);
+
+    // --- sections -------------------------------------------------------------------
+    void ReadData(const YAML::Node& root, Scene& scene) const;
+    void ReadCamera(const YAML::Node& root, Scene& scene) const;
+    void ReadIsosurfaces(const YAML::Node& root, Scene& scene) const;
+    void ReadSlices(const YAML::Node& root, Scene& scene) const;
+    void ReadVolume(const YAML::Node& root, Scene& scene) const;
+    void ReadLighting(const YAML::Node& root, Scene& scene) const;
+    void ReadAccuracy(const YAML::Node& root, Scene& scene) const;
+    void ReadClip(const YAML::Node& root, Scene& scene) const;
+    void ReadOutput(const YAML::Node& root, Scene& scene) const;
+    void ReadExtras(const YAML::Node& root, Scene& scene) const;
+
+    std::string source_;
+    std::string baseDir_;
+    /// Key paths set by --set (e.g. "isosurfaces.0.value") -> the override text.
+    std::map<std::string, std::string> overridden_;
+};
+
+std::string SceneParser::Where(const std::string& path, const YAML::Node& node) const {
+    // A key set or created by --set has no line in the file: name the override instead.
+    std::string probe = path;
+    while (true) {
+        const auto it = overridden_.find(probe);
+        if (it != overridden_.end()) return path + " (--set " + it->second + ")";
+        const std::size_t dot = probe.rfind('.');
+        if (dot == std::string::npos) break;
+        probe.resize(dot);
+    }
+    const YAML::Mark mark = node.IsDefined() ? node.Mark() : YAML::Mark::null_mark();
+    if (mark.is_null()) return path;
+    return "line " + std::to_string(mark.line + 1) + (path.empty() ? "" : ", " + path);
+}
+
+void SceneParser::CountNodes(const YAML::Node& node, std::size_t& count) const {
+    if (++count > kMaxNodes)
+        throw InputError(source_, "", "scene has more than a million YAML nodes");
+    if (node.IsSequence()) {
+        for (const YAML::Node& item : node) CountNodes(item, count);
+    } else if (node.IsMap()) {
+        for (auto it = node.begin(); it != node.end(); ++it) {
+            const YAML::Node key = it->first;
+            const YAML::Node value = it->second;
+            CountNodes(key, count);
+            CountNodes(value, count);
+        }
+    }
+}
+
+void SceneParser::CheckKeys(const YAML::Node& node, const SchemaNode& schema,
+                            const std::string& path) const {
+    if (node.IsNull()) return;  // an empty section: all defaults
+    if (schema.kind == SchemaNode::Kind::Map) {
+        if (!node.IsMap())
+            Fail(path, node, "expected a mapping of keys, got " + Describe(node));
+        std::vector<std::string> seen;
+        for (auto it = node.begin(); it != node.end(); ++it) {
+            const YAML::Node keyNode = it->first;
+            const YAML::Node valueNode = it->second;
+            if (!keyNode.IsScalar())
+                Fail(path, keyNode, "keys must be plain names, got " + Describe(keyNode));
+            const std::string key = keyNode.Scalar();
+            const std::string keyPath = Child(path, key);
+            const SchemaNode* child = schema.Find(key);
+            if (child == nullptr)
+                Fail(keyPath, keyNode,
+                     "unknown key '" + key + "'; " + Suggestion(key, schema.KeyNames()));
+            if (std::find(seen.begin(), seen.end(), key) != seen.end())
+                Fail(keyPath, keyNode, "duplicate key '" + key + "'");
+            seen.push_back(key);
+            CheckKeys(valueNode, *child, keyPath);
+        }
+    } else if (schema.kind == SchemaNode::Kind::List) {
+        if (!node.IsSequence())
+            Fail(path, node, "expected a list, got " + Describe(node));
+        for (std::size_t k = 0; k < node.size(); ++k)
+            CheckKeys(node[k], schema.children[0], Child(path, std::to_string(k)));
+    }
+}
+
+void SceneParser::ApplyOverride(YAML::Node root, const std::string& text) {
+    const std::string where = "--set " + text;
+    const std::size_t eq = text.find('=');
+    if (eq == std::string::npos || eq == 0)
+        throw InputError(source_, where, "expected key.path=value");
+    const std::string keyPath = text.substr(0, eq);
+    std::vector<std::string> segments;
+    std::size_t start = 0;
+    while (true) {
+        const std::size_t dot = keyPath.find('.', start);
+        segments.push_back(keyPath.substr(start, dot - start));
+        if (dot == std::string::npos) break;
+        start = dot + 1;
+    }
+    for (const std::string& segment : segments)
+        if (segment.empty())
+            throw InputError(source_, where, "empty key in '" + keyPath + "'");
+
+    YAML::Node value;
+    try {
+        value = YAML::Load(text.substr(eq + 1));
+    } catch (const YAML::Exception& e) {
+        throw InputError(source_, where, "the value is not valid YAML: " + e.msg);
+    }
+    ApplyAt(root, Schema(), segments, 0, value, text);
+    overridden_[keyPath] = text;
+}
+
+void SceneParser::ApplyAt(YAML::Node node, const SchemaNode& schema,
+                          const std::vector<std::string>& segments, std::size_t k,
+                          const YAML::Node& value, const std::string& text) {
+    // `node` is a handle to the tree (yaml-cpp nodes are references); assigning to one of
+    // its children edits the document in place.
+    const std::string where = "--set " + text;
+    const std::string& segment = segments[k];
+    const bool last = k + 1 == segments.size();
+    const std::string pathSoFar = Join(segments, k + 1);
+    const std::string parentPath = Join(segments, k);
+
+    if (schema.kind == SchemaNode::Kind::Map) {
+        const SchemaNode* child = schema.Find(segment);
+        if (child == nullptr)
+            throw InputError(source_, where,
+                             "unknown key '" + pathSoFar + "'; " +
+                                 Suggestion(segment, schema.KeyNames()));
+        if (!node.IsMap() && !node.IsNull())
+            throw InputError(
+                source_, where,
+                "'" + parentPath + "' is " + Describe(node) + ", not a mapping");
+        if (last) {
+            if (value.IsNull()) {
+                if (node.IsMap()) node.remove(segment);
+            } else {
+                node[segment] = value;
+            }
+            return;
+        }
+        // Create a missing (or empty) intermediate section, then descend into it.
+        const YAML::Node existing = Get(node, segment);
+        if (!existing.IsDefined() || existing.IsNull())
+            node[segment] = YAML::Node(child->kind == SchemaNode::Kind::List
+                                           ? YAML::NodeType::Sequence
+                                           : YAML::NodeType::Map);
+        ApplyAt(node[segment], *child, segments, k + 1, value, text);
+        return;
+    }
+
+    // A list (of the schema) or a leaf holding a sequence (a colour, a transfer
+    // function): the segment is an index.
+    if (!node.IsSequence() && !(schema.kind == SchemaNode::Kind::List && node.IsNull()))
+        throw InputError(source_, where,
+                         "'" + parentPath + "' " +
+                             (schema.kind == SchemaNode::Kind::Leaf
+                                  ? "takes a value, not sub-keys"
+                                  : "is " + Describe(node) + ", not a list"));
+    if (!AllDigits(segment))
+        throw InputError(source_, where,
+                         "'" + segment + "' is not a list index of '" + parentPath + "'");
+    const std::size_t index = std::stoul(segment);
+    const std::size_t size = node.IsSequence() ? node.size() : 0;
+    const bool canAppend = schema.kind == SchemaNode::Kind::List;
+    if (index > size || (index == size && !canAppend))
+        throw InputError(source_, where,
+                         "index " + segment + " is past the end of '" + parentPath +
+                             "' (" + std::to_string(size) + " entries)");
+    const SchemaNode& itemSchema =
+        schema.kind == SchemaNode::Kind::List ? schema.children[0] : schema;
+    if (last) {
+        if (value.IsNull()) {
+            if (index < size) node.remove(index);
+        } else if (index == size) {
+            node.push_back(value);
+        } else {
+            node[index] = value;
+        }
+        return;
+    }
+    if (index == size) node.push_back(YAML::Node(YAML::NodeType::Map));
+    YAML::Node next = node[index];
+    ApplyAt(next, itemSchema, segments, k + 1, value, text);
+}
+
+double SceneParser::Number(const YAML::Node& node, const std::string& path,
+                           bool allowInfinite) const {
+    RequireValue(node, path);
+    if (!node.IsScalar()) Fail(path, node, "expected a number, got " + Describe(node));
+    double v = 0.0;
+    try {
+        v = node.as<double>();
+    } catch (const YAML::Exception&) {
+        Fail(path, node, "expected a number, got " + Describe(node));
+    }
+    if (std::isnan(v)) Fail(path, node, "NaN is not allowed");
+    if (std::isinf(v) && !allowInfinite) Fail(path, node, "must be finite");
+    return v;
+}
+
+long long SceneParser::Integer(const YAML::Node& node, const std::string& path) const {
+    RequireValue(node, path);
+    if (!node.IsScalar()) Fail(path, node, "expected an integer, got " + Describe(node));
+    try {
+        return node.as<long long>();
+    } catch (const YAML::Exception&) {
+    }
+    // 512.0 or 1e3 are integers too; 512.5 and 'abc' are not.
+    double v = 0.0;
+    try {
+        v = node.as<double>();
+    } catch (const YAML::Exception&) {
+        Fail(path, node, "expected an integer, got " + Describe(node));
+    }
+    if (!std::isfinite(v) || v != std::floor(v) || std::fabs(v) > 9.0e15)
+        Fail(path, node, "expected an integer, got " + Describe(node));
+    return static_cast<long long>(v);
+}
+
+std::string SceneParser::String(const YAML::Node& node, const std::string& path) const {
+    RequireValue(node, path);
+    if (!node.IsScalar()) Fail(path, node, "expected a string, got " + Describe(node));
+    return node.Scalar();
+}
+
+std::vector<double> SceneParser::Numbers(const YAML::Node& node, const std::string& path,
+                                         std::size_t count) const {
+    RequireValue(node, path);
+    if (!node.IsSequence() || node.size() != count)
+        Fail(path, node,
+             "expected a list of " + std::to_string(count) + " numbers, got " +
+                 (node.IsSequence() ? "a list of " + std::to_string(node.size())
+                                    : Describe(node)));
+    std::vector<double> out(count);
+    for (std::size_t k = 0; k < count; ++k)
+        out[k] = Number(node[k], Child(path, std::to_string(k)));
+    return out;
+}
+
+Vec3 SceneParser::Vector(const YAML::Node& node, const std::string& path) const {
+    const std::vector<double> v = Numbers(node, path, 3);
+    return {v[0], v[1], v[2]};
+}
+
+Vec3 SceneParser::Color(const YAML::Node& node, const std::string& path) const {
+    const Vec3 c = Vector(node, path);
+    for (std::size_t k = 0; k < 3; ++k)
+        if (c[k] < 0.0 || c[k] > 1.0)
+            Fail(Child(path, std::to_string(k)), node[k],
+                 "colour components must be in [0, 1], got " + FormatNumber(c[k]));
+    return c;
+}
+
+double SceneParser::InRange(const YAML::Node& node, const std::string& path, double lo,
+                            double hi, bool openLo, bool openHi) const {
+    const double v = Number(node, path);
+    const bool ok = (openLo ? v > lo : v >= lo) && (openHi ? v < hi : v <= hi);
+    if (!ok)
+        Fail(path, node,
+             std::string("must be in ") + (openLo ? "(" : "[") + FormatNumber(lo) + ", " +
+                 FormatNumber(hi) + (openHi ? ")" : "]") + ", got " + FormatNumber(v));
+    return v;
+}
+
+double SceneParser::Positive(const YAML::Node& node, const std::string& path) const {
+    const double v = Number(node, path);
+    if (!(v > 0.0)) Fail(path, node, "must be > 0, got " + FormatNumber(v));
+    return v;
+}
+
+double SceneParser::NonNegative(const YAML::Node& node, const std::string& path) const {
+    const double v = Number(node, path);
+    if (!(v >= 0.0)) Fail(path, node, "must be >= 0, got " + FormatNumber(v));
+    return v;
+}
+
+std::string SceneParser::FieldName(const YAML::Node& node,
+                                   const std::string& path) const {
+    const std::string name = String(node, path);
+    if (name.empty()) Fail(path, node, "field name is empty");
+    return name;
+}
+
+std::vector<ColorControlPoint> SceneParser::ColorTf(const YAML::Node& node,
+                                                    const std::string& path,
+                                                    bool unitRange) const {
+    RequireValue(node, path);
+    if (!node.IsSequence() || node.size() == 0)
+        Fail(path, node,
+             "expected a non-empty list of [scalar, r, g, b], got " + Describe(node));
+    std::vector<ColorControlPoint> points;
+    for (std::size_t k = 0; k < node.size(); ++k) {
+        const std::string itemPath = Child(path, std::to_string(k));
+        const std::vector<double> v = Numbers(node[k], itemPath, 4);
+        ColorControlPoint p;
+        p.scalar = v[0];
+        for (std::size_t c = 0; c < 3; ++c) {
+            p.rgb[c] = v[c + 1];
+            const bool bad =
+                unitRange ? (p.rgb[c] < 0.0 || p.rgb[c] > 1.0) : p.rgb[c] < 0.0;
+            if (bad)
+                Fail(itemPath, node[k],
+                     std::string(unitRange ? "colour components must be in [0, 1]"
+                                           : "glow components must be >= 0") +
+                         ", got " + FormatNumber(p.rgb[c]));
+        }
+        if (!points.empty() && !(p.scalar > points.back().scalar))
+            Fail(itemPath, node[k],
+                 "control-point scalars must be strictly increasing (" +
+                     FormatNumber(p.scalar) + " after " +
+                     FormatNumber(points.back().scalar) + ")");
+        points.push_back(p);
+    }
+    return points;
+}
+
+std::vector<ExtinctionControlPoint> SceneParser::ExtinctionTf(
+    const YAML::Node& node, const std::string& path) const {
+    RequireValue(node, path);
+    if (!node.IsSequence() || node.size() == 0)
+        Fail(path, node,
+             "expected a non-empty list of [scalar, extinction], got " + Describe(node));
+    std::vector<ExtinctionControlPoint> points;
+    for (std::size_t k = 0; k < node.size(); ++k) {
+        const std::string itemPath = Child(path, std::to_string(k));
+        const std::vector<double> v = Numbers(node[k], itemPath, 2);
+        ExtinctionControlPoint p{v[0], v[1]};
+        if (p.extinction < 0.0)
+            Fail(itemPath, node[k],
+                 "extinction must be >= 0, got " + FormatNumber(p.extinction));
+        if (!points.empty() && !(p.scalar > points.back().scalar))
+            Fail(itemPath, node[k],
+                 "control-point scalars must be strictly increasing (" +
+                     FormatNumber(p.scalar) + " after " +
+                     FormatNumber(points.back().scalar) + ")");
+        points.push_back(p);
+    }
+    return points;
+}
+
+std::string SceneParser::InputPath(const std::string& path) const {
+    if (path.rfind("builtin:", 0) == 0) return path;
+    fs::path p(path);
+    if (p.is_relative())
+        p = (baseDir_.empty() ? fs::current_path() : fs::path(baseDir_)) / p;
+    return fs::absolute(p).lexically_normal().string();
+}
+
+std::string SceneParser::OutputPath(const std::string& path) {
+    if (path.empty()) return path;
+    return fs::absolute(fs::path(path)).lexically_normal().string();
+}
+
+// --- sections
+// ---------------------------------------------------------------------------
+
+void SceneParser::ReadData(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node data = Get(root, "data");
+    if (!data.IsDefined())
+        Fail("data", root, "required key is missing (data: {mesh: ...})");
+    const std::string mesh = String(Get(data, "mesh"), "data.mesh");
+    if (mesh.empty()) Fail("data.mesh", Get(data, "mesh"), "is empty");
+    if (mesh == "builtin:") Fail("data.mesh", Get(data, "mesh"), "builtin name is empty");
+    scene.data.mesh = InputPath(mesh);
+}
+
+void SceneParser::ReadCamera(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node cam = Get(root, "camera");
+    SceneCamera& c = scene.camera;
+    const std::string p = "camera";
+    if (Has(cam, "position")) c.position = Vector(Get(cam, "position"), p + ".position");
+    if (Has(cam, "look_at")) c.lookAt = Vector(Get(cam, "look_at"), p + ".look_at");
+    if (Has(cam, "up")) c.up = Vector(Get(cam, "up"), p + ".up");
+    for (const char* key : {"width", "height"}) {
+        if (!Has(cam, key)) continue;
+        const YAML::Node n = Get(cam, key);
+        const long long v = Integer(n, p + "." + key);
+        if (v < 1 || v > 32768)
+            Fail(p + "." + key, n, "must be in [1, 32768], got " + std::to_string(v));
+        (std::string(key) == "width" ? c.width : c.height) = static_cast<int>(v);
+    }
+    if (Has(cam, "fov_y") && Has(cam, "ortho_height"))
+        Fail(p + ".ortho_height", Get(cam, "ortho_height"),
+             "give either fov_y (perspective) or ortho_height (orthographic), not both");
+    if (Has(cam, "fov_y"))
+        c.fovYDegrees = InRange(Get(cam, "fov_y"), p + ".fov_y", 0.0, 180.0, true, true);
+    if (Has(cam, "ortho_height")) {
+        c.orthographic = true;
+        c.orthoHeight = Positive(Get(cam, "ortho_height"), p + ".ortho_height");
+    }
+
+    // Degenerate frames: the basis of camera.h would divide by zero.
+    const Vec3 d = {c.lookAt[0] - c.position[0], c.lookAt[1] - c.position[1],
+                    c.lookAt[2] - c.position[2]};
+    const double dLength = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const double scale = std::max({std::fabs(c.position[0]), std::fabs(c.position[1]),
+                                   std::fabs(c.position[2]), std::fabs(c.lookAt[0]),
+                                   std::fabs(c.lookAt[1]), std::fabs(c.lookAt[2])});
+    if (!(dLength > 1e-12 * scale) || !std::isfinite(dLength))
+        Fail(p + ".look_at", Get(cam, "look_at"),
+             "look_at coincides with position: no view direction");
+    const double upLength =
+        std::sqrt(c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]);
+    if (!(upLength > 0.0) || !std::isfinite(upLength))
+        Fail(p + ".up", Get(cam, "up"), "up must be a non-zero vector");
+    const Vec3 f = {d[0] / dLength, d[1] / dLength, d[2] / dLength};
+    const Vec3 u = {c.up[0] / upLength, c.up[1] / upLength, c.up[2] / upLength};
+    const Vec3 x = {f[1] * u[2] - f[2] * u[1], f[2] * u[0] - f[0] * u[2],
+                    f[0] * u[1] - f[1] * u[0]};
+    if (std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) < 1e-9)
+        Fail(p + ".up", Get(cam, "up"),
+             "up is parallel to the view direction (look_at - position)");
+}
+
+void SceneParser::ReadIsosurfaces(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node list = Get(root, "isosurfaces");
+    if (!list.IsSequence()) return;
+    for (std::size_t k = 0; k < list.size(); ++k) {
+        const YAML::Node item = list[k];
+        const std::string p = "isosurfaces." + std::to_string(k);
+        if (!item.IsMap())
+            Fail(p, item, "expected a mapping {field, value, color, opacity}");
+        SceneIsosurface iso;
+        if (Has(item, "field")) iso.field = FieldName(Get(item, "field"), p + ".field");
+        if (!Has(item, "value")) Fail(p + ".value", item, "required key is missing");
+        iso.value = Number(Get(item, "value"), p + ".value");
+        if (Has(item, "color")) iso.color = Color(Get(item, "color"), p + ".color");
+        if (Has(item, "opacity"))
+            iso.opacity =
+                InRange(Get(item, "opacity"), p + ".opacity", 0, 1, false, false);
+        scene.isosurfaces.push_back(iso);
+    }
+}
+
+void SceneParser::ReadSlices(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node list = Get(root, "slices");
+    if (!list.IsSequence()) return;
+    for (std::size_t k = 0; k < list.size(); ++k) {
+        const YAML::Node item = list[k];
+        const std::string p = "slices." + std::to_string(k);
+        if (!item.IsMap())
+            Fail(p, item, "expected a mapping {point, normal, field, ...}");
+        SceneSlice slice;
+        for (const char* key : {"point", "normal", "color_tf"})
+            if (!Has(item, key)) Fail(p + "." + key, item, "required key is missing");
+        slice.point = Vector(Get(item, "point"), p + ".point");
+        slice.normal = Vector(Get(item, "normal"), p + ".normal");
+        if (slice.normal[0] == 0.0 && slice.normal[1] == 0.0 && slice.normal[2] == 0.0)
+            Fail(p + ".normal", Get(item, "normal"), "normal must be a non-zero vector");
+        if (Has(item, "field")) slice.field = FieldName(Get(item, "field"), p + ".field");
+        slice.colorTf = ColorTf(Get(item, "color_tf"), p + ".color_tf", true);
+        if (Has(item, "opacity"))
+            slice.opacity =
+                InRange(Get(item, "opacity"), p + ".opacity", 0, 1, false, false);
+        scene.slices.push_back(slice);
+    }
+}
+
+void SceneParser::ReadVolume(const YAML::Node& root, Scene& scene) const {
+    if (!Has(root, "volume")) return;
+    const YAML::Node vol = Get(root, "volume");
+    SceneVolume v;
+    const std::string p = "volume";
+    if (Has(vol, "color_field"))
+        v.colorField = FieldName(Get(vol, "color_field"), p + ".color_field");
+    v.extinctionField =
+        Has(vol, "extinction_field")
+            ? FieldName(Get(vol, "extinction_field"), p + ".extinction_field")
+            : v.colorField;
+    if (Has(vol, "glow")) {
+        const std::string glow = String(Get(vol, "glow"), p + ".glow");
+        if (glow == "williams-max") {
+            v.glow = GlowModel::WilliamsMax;
+        } else if (glow == "wilhelms-van-gelder") {
+            v.glow = GlowModel::WilhelmsVanGelder;
+        } else {
+            Fail(p + ".glow", Get(vol, "glow"),
+                 "unknown glow model '" + glow +
+                     "'; expected williams-max or wilhelms-van-gelder");
+        }
+    }
+    if (!Has(vol, "color_tf")) Fail(p + ".color_tf", vol, "required key is missing");
+    if (!Has(vol, "extinction_tf"))
+        Fail(p + ".extinction_tf", vol, "required key is missing");
+    v.colorTf =
+        ColorTf(Get(vol, "color_tf"), p + ".color_tf", v.glow == GlowModel::WilliamsMax);
+    v.extinctionTf = ExtinctionTf(Get(vol, "extinction_tf"), p + ".extinction_tf");
+    scene.volume = v;
+}
+
+void SceneParser::ReadLighting(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node light = Get(root, "lighting");
+    SceneLighting& l = scene.lighting;
+    const std::pair<const char*, double*> keys[] = {{"ambient", &l.ambient},
+                                                    {"diffuse", &l.diffuse},
+                                                    {"specular", &l.specular},
+                                                    {"shininess", &l.shininess}};
+    for (const auto& [key, target] : keys)
+        if (Has(light, key))
+            *target = NonNegative(Get(light, key), std::string("lighting.") + key);
+}
+
+void SceneParser::ReadAccuracy(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node acc = Get(root, "accuracy");
+    SceneAccuracy& a = scene.accuracy;
+    const std::pair<const char*, double*> keys[] = {
+        {"mapping_tolerance", &a.mappingTolerance},
+        {"projection_tolerance", &a.projectionTolerance},
+        {"root_tolerance", &a.rootTolerance},
+        {"volume_tolerance", &a.volumeTolerance}};
+    for (const auto& [key, target] : keys)
+        if (Has(acc, key))
+            *target = Positive(Get(acc, key), std::string("accuracy.") + key);
+    if (Has(acc, "projection_order")) {
+        const YAML::Node n = Get(acc, "projection_order");
+        const std::string path = "accuracy.projection_order";
+        if (n.IsScalar() && n.Scalar() == "auto") {
+            a.projectionOrder = 0;
+        } else {
+            if (!n.IsScalar())
+                Fail(path, n, "expected auto or an integer, got " + Describe(n));
+            long long order = 0;
+            try {
+                order = Integer(n, path);
+            } catch (const InputError&) {
+                Fail(path, n, "expected auto or an integer, got " + Describe(n));
+            }
+            if (order < 1 || order > 64)
+                Fail(path, n, "must be auto or in [1, 64], got " + std::to_string(order));
+            a.projectionOrder = static_cast<int>(order);
+        }
+    }
+}
+
+void SceneParser::ReadClip(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node clip = Get(root, "clip");
+    SceneClip& c = scene.clip;
+    if (Has(clip, "near")) c.near = NonNegative(Get(clip, "near"), "clip.near");
+    if (Has(clip, "far")) {
+        c.far = Number(Get(clip, "far"), "clip.far", true);
+        if (!(c.far > c.near))
+            Fail("clip.far", Get(clip, "far"),
+                 "must be > clip.near (" + FormatNumber(c.near) + "), got " +
+                     FormatNumber(c.far));
+    }
+    if (Has(clip, "box")) {
+        const YAML::Node box = Get(clip, "box");
+        RequireValue(box, "clip.box");
+        if (!box.IsSequence() || box.size() != 2)
+            Fail("clip.box", box,
+                 "expected [[x0, y0, z0], [x1, y1, z1]], got " + Describe(box));
+        const Vec3 lo = Vector(box[0], "clip.box.0");
+        const Vec3 hi = Vector(box[1], "clip.box.1");
+        for (std::size_t k = 0; k < 3; ++k)
+            if (!(lo[k] < hi[k]))
+                Fail("clip.box", box,
+                     "the first corner must be below the second on every axis");
+        c.box = std::array<Vec3, 2>{lo, hi};
+    }
+}
+
+void SceneParser::ReadOutput(const YAML::Node& root, Scene& scene) const {
+    const YAML::Node out = Get(root, "output");
+    SceneOutput& o = scene.output;
+    const std::pair<const char*, std::string*> keys[] = {{"exr", &o.exr},
+                                                         {"png", &o.png},
+                                                         {"stats", &o.stats},
+                                                         {"hits", &o.hits},
+                                                         {"rgba", &o.rgba}};
+    for (const auto& [key, target] : keys) {
+        if (!Has(out, key)) continue;
+        const std::string path = std::string("output.") + key;
+        const std::string value = String(Get(out, key), path);
+        if (value.empty()) Fail(path, Get(out, key), "is empty (omit the key instead)");
+        *target = OutputPath(value);
+    }
+}
+
+void SceneParser::ReadExtras(const YAML::Node& root, Scene& scene) const {
+    if (Has(root, "background"))
+        scene.background = Color(Get(root, "background"), "background");
+    if (Has(root, "threads")) {
+        const long long t = Integer(Get(root, "threads"), "threads");
+        if (t < 0 || t > 4096)
+            Fail("threads", Get(root, "threads"),
+                 "must be in [0, 4096] (0 = all hardware threads), got " +
+                     std::to_string(t));
+        scene.threads = static_cast<int>(t);
+    }
+    if (Has(root, "edges")) {
+        const YAML::Node e = Get(root, "edges");
+        SceneEdges edges;
+        if (Has(e, "color")) edges.color = Color(Get(e, "color"), "edges.color");
+        if (Has(e, "width"))
+            edges.width = InRange(Get(e, "width"), "edges.width", 0, 64, true, false);
+        if (Has(e, "opacity"))
+            edges.opacity =
+                InRange(Get(e, "opacity"), "edges.opacity", 0, 1, false, false);
+        scene.edges = edges;
+    }
+}
+
+Scene SceneParser::Build(const YAML::Node& root) {
+    std::size_t count = 0;
+    CountNodes(root, count);
+    if (!root.IsDefined() || root.IsNull())
+        throw InputError(source_, "",
+                         "the scene is empty (expected at least data: {mesh: ...})");
+    if (!root.IsMap())
+        throw InputError(source_, Where("", root),
+                         "expected a mapping of top-level keys, got " + Describe(root));
+    CheckKeys(root, Schema(), "");
+
+    Scene scene;
+    ReadData(root, scene);
+    ReadCamera(root, scene);
+    ReadIsosurfaces(root, scene);
+    ReadSlices(root, scene);
+    ReadVolume(root, scene);
+    ReadLighting(root, scene);
+    ReadAccuracy(root, scene);
+    ReadClip(root, scene);
+    ReadOutput(root, scene);
+    ReadExtras(root, scene);
+    return scene;
+}
+
+}  // namespace
+
+std::vector<std::string> Scene::FieldNames() const {
+    std::vector<std::string> names;
+    auto add = [&](const std::string& name) {
+        if (std::find(names.begin(), names.end(), name) == names.end())
+            names.push_back(name);
+    };
+    for (const SceneIsosurface& iso : isosurfaces) add(iso.field);
+    for (const SceneSlice& slice : slices) add(slice.field);
+    if (volume) {
+        add(volume->colorField);
+        add(volume->extinctionField);
+    }
+    return names;
+}
+
+Scene ParseScene(const std::string& yamlText, const std::string& sourceName,
+                 const std::vector<std::string>& overrides, const std::string& baseDir) {
+    const std::string source = sourceName.empty() ? "scene" : sourceName;
+    std::vector<YAML::Node> documents;
+    try {
+        documents = YAML::LoadAll(yamlText);
+    } catch (const YAML::Exception& e) {
+        const std::string where =
+            e.mark.is_null() ? ""
+                             : "line " + std::to_string(e.mark.line + 1) + ", column " +
+                                   std::to_string(e.mark.column + 1);
+        throw InputError(source, where, "malformed YAML: " + e.msg);
+    }
+    if (documents.size() > 1)
+        throw InputError(
+            source, "",
+            "expected one YAML document, found " + std::to_string(documents.size()));
+    YAML::Node root = documents.empty() ? YAML::Node() : documents[0];
+
+    SceneParser parser(source, baseDir);
+    try {
+        if (!overrides.empty()) {
+            if (!root.IsDefined() || root.IsNull())
+                root = YAML::Node(YAML::NodeType::Map);
+            if (!root.IsMap())
+                throw InputError(source, "", "expected a mapping of top-level keys");
+            for (const std::string& text : overrides) parser.ApplyOverride(root, text);
+        }
+        Scene scene = parser.Build(root);
+        scene.sourcePath = sourceName;
+        return scene;
+    } catch (const YAML::Exception& e) {
+        // A shape the checks above did not foresee: still bad input, never a crash.
+        const std::string where =
+            e.mark.is_null() ? "" : "line " + std::to_string(e.mark.line + 1);
+        throw InputError(source, where, "invalid scene: " + e.msg);
+    }
+}
+
+Scene LoadScene(const std::string& path, const std::vector<std::string>& overrides) {
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    if (ec || !fs::exists(status))
+        throw InputError(path, "", "scene file does not exist");
+    if (fs::is_directory(status))
+        throw InputError(path, "", "is a folder, not a scene file");
+    const std::uintmax_t size = fs::file_size(path, ec);
+    if (ec) throw InputError(path, "", "cannot read scene file: " + ec.message());
+    if (size > kMaxSceneBytes)
+        throw InputError(path, "", "scene file is larger than 16 MB");
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path, "", "cannot open scene file");
+    std::ostringstream text;
+    text << in.rdbuf();
+    const std::string baseDir = fs::absolute(fs::path(path)).parent_path().string();
+    Scene scene = ParseScene(text.str(), path, overrides, baseDir);
+    scene.sourcePath = path;
+    return scene;
+}
+
+std::vector<std::string> SceneKeyPaths() {
+    std::vector<std::string> out;
+    CollectKeyPaths(Schema(), "", out);
+    return out;
+}
+
+}  // namespace hpray

@@ -1,2 +1,791 @@
-// Tests in progress.
+// Tests of scene parsing (schema, defaults, checks, overrides, paths) and camera rays.
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+
+#include "scene/camera.h"
+#include "scene/scene.h"
+#include "util/error.h"
+
+namespace hpray {
+namespace {
+
+namespace fs = std::filesystem;
+using Vec3 = std::array<double, 3>;
+
+const double kInf = std::numeric_limits<double>::infinity();
+
+/// The example of design.md "Scene file (YAML)"; only comments shortened to 90 columns.
+const char* kDesignExample = R"(
+data: {mesh: path/to/mesh.vtu}        # a mesh file, builtin:NAME, or a partition dir
+camera: {position: [3, 2, 4], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0],
+         fov_y: 30, width: 512, height: 512}   # or ortho_height: 2.0 instead of fov_y
+isosurfaces:                           # any number, any fields
+  - {field: u, value: 0.0, color: [0.9, 0.5, 0.2], opacity: 1.0}
+slices:                                # optional cut planes, true field colour-mapped
+  - {point: [0.5, 0.5, 0.5], normal: [0, 0, 1], field: u,
+     color_tf: [[-1.0, 0, 0, 1], [1.0, 1, 0, 0]], opacity: 1.0}
+volume:                                # optional
+  color_field: u                       # chromaticity (Williams-Max) or glow
+  extinction_field: u                  # defaults to color_field
+  glow: williams-max                   # or wilhelms-van-gelder
+  color_tf: [[-1.0, 0, 0, 1], [1.0, 1, 0, 0]]  # [scalar, r, g, b], piecewise linear
+  extinction_tf: [[-1.0, 0.0], [1.0, 4.0]]    # [scalar, extinction per world unit]
+lighting: {ambient: 0.1, diffuse: 0.8, specular: 0.3, shininess: 32}   # headlight
+background: [1, 1, 1]
+accuracy: {mapping_tolerance: 1e-12, projection_order: auto, projection_tolerance: 1e-12,
+           root_tolerance: 1e-14, volume_tolerance: 1e-10}
+clip: {near: 0.0, far: .inf}           # along the ray, world units; optional box
+output: {exr: out/frame.exr, png: out/frame.png, stats: out/frame.json,
+         hits: out/frame.hits.npy, rgba: out/frame.rgba.npy}   # every output optional
+)";
+
+const char* kMinimal = "data: {mesh: builtin:nk-sinc}\n";
+
+std::string Cwd(const std::string& relative) {
+    return (fs::current_path() / relative).lexically_normal().string();
+}
+
+/// Parses `yaml` (with overrides) expecting an InputError; returns its message.
+std::string ErrorOf(const std::string& yaml,
+                    const std::vector<std::string>& overrides = {}) {
+    try {
+        ParseScene(yaml, "test.yaml", overrides, "/base");
+    } catch (const InputError& e) {
+        return e.what();
+    } catch (const std::exception& e) {
+        return std::string("WRONG EXCEPTION TYPE: ") + e.what();
+    }
+    return "NO ERROR";
+}
+
+bool Contains(const std::string& text, const std::string& fragment) {
+    return text.find(fragment) != std::string::npos;
+}
+
+// ---------------------------------------------------------------------------------------
+// Defaults and the design example
+// ---------------------------------------------------------------------------------------
+
+TEST(SceneTest, DefaultsOfAMinimalScene) {
+    const Scene s = ParseScene(kMinimal, "minimal.yaml", {}, "/base");
+    EXPECT_EQ(s.sourcePath, "minimal.yaml");
+    EXPECT_EQ(s.data.mesh, "builtin:nk-sinc");
+    EXPECT_EQ(s.camera.position, (Vec3{3, 2, 4}));
+    EXPECT_EQ(s.camera.lookAt, (Vec3{0.5, 0.5, 0.5}));
+    EXPECT_EQ(s.camera.up, (Vec3{0, 1, 0}));
+    EXPECT_FALSE(s.camera.orthographic);
+    EXPECT_EQ(s.camera.fovYDegrees, 30.0);
+    EXPECT_EQ(s.camera.width, 512);
+    EXPECT_EQ(s.camera.height, 512);
+    EXPECT_TRUE(s.isosurfaces.empty());
+    EXPECT_TRUE(s.slices.empty());
+    EXPECT_FALSE(s.volume.has_value());
+    EXPECT_EQ(s.lighting.ambient, 0.1);
+    EXPECT_EQ(s.lighting.diffuse, 0.8);
+    EXPECT_EQ(s.lighting.specular, 0.3);
+    EXPECT_EQ(s.lighting.shininess, 32.0);
+    EXPECT_EQ(s.background, (Vec3{1, 1, 1}));
+    EXPECT_EQ(s.accuracy.mappingTolerance, 1e-12);
+    EXPECT_EQ(s.accuracy.projectionOrder, 0);  // auto
+    EXPECT_EQ(s.accuracy.projectionTolerance, 1e-12);
+    EXPECT_EQ(s.accuracy.rootTolerance, 1e-14);
+    EXPECT_EQ(s.accuracy.volumeTolerance, 1e-10);
+    EXPECT_EQ(s.clip.near, 0.0);
+    EXPECT_EQ(s.clip.far, kInf);
+    EXPECT_FALSE(s.clip.box.has_value());
+    EXPECT_TRUE(s.output.exr.empty());
+    EXPECT_TRUE(s.output.png.empty());
+    EXPECT_TRUE(s.output.stats.empty());
+    EXPECT_TRUE(s.output.hits.empty());
+    EXPECT_TRUE(s.output.rgba.empty());
+    EXPECT_EQ(s.threads, 0);
+    EXPECT_FALSE(s.edges.has_value());
+    EXPECT_TRUE(s.FieldNames().empty());
+}
+
+TEST(SceneTest, ItemDefaults) {
+    const Scene s = ParseScene(std::string(kMinimal) +
+                                   "isosurfaces: [{value: 0.25}]\n"
+                                   "slices: [{point: [0, 0, 0], normal: [1, 0, 0], "
+                                   "color_tf: [[0, 1, 1, 1]]}]\n"
+                                   "volume: {color_field: v, color_tf: [[0, 1, 0, 0]], "
+                                   "extinction_tf: [[0, 1]]}\n"
+                                   "edges: {}\n",
+                               "t.yaml");
+    ASSERT_EQ(s.isosurfaces.size(), 1u);
+    EXPECT_EQ(s.isosurfaces[0].field, "u");
+    EXPECT_EQ(s.isosurfaces[0].value, 0.25);
+    EXPECT_EQ(s.isosurfaces[0].color, (Vec3{0.9, 0.5, 0.2}));
+    EXPECT_EQ(s.isosurfaces[0].opacity, 1.0);
+    ASSERT_EQ(s.slices.size(), 1u);
+    EXPECT_EQ(s.slices[0].field, "u");
+    EXPECT_EQ(s.slices[0].opacity, 1.0);
+    ASSERT_TRUE(s.volume.has_value());
+    EXPECT_EQ(s.volume->colorField, "v");
+    EXPECT_EQ(s.volume->extinctionField, "v");  // defaults to color_field
+    EXPECT_EQ(s.volume->glow, GlowModel::WilliamsMax);
+    ASSERT_TRUE(s.edges.has_value());
+    EXPECT_EQ(s.edges->color, (Vec3{0, 0, 0}));
+    EXPECT_EQ(s.edges->width, 1.0);
+    EXPECT_EQ(s.edges->opacity, 1.0);
+    EXPECT_EQ(s.FieldNames(), (std::vector<std::string>{"u", "v"}));
+}
+
+TEST(SceneTest, EveryKeyOfTheDesignExample) {
+    const Scene s = ParseScene(kDesignExample, "design.yaml", {}, "/scenes/here");
+    EXPECT_EQ(s.data.mesh, "/scenes/here/path/to/mesh.vtu");
+    EXPECT_EQ(s.camera.position, (Vec3{3, 2, 4}));
+    EXPECT_EQ(s.camera.lookAt, (Vec3{0.5, 0.5, 0.5}));
+    EXPECT_EQ(s.camera.up, (Vec3{0, 1, 0}));
+    EXPECT_FALSE(s.camera.orthographic);
+    EXPECT_EQ(s.camera.fovYDegrees, 30.0);
+    EXPECT_EQ(s.camera.width, 512);
+    EXPECT_EQ(s.camera.height, 512);
+
+    ASSERT_EQ(s.isosurfaces.size(), 1u);
+    EXPECT_EQ(s.isosurfaces[0].field, "u");
+    EXPECT_EQ(s.isosurfaces[0].value, 0.0);
+    EXPECT_EQ(s.isosurfaces[0].color, (Vec3{0.9, 0.5, 0.2}));
+    EXPECT_EQ(s.isosurfaces[0].opacity, 1.0);
+
+    ASSERT_EQ(s.slices.size(), 1u);
+    EXPECT_EQ(s.slices[0].point, (Vec3{0.5, 0.5, 0.5}));
+    EXPECT_EQ(s.slices[0].normal, (Vec3{0, 0, 1}));
+    EXPECT_EQ(s.slices[0].field, "u");
+    ASSERT_EQ(s.slices[0].colorTf.size(), 2u);
+    EXPECT_EQ(s.slices[0].colorTf[0].scalar, -1.0);
+    EXPECT_EQ(s.slices[0].colorTf[0].rgb, (Vec3{0, 0, 1}));
+    EXPECT_EQ(s.slices[0].colorTf[1].scalar, 1.0);
+    EXPECT_EQ(s.slices[0].colorTf[1].rgb, (Vec3{1, 0, 0}));
+    EXPECT_EQ(s.slices[0].opacity, 1.0);
+
+    ASSERT_TRUE(s.volume.has_value());
+    EXPECT_EQ(s.volume->colorField, "u");
+    EXPECT_EQ(s.volume->extinctionField, "u");
+    EXPECT_EQ(s.volume->glow, GlowModel::WilliamsMax);
+    ASSERT_EQ(s.volume->colorTf.size(), 2u);
+    EXPECT_EQ(s.volume->colorTf[0].scalar, -1.0);
+    EXPECT_EQ(s.volume->colorTf[0].rgb, (Vec3{0, 0, 1}));
+    EXPECT_EQ(s.volume->colorTf[1].scalar, 1.0);
+    EXPECT_EQ(s.volume->colorTf[1].rgb, (Vec3{1, 0, 0}));
+    ASSERT_EQ(s.volume->extinctionTf.size(), 2u);
+    EXPECT_EQ(s.volume->extinctionTf[0].scalar, -1.0);
+    EXPECT_EQ(s.volume->extinctionTf[0].extinction, 0.0);
+    EXPECT_EQ(s.volume->extinctionTf[1].scalar, 1.0);
+    EXPECT_EQ(s.volume->extinctionTf[1].extinction, 4.0);
+
+    EXPECT_EQ(s.lighting.ambient, 0.1);
+    EXPECT_EQ(s.lighting.diffuse, 0.8);
+    EXPECT_EQ(s.lighting.specular, 0.3);
+    EXPECT_EQ(s.lighting.shininess, 32.0);
+    EXPECT_EQ(s.background, (Vec3{1, 1, 1}));
+    EXPECT_EQ(s.accuracy.mappingTolerance, 1e-12);
+    EXPECT_EQ(s.accuracy.projectionOrder, 0);
+    EXPECT_EQ(s.accuracy.projectionTolerance, 1e-12);
+    EXPECT_EQ(s.accuracy.rootTolerance, 1e-14);
+    EXPECT_EQ(s.accuracy.volumeTolerance, 1e-10);
+    EXPECT_EQ(s.clip.near, 0.0);
+    EXPECT_EQ(s.clip.far, kInf);
+    EXPECT_EQ(s.output.exr, Cwd("out/frame.exr"));
+    EXPECT_EQ(s.output.png, Cwd("out/frame.png"));
+    EXPECT_EQ(s.output.stats, Cwd("out/frame.json"));
+    EXPECT_EQ(s.output.hits, Cwd("out/frame.hits.npy"));
+    EXPECT_EQ(s.output.rgba, Cwd("out/frame.rgba.npy"));
+}
+
+TEST(SceneTest, OptionalKeysAndAlternatives) {
+    const Scene s = ParseScene(std::string(kMinimal) + R"(
+camera: {ortho_height: 2.5, width: 64, height: 1e2}
+volume: {color_field: a, extinction_field: b, glow: wilhelms-van-gelder,
+         color_tf: [[0, 0, 0, 0], [1, 7.5, 2, 0]], extinction_tf: [[0, 0]]}
+accuracy: {projection_order: 12}
+clip: {near: 0.5, far: 10, box: [[0, 0, 0], [1, 2, 3]]}
+threads: 3
+edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
+)",
+                               "t.yaml");
+    EXPECT_TRUE(s.camera.orthographic);
+    EXPECT_EQ(s.camera.orthoHeight, 2.5);
+    EXPECT_EQ(s.camera.width, 64);
+    EXPECT_EQ(s.camera.height, 100);
+    EXPECT_EQ(s.volume->glow, GlowModel::WilhelmsVanGelder);
+    EXPECT_EQ(s.volume->colorTf[1].rgb[0], 7.5);  // glow may exceed 1
+    EXPECT_EQ(s.volume->extinctionField, "b");
+    EXPECT_EQ(s.FieldNames(), (std::vector<std::string>{"a", "b"}));
+    EXPECT_EQ(s.accuracy.projectionOrder, 12);
+    EXPECT_EQ(s.clip.near, 0.5);
+    EXPECT_EQ(s.clip.far, 10.0);
+    ASSERT_TRUE(s.clip.box.has_value());
+    EXPECT_EQ((*s.clip.box)[0], (Vec3{0, 0, 0}));
+    EXPECT_EQ((*s.clip.box)[1], (Vec3{1, 2, 3}));
+    EXPECT_EQ(s.threads, 3);
+    ASSERT_TRUE(s.edges.has_value());
+    EXPECT_EQ(s.edges->width, 1.5);
+}
+
+TEST(SceneTest, KeyPathsCoverTheDesignSchema) {
+    const std::vector<std::string> paths = SceneKeyPaths();
+    for (const char* key : {"data.mesh",
+                            "camera.position",
+                            "camera.look_at",
+                            "camera.up",
+                            "camera.fov_y",
+                            "camera.ortho_height",
+                            "camera.width",
+                            "camera.height",
+                            "isosurfaces.#.field",
+                            "isosurfaces.#.value",
+                            "isosurfaces.#.color",
+                            "isosurfaces.#.opacity",
+                            "slices.#.point",
+                            "slices.#.normal",
+                            "slices.#.field",
+                            "slices.#.color_tf",
+                            "slices.#.opacity",
+                            "volume.color_field",
+                            "volume.extinction_field",
+                            "volume.glow",
+                            "volume.color_tf",
+                            "volume.extinction_tf",
+                            "lighting.ambient",
+                            "lighting.diffuse",
+                            "lighting.specular",
+                            "lighting.shininess",
+                            "background",
+                            "accuracy.mapping_tolerance",
+                            "accuracy.projection_order",
+                            "accuracy.projection_tolerance",
+                            "accuracy.root_tolerance",
+                            "accuracy.volume_tolerance",
+                            "clip.near",
+                            "clip.far",
+                            "clip.box",
+                            "output.exr",
+                            "output.png",
+                            "output.stats",
+                            "output.hits",
+                            "output.rgba"}) {
+        EXPECT_NE(std::find(paths.begin(), paths.end(), key), paths.end()) << key;
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Validation
+// ---------------------------------------------------------------------------------------
+
+TEST(SceneValidationTest, UnknownKeysNameThePathAndSuggest) {
+    std::string e = ErrorOf(std::string(kMinimal) + "camra: {fov_y: 20}\n");
+    EXPECT_TRUE(Contains(e, "test.yaml")) << e;
+    EXPECT_TRUE(Contains(e, "line 2")) << e;
+    EXPECT_TRUE(Contains(e, "unknown key 'camra'")) << e;
+    EXPECT_TRUE(Contains(e, "did you mean 'camera'?")) << e;
+
+    e = ErrorOf(std::string(kMinimal) + "camera:\n  width: 10\n  fovy: 20\n");
+    EXPECT_TRUE(Contains(e, "line 4, camera.fovy")) << e;
+    EXPECT_TRUE(Contains(e, "did you mean 'fov_y'?")) << e;
+
+    e = ErrorOf(std::string(kMinimal) +
+                "isosurfaces:\n  - {value: 0}\n  - {value: 1, colour: "
+                "[1, 0, 0]}\n");
+    EXPECT_TRUE(Contains(e, "line 4, isosurfaces.1.colour")) << e;
+    EXPECT_TRUE(Contains(e, "did you mean 'color'?")) << e;
+
+    e = ErrorOf(std::string(kMinimal) + "isosurface: []\n");
+    EXPECT_TRUE(Contains(e, "did you mean 'isosurfaces'?")) << e;
+    e = ErrorOf(std::string(kMinimal) + "accuracy: {root_tol: 1e-3}\n");
+    EXPECT_TRUE(Contains(e, "accuracy.root_tol")) << e;
+    EXPECT_TRUE(Contains(e, "did you mean 'root_tolerance'?")) << e;
+    e = ErrorOf(std::string(kMinimal) + "output: {EXR: a.exr}\n");
+    EXPECT_TRUE(Contains(e, "did you mean 'exr'?")) << e;
+
+    // Nothing close: list the valid keys instead of a far-fetched guess.
+    e = ErrorOf(std::string(kMinimal) + "lighting: {xyzzyplugh: 1}\n");
+    EXPECT_TRUE(Contains(e, "lighting.xyzzyplugh")) << e;
+    EXPECT_TRUE(Contains(e, "valid keys here: ambient, diffuse, specular, shininess"))
+        << e;
+    EXPECT_FALSE(Contains(e, "did you mean")) << e;
+}
+
+struct BadCase {
+    const char* yaml;  // appended to a valid minimal scene (line 1)
+    const char* keyPath;
+    const char* message;
+    int line;  // 0: do not check
+};
+
+TEST(SceneValidationTest, EachRuleNamesKeyAndLine) {
+    const BadCase cases[] = {
+        // types
+        {"camera: {width: abc}\n", "camera.width", "expected an integer, got 'abc'", 2},
+        {"camera: {width: 12.5}\n", "camera.width", "expected an integer", 2},
+        {"camera: {fov_y: [1]}\n", "camera.fov_y", "expected a number, got a list", 2},
+        {"camera: {position: [1, 2]}\n", "camera.position", "list of 3 numbers", 2},
+        {"camera: {position: [1, x, 2]}\n", "camera.position.1", "expected a number", 2},
+        {"camera: 5\n", "camera", "expected a mapping", 2},
+        {"isosurfaces: {value: 1}\n", "isosurfaces", "expected a list", 2},
+        {"isosurfaces: [{value: }]\n", "isosurfaces.0.value", "has no value", 2},
+        {"isosurfaces: [{field: u}]\n", "isosurfaces.0.value", "required key is missing",
+         2},
+        {"isosurfaces: [{value: .nan}]\n", "isosurfaces.0.value", "NaN", 2},
+        {"isosurfaces: [{value: .inf}]\n", "isosurfaces.0.value", "finite", 2},
+        {"isosurfaces: [{value: 0, field: ''}]\n", "isosurfaces.0.field", "empty", 2},
+        {"output: {png: [a]}\n", "output.png", "expected a string", 2},
+        {"volume: {color_tf: [[0, 1, 1, 1]], extinction_tf: [[0, 1]], glow: sparkly}\n",
+         "volume.glow", "unknown glow model 'sparkly'", 2},
+        {"accuracy: {projection_order: often}\n", "accuracy.projection_order",
+         "expected auto or an integer", 2},
+        // ranges
+        {"camera: {width: 0}\n", "camera.width", "[1, 32768]", 2},
+        {"camera: {height: 32769}\n", "camera.height", "[1, 32768]", 2},
+        {"camera: {fov_y: 0}\n", "camera.fov_y", "must be in (0, 180)", 2},
+        {"camera: {fov_y: 180}\n", "camera.fov_y", "must be in (0, 180)", 2},
+        {"camera: {ortho_height: 0}\n", "camera.ortho_height", "must be > 0", 2},
+        {"camera: {ortho_height: -2}\n", "camera.ortho_height", "must be > 0", 2},
+        {"camera:\n  fov_y: 30\n  ortho_height: 2\n", "camera.ortho_height", "not both",
+         4},
+        {"isosurfaces: [{value: 0, color: [1, 0, 1.5]}]\n", "isosurfaces.0.color.2",
+         "[0, 1]", 2},
+        {"isosurfaces: [{value: 0, opacity: -0.1}]\n", "isosurfaces.0.opacity", "[0, 1]",
+         2},
+        {"background: [0, 0, 2]\n", "background.2", "[0, 1]", 2},
+        {"slices: [{point: [0, 0, 0], normal: [0, 0, 1], color_tf: [[0, 1, 1, 1]], "
+         "opacity: 2}]\n",
+         "slices.0.opacity", "[0, 1]", 2},
+        {"slices: [{point: [0, 0, 0], normal: [0, 0, 0], color_tf: [[0, 1, 1, 1]]}]\n",
+         "slices.0.normal", "non-zero", 2},
+        {"slices: [{point: [0, 0, 0], normal: [0, 0, 1]}]\n", "slices.0.color_tf",
+         "required key is missing", 2},
+        {"volume:\n  color_tf:\n    - [0, 1, 1, 1]\n    - [0, 0, 0, 0]\n  extinction_tf: "
+         "[[0, 1]]\n",
+         "volume.color_tf.1", "strictly increasing", 5},
+        {"volume: {color_tf: [[1, 1, 1, 1], [0.5, 0, 0, 0]], extinction_tf: [[0, 1]]}\n",
+         "volume.color_tf.1", "strictly increasing", 2},
+        {"volume: {color_tf: [[0, 1, 1, 1]], extinction_tf: [[0, 1], [1, -1]]}\n",
+         "volume.extinction_tf.1", "extinction must be >= 0", 2},
+        {"volume: {color_tf: [[0, 1, 1, 1]], extinction_tf: [[0, 1], [-1, 1]]}\n",
+         "volume.extinction_tf.1", "strictly increasing", 2},
+        {"volume: {color_tf: [[0, 1, 2, 1]], extinction_tf: [[0, 1]]}\n",
+         "volume.color_tf.0", "[0, 1]", 2},
+        {"volume: {glow: wilhelms-van-gelder, color_tf: [[0, 1, -2, 1]], "
+         "extinction_tf: [[0, 1]]}\n",
+         "volume.color_tf.0", "glow components must be >= 0", 2},
+        {"volume: {color_tf: [], extinction_tf: [[0, 1]]}\n", "volume.color_tf",
+         "non-empty list", 2},
+        {"volume: {color_tf: [[0, 1, 1]], extinction_tf: [[0, 1]]}\n",
+         "volume.color_tf.0", "list of 4 numbers", 2},
+        {"volume: {color_tf: [[0, 1, 1, 1]]}\n", "volume.extinction_tf",
+         "required key is missing", 0},
+        {"accuracy: {mapping_tolerance: 0}\n", "accuracy.mapping_tolerance",
+         "must be > 0", 2},
+        {"accuracy: {root_tolerance: -1e-14}\n", "accuracy.root_tolerance", "must be > 0",
+         2},
+        {"accuracy: {projection_tolerance: 0}\n", "accuracy.projection_tolerance", "> 0",
+         2},
+        {"accuracy: {volume_tolerance: 0}\n", "accuracy.volume_tolerance", "> 0", 2},
+        {"accuracy: {projection_order: 0}\n", "accuracy.projection_order", "[1, 64]", 2},
+        {"lighting: {diffuse: -1}\n", "lighting.diffuse", "must be >= 0", 2},
+        {"clip: {near: -1}\n", "clip.near", "must be >= 0", 2},
+        {"clip: {near: 2, far: 1}\n", "clip.far", "must be > clip.near", 2},
+        {"clip: {box: [[0, 0, 0], [1, 0, 1]]}\n", "clip.box", "below the second", 2},
+        {"threads: -1\n", "threads", "[0, 4096]", 2},
+        {"edges: {width: 0}\n", "edges.width", "(0, 64]", 2},
+        // degenerate cameras
+        {"camera: {position: [1, 2, 3], look_at: [1, 2, 3]}\n", "camera.look_at",
+         "coincides with position", 2},
+        {"camera: {position: [0, 0, 0], look_at: [0, 5, 0], up: [0, 1, 0]}\n",
+         "camera.up", "parallel to the view direction", 2},
+        {"camera: {position: [0, 0, 0], look_at: [0, 0, 1], up: [0, 0, -3]}\n",
+         "camera.up", "parallel", 2},
+        {"camera: {up: [0, 0, 0]}\n", "camera.up", "non-zero", 2},
+        // structure
+        {"data: {mesh: other}\n", "data", "duplicate key 'data'", 2},
+        {"camera: {width: 1, width: 2}\n", "camera.width", "duplicate key", 2},
+    };
+    for (const BadCase& c : cases) {
+        const std::string e = ErrorOf(std::string(kMinimal) + c.yaml);
+        SCOPED_TRACE(c.yaml);
+        EXPECT_TRUE(Contains(e, "test.yaml: ")) << e;
+        EXPECT_TRUE(Contains(e, c.keyPath)) << e;
+        EXPECT_TRUE(Contains(e, c.message)) << e;
+        if (c.line > 0) {
+            EXPECT_TRUE(Contains(e, "line " + std::to_string(c.line) + ", " + c.keyPath))
+                << e;
+        }
+    }
+}
+
+TEST(SceneValidationTest, ValuesAtTheRangeBoundariesAreAccepted) {
+    const Scene s = ParseScene(std::string(kMinimal) + R"(
+camera: {fov_y: 179.9, width: 1, height: 32768}
+isosurfaces: [{value: -1e300, color: [0, 1, 0], opacity: 0}]
+background: [0, 0, 0]
+lighting: {ambient: 0, diffuse: 0, specular: 0, shininess: 0}
+volume: {color_tf: [[-1, 0, 0, 0], [-0.999999, 1, 1, 1]], extinction_tf: [[5, 0]]}
+)",
+                               "t.yaml");
+    EXPECT_EQ(s.camera.width, 1);
+    EXPECT_EQ(s.camera.height, 32768);
+    EXPECT_EQ(s.isosurfaces[0].value, -1e300);
+}
+
+TEST(SceneValidationTest, MissingMeshEmptyFileMalformedYaml) {
+    std::string e = ErrorOf("camera: {width: 10}\n");
+    EXPECT_TRUE(Contains(e, "data")) << e;
+    EXPECT_TRUE(Contains(e, "required key is missing")) << e;
+    e = ErrorOf("data: {}\n");
+    EXPECT_TRUE(Contains(e, "data.mesh: required key is missing")) << e;
+    e = ErrorOf("data:\n  mesh:\n");
+    EXPECT_TRUE(Contains(e, "data.mesh")) << e;
+    EXPECT_TRUE(Contains(e, "has no value")) << e;
+
+    for (const char* empty : {"", "\n\n", "# only a comment\n", "---\n"}) {
+        e = ErrorOf(empty);
+        EXPECT_TRUE(Contains(e, "test.yaml")) << e;
+        EXPECT_TRUE(Contains(e, "empty")) << e;
+    }
+    e = ErrorOf("- 1\n- 2\n");
+    EXPECT_TRUE(Contains(e, "expected a mapping")) << e;
+
+    // yaml-cpp's position: the unclosed flow sequence runs to the end of the text.
+    e = ErrorOf("data: {mesh: builtin:nk-sinc}\ncamera:\n  position: [1, 2\n");
+    EXPECT_TRUE(Contains(e, "test.yaml: line ")) << e;
+    EXPECT_TRUE(Contains(e, ", column ")) << e;
+    EXPECT_TRUE(Contains(e, "malformed YAML")) << e;
+    e = ErrorOf("data: {mesh: builtin:nk-sinc}\ncamera:\n  width: 10\n   height: 10\n");
+    EXPECT_TRUE(Contains(e, "test.yaml: line 4, column")) << e;
+    e = ErrorOf("a: 1\n---\nb: 2\n");
+    EXPECT_TRUE(Contains(e, "one YAML document")) << e;
+    // Deep nesting is refused by yaml-cpp's depth guard, not by a stack overflow.
+    e = ErrorOf(std::string(100000, '[') + std::string(100000, ']'));
+    EXPECT_TRUE(Contains(e, "test.yaml")) << e;
+}
+
+// ---------------------------------------------------------------------------------------
+// Overrides
+// ---------------------------------------------------------------------------------------
+
+TEST(SceneOverrideTest, SetsExistingCreatesAbsentAndIndexes) {
+    const std::string yaml = std::string(kMinimal) +
+                             "camera: {width: 512}\n"
+                             "isosurfaces: [{value: 0}, {value: 1, color: [1, 0, 0]}]\n";
+    const Scene s = ParseScene(
+        yaml, "t.yaml",
+        {"camera.width=64", "isosurfaces.0.value=0.5",
+         "volume.color_tf=[[0,1,0,0],[1,0,0,1]]", "volume.extinction_tf=[[0, 2]]",
+         "clip.far=10", "isosurfaces.1.color.2=0.75", "isosurfaces.2.value=-3",
+         "lighting.shininess=8", "output.png=o/x.png"});
+    EXPECT_EQ(s.camera.width, 64);
+    EXPECT_EQ(s.camera.height, 512);
+    ASSERT_EQ(s.isosurfaces.size(), 3u);
+    EXPECT_EQ(s.isosurfaces[0].value, 0.5);
+    EXPECT_EQ(s.isosurfaces[1].value, 1.0);
+    EXPECT_EQ(s.isosurfaces[1].color, (Vec3{1, 0, 0.75}));
+    EXPECT_EQ(s.isosurfaces[2].value, -3.0);  // appended, other keys default
+    EXPECT_EQ(s.isosurfaces[2].field, "u");
+    ASSERT_TRUE(s.volume.has_value());
+    ASSERT_EQ(s.volume->colorTf.size(), 2u);
+    EXPECT_EQ(s.volume->colorTf[0].rgb, (Vec3{1, 0, 0}));
+    EXPECT_EQ(s.volume->colorTf[1].scalar, 1.0);
+    EXPECT_EQ(s.volume->colorTf[1].rgb, (Vec3{0, 0, 1}));
+    EXPECT_EQ(s.volume->extinctionTf[0].extinction, 2.0);
+    EXPECT_EQ(s.clip.far, 10.0);
+    EXPECT_EQ(s.lighting.shininess, 8.0);
+    EXPECT_EQ(s.lighting.ambient, 0.1);
+    EXPECT_EQ(s.output.png, Cwd("o/x.png"));
+}
+
+TEST(SceneOverrideTest, LaterOverridesWinAndNullRemoves) {
+    const std::string yaml = std::string(kMinimal) + "camera: {fov_y: 40}\n";
+    Scene s = ParseScene(yaml, "t.yaml", {"camera.width=10", "camera.width=20"});
+    EXPECT_EQ(s.camera.width, 20);
+    // Switching to orthographic: drop fov_y, add ortho_height.
+    s = ParseScene(yaml, "t.yaml", {"camera.fov_y=null", "camera.ortho_height=3"});
+    EXPECT_TRUE(s.camera.orthographic);
+    EXPECT_EQ(s.camera.orthoHeight, 3.0);
+    const std::string e = ErrorOf(yaml, {"camera.ortho_height=3"});
+    EXPECT_TRUE(Contains(e, "not both")) << e;
+    // Removing a list entry.
+    s = ParseScene(std::string(kMinimal) + "isosurfaces: [{value: 1}, {value: 2}]\n",
+                   "t.yaml", {"isosurfaces.0=~"});
+    ASSERT_EQ(s.isosurfaces.size(), 1u);
+    EXPECT_EQ(s.isosurfaces[0].value, 2.0);
+    // Overrides on an empty text build the whole scene.
+    s = ParseScene("", "t.yaml",
+                   {"data.mesh=builtin:ball-p2", "isosurfaces.0.value=0.5"});
+    EXPECT_EQ(s.data.mesh, "builtin:ball-p2");
+    EXPECT_EQ(s.isosurfaces.at(0).value, 0.5);
+}
+
+TEST(SceneOverrideTest, BadOverridesAreErrors) {
+    std::string e = ErrorOf(kMinimal, {"camera.fovy=20"});
+    EXPECT_TRUE(Contains(e, "--set camera.fovy=20")) << e;
+    EXPECT_TRUE(Contains(e, "unknown key 'camera.fovy'")) << e;
+    EXPECT_TRUE(Contains(e, "did you mean 'fov_y'?")) << e;
+    e = ErrorOf(kMinimal, {"camra.width=20"});
+    EXPECT_TRUE(Contains(e, "did you mean 'camera'?")) << e;
+    e = ErrorOf(kMinimal, {"isosurfaces.0.valeu=1"});
+    EXPECT_TRUE(Contains(e, "did you mean 'value'?")) << e;
+    e = ErrorOf(kMinimal, {"isosurfaces.3.value=1"});
+    EXPECT_TRUE(Contains(e, "past the end")) << e;
+    e = ErrorOf(kMinimal, {"isosurfaces.first.value=1"});
+    EXPECT_TRUE(Contains(e, "not a list index")) << e;
+    e = ErrorOf(kMinimal, {"camera.width.x=1"});
+    EXPECT_TRUE(Contains(e, "takes a value, not sub-keys")) << e;
+    e = ErrorOf(kMinimal, {"camera.width"});
+    EXPECT_TRUE(Contains(e, "expected key.path=value")) << e;
+    e = ErrorOf(kMinimal, {"camera..width=1"});
+    EXPECT_TRUE(Contains(e, "empty key")) << e;
+    e = ErrorOf(kMinimal, {"camera.position=[1, 2"});
+    EXPECT_TRUE(Contains(e, "not valid YAML")) << e;
+    // A bad value arriving by --set is reported against the override, not a file line.
+    e = ErrorOf(kMinimal, {"camera.width=0"});
+    EXPECT_TRUE(Contains(e, "camera.width (--set camera.width=0)")) << e;
+    EXPECT_TRUE(Contains(e, "[1, 32768]")) << e;
+    e = ErrorOf(kMinimal, {"volume.color_tf=[[1,1,0,0],[0,0,0,1]]",
+                           "volume.extinction_tf=[[0, 1]]"});
+    EXPECT_TRUE(Contains(e, "volume.color_tf.1 (--set volume.color_tf=")) << e;
+    EXPECT_TRUE(Contains(e, "strictly increasing")) << e;
+}
+
+// ---------------------------------------------------------------------------------------
+// Files and paths
+// ---------------------------------------------------------------------------------------
+
+class SceneFileTest : public ::testing::Test {
+  protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ =
+            fs::temp_directory_path() / ("hpray_test_scene_" + std::string(info->name()));
+        fs::remove_all(dir_);
+        fs::create_directories(dir_ / "scenes");
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+    std::string Write(const std::string& name, const std::string& text) {
+        const fs::path path = dir_ / name;
+        std::ofstream(path) << text;
+        return path.string();
+    }
+    fs::path dir_;
+};
+
+TEST_F(SceneFileTest, InputPathsResolveAgainstTheSceneFolder) {
+    const std::string path = Write("scenes/a.yaml",
+                                   "data: {mesh: ../meshes/m.vtu}\n"
+                                   "output: {exr: out/a.exr, png: /abs/a.png}\n");
+    const Scene s = LoadScene(path, {});
+    EXPECT_EQ(s.sourcePath, path);
+    EXPECT_EQ(s.data.mesh, (dir_ / "meshes/m.vtu").string());
+    EXPECT_EQ(s.output.exr, Cwd("out/a.exr"));  // outputs: the working directory
+    EXPECT_EQ(s.output.png, "/abs/a.png");
+
+    const Scene abs =
+        LoadScene(Write("scenes/b.yaml", "data: {mesh: /data/x.vtu}\n"), {});
+    EXPECT_EQ(abs.data.mesh, "/data/x.vtu");
+    const Scene builtin = LoadScene(
+        Write("scenes/c.yaml", "data: {mesh: 'builtin:nk-sinc?order=4'}\n"), {});
+    EXPECT_EQ(builtin.data.mesh, "builtin:nk-sinc?order=4");
+    // An override of an input path resolves against the scene folder too.
+    const Scene over = LoadScene(path, {"data.mesh=other.vtu"});
+    EXPECT_EQ(over.data.mesh, (dir_ / "scenes/other.vtu").string());
+    // ParseScene without a base folder: the working directory.
+    EXPECT_EQ(ParseScene("data: {mesh: m.vtu}", "t.yaml").data.mesh, Cwd("m.vtu"));
+}
+
+TEST_F(SceneFileTest, FileErrorsNameTheFile) {
+    const std::string missing = (dir_ / "nope.yaml").string();
+    try {
+        LoadScene(missing, {});
+        FAIL() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_TRUE(Contains(e.what(), missing)) << e.what();
+    }
+    EXPECT_THROW(LoadScene(dir_.string(), {}), InputError);
+    const std::string path = Write("bad.yaml", "data: {mesh: builtin:nk-sinc}\nfoo: 1\n");
+    try {
+        LoadScene(path, {});
+        FAIL() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_TRUE(Contains(e.what(), path + ": line 2, foo: unknown key")) << e.what();
+    }
+}
+
+TEST(SceneConfigsTest, EveryConfigParses) {
+    const fs::path configs = fs::path(HPRAY_TEST_DATA) / ".." / ".." / "configs";
+    ASSERT_TRUE(fs::is_directory(configs)) << configs;
+    int count = 0;
+    for (const auto& entry : fs::directory_iterator(configs)) {
+        const std::string ext = entry.path().extension().string();
+        if (ext != ".yaml" && ext != ".yml") continue;
+        SCOPED_TRACE(entry.path().string());
+        EXPECT_NO_THROW(LoadScene(entry.path().string(), {}));
+        ++count;
+    }
+    EXPECT_GE(count, 1);
+}
+
+TEST(SceneConfigsTest, Quickstart) {
+    const fs::path path =
+        fs::path(HPRAY_TEST_DATA) / ".." / ".." / "configs" / "quickstart.yaml";
+    const Scene s = LoadScene(path.string(), {});
+    EXPECT_EQ(s.data.mesh, "builtin:nk-sinc");
+    EXPECT_EQ(s.camera.position, (Vec3{2.2, 1.6, 2.6}));
+    EXPECT_EQ(s.camera.lookAt, (Vec3{0.5, 0.5, 0.5}));
+    EXPECT_EQ(s.camera.up, (Vec3{0, 1, 0}));
+    EXPECT_EQ(s.camera.fovYDegrees, 30.0);
+    EXPECT_EQ(s.camera.width, 512);
+    EXPECT_EQ(s.camera.height, 512);
+    ASSERT_EQ(s.isosurfaces.size(), 1u);
+    EXPECT_EQ(s.isosurfaces[0].value, 0.0);
+    EXPECT_EQ(s.output.exr, Cwd("out/quickstart.exr"));
+    EXPECT_EQ(s.output.png, Cwd("out/quickstart.png"));
+    EXPECT_EQ(s.output.stats, Cwd("out/quickstart.json"));
+}
+
+// ---------------------------------------------------------------------------------------
+// Camera
+// ---------------------------------------------------------------------------------------
+
+double Dot(const Vec3& a, const Vec3& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+double Norm(const Vec3& a) { return std::sqrt(Dot(a, a)); }
+double AngleDegrees(const Vec3& a, const Vec3& b) {
+    return std::acos(std::clamp(Dot(a, b) / (Norm(a) * Norm(b)), -1.0, 1.0)) * 180.0 /
+           M_PI;
+}
+
+SceneCamera MakeCamera(Vec3 position, Vec3 lookAt, Vec3 up, int w, int h) {
+    SceneCamera c;
+    c.position = position;
+    c.lookAt = lookAt;
+    c.up = up;
+    c.width = w;
+    c.height = h;
+    return c;
+}
+
+TEST(CameraTest, AxisAlignedFrame) {
+    // Looking down -z with +y up: right = +x, trueUp = +y.
+    const Camera cam(MakeCamera({0, 0, 5}, {0, 0, 0}, {0, 1, 0}, 5, 3));
+    EXPECT_EQ(cam.Forward(), (Vec3{0, 0, -1}));
+    EXPECT_EQ(cam.Right(), (Vec3{1, 0, 0}));
+    EXPECT_EQ(cam.TrueUp(), (Vec3{0, 1, 0}));
+    // The centre pixel of an odd-sized image looks exactly along forward.
+    const CameraRay centre = cam.PixelRay(2, 1);
+    EXPECT_EQ(centre.direction, (Vec3{0, 0, -1}));
+    EXPECT_EQ(centre.origin, (Vec3{0, 0, 5}));
+    // i grows to the right (+x), j grows downwards (-y).
+    EXPECT_GT(cam.PixelRay(4, 1).direction[0], 0.0);
+    EXPECT_LT(cam.PixelRay(0, 1).direction[0], 0.0);
+    EXPECT_GT(cam.PixelRay(2, 0).direction[1], 0.0);
+    EXPECT_LT(cam.PixelRay(2, 2).direction[1], 0.0);
+}
+
+TEST(CameraTest, CentreRayOfAGeneralCameraIsForward) {
+    for (int seed = 0; seed < 20; ++seed) {
+        const double a = 0.37 * seed, b = 1.1 + 0.13 * seed;
+        const Vec3 position{3 * std::cos(a), 2 * std::sin(b), 1 + std::sin(a + b)};
+        const Vec3 lookAt{0.5, -0.25 * seed, 0.1};
+        const SceneCamera settings = MakeCamera(position, lookAt, {0, 1, 0}, 31, 17);
+        const Camera cam(settings);
+        const Vec3 d{lookAt[0] - position[0], lookAt[1] - position[1],
+                     lookAt[2] - position[2]};
+        const CameraRay ray = cam.PixelRay(15, 8);
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(ray.direction[k], d[k] / Norm(d), 1e-15) << seed;
+        EXPECT_NEAR(Norm(ray.direction), 1.0, 1e-15);
+        // The frame is orthonormal and right-handed: right x trueUp = -forward.
+        EXPECT_NEAR(Dot(cam.Right(), cam.Forward()), 0.0, 1e-15);
+        EXPECT_NEAR(Dot(cam.TrueUp(), cam.Forward()), 0.0, 1e-15);
+        EXPECT_NEAR(Dot(cam.TrueUp(), cam.Right()), 0.0, 1e-15);
+        EXPECT_NEAR(Norm(cam.TrueUp()), 1.0, 1e-15);
+        EXPECT_GT(cam.TrueUp()[1], 0.0);  // true_up leans towards up
+    }
+}
+
+TEST(CameraTest, PerspectiveCornerAndEdgeAngles) {
+    // W = 2H and fov_y = 90: the top image edge is 45 degrees above forward; the right
+    // edge is at atan(W/H * tan 45) = atan 2 beside it. Pixel centres sit half a pixel
+    // inside, so use continuous coordinates for the edges and check pixel centres apart.
+    const int w = 400, h = 200;
+    SceneCamera settings = MakeCamera({1, 2, 3}, {1, 2, -7}, {0, 1, 0}, w, h);
+    settings.fovYDegrees = 90.0;
+    const Camera cam(settings);
+    const Vec3 f = cam.Forward();
+    EXPECT_NEAR(AngleDegrees(cam.RayAt(w / 2.0, 0).direction, f), 45.0, 1e-12);
+    EXPECT_NEAR(AngleDegrees(cam.RayAt(w / 2.0, h).direction, f), 45.0, 1e-12);
+    EXPECT_NEAR(AngleDegrees(cam.RayAt(w, h / 2.0).direction, f),
+                std::atan(2.0) * 180 / M_PI, 1e-12);
+    // The corner (0, 0): tan of the angle = sqrt(2^2 + 1^2).
+    EXPECT_NEAR(AngleDegrees(cam.RayAt(0, 0).direction, f),
+                std::atan(std::sqrt(5.0)) * 180 / M_PI, 1e-12);
+    // Corner pixel centres against the formula of design.md.
+    const double t = std::tan(M_PI / 4);
+    for (const auto& [i, j] : {std::pair{0, 0}, std::pair{w - 1, 0}, std::pair{0, h - 1},
+                               std::pair{w - 1, h - 1}, std::pair{17, 123}}) {
+        const double sx = (2.0 * (i + 0.5) / w - 1.0) * (double(w) / h) * t;
+        const double sy = (1.0 - 2.0 * (j + 0.5) / h) * t;
+        // Here forward = -z, right = +x, trueUp = +y.
+        const Vec3 expected{sx / std::sqrt(1 + sx * sx + sy * sy),
+                            sy / std::sqrt(1 + sx * sx + sy * sy),
+                            -1 / std::sqrt(1 + sx * sx + sy * sy)};
+        const CameraRay ray = cam.PixelRay(i, j);
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(ray.direction[k], expected[k], 1e-15) << i << "," << j;
+        EXPECT_EQ(ray.origin, (Vec3{1, 2, 3}));
+    }
+    // Symmetric pixels mirror each other.
+    const CameraRay a = cam.PixelRay(10, 20), b = cam.PixelRay(w - 1 - 10, h - 1 - 20);
+    EXPECT_NEAR(a.direction[0], -b.direction[0], 1e-15);
+    EXPECT_NEAR(a.direction[1], -b.direction[1], 1e-15);
+    EXPECT_NEAR(a.direction[2], b.direction[2], 1e-15);
+}
+
+TEST(CameraTest, OrthographicOriginsSpacedByOrthoHeightOverH) {
+    const int w = 6, h = 4;
+    SceneCamera settings = MakeCamera({0, 0, 0}, {3, 0, 0}, {0, 0, 1}, w, h);
+    settings.orthographic = true;
+    settings.orthoHeight = 2.0;
+    const Camera cam(settings);
+    // forward = +x, right = forward x up = x cross z = -y, trueUp = right x forward = +z.
+    EXPECT_EQ(cam.Forward(), (Vec3{1, 0, 0}));
+    EXPECT_EQ(cam.Right(), (Vec3{0, -1, 0}));
+    EXPECT_EQ(cam.TrueUp(), (Vec3{0, 0, 1}));
+    const double spacing = settings.orthoHeight / h;  // the same in both directions
+    for (int j = 0; j < h; ++j) {
+        for (int i = 0; i < w; ++i) {
+            const CameraRay ray = cam.PixelRay(i, j);
+            EXPECT_EQ(ray.direction, (Vec3{1, 0, 0}));
+            EXPECT_NEAR(ray.origin[0], 0.0, 1e-15);
+            EXPECT_NEAR(ray.origin[1], -(i + 0.5 - w / 2.0) * spacing, 1e-15) << i;
+            EXPECT_NEAR(ray.origin[2], (h / 2.0 - j - 0.5) * spacing, 1e-15) << j;
+        }
+    }
+    // The image spans ortho_height vertically and ortho_height * W/H horizontally.
+    EXPECT_NEAR(cam.RayAt(0, 0).origin[2] - cam.RayAt(0, h).origin[2], 2.0, 1e-15);
+    EXPECT_NEAR(cam.RayAt(0, 0).origin[1] - cam.RayAt(w, 0).origin[1], 3.0, 1e-15);
+}
+
+TEST(CameraTest, FromAParsedScene) {
+    const Scene s = ParseScene(std::string(kMinimal) +
+                                   "camera: {position: [0, 0, 0], look_at: [0, 0, -1], "
+                                   "fov_y: 60, width: 3, height: 3}\n",
+                               "t.yaml");
+    const Camera cam(s.camera);
+    EXPECT_EQ(cam.Width(), 3);
+    EXPECT_FALSE(cam.Orthographic());
+    // Top-centre pixel: sy = (1 - 1/3) tan 30 deg.
+    const double sy = (2.0 / 3.0) * std::tan(M_PI / 6);
+    const CameraRay ray = cam.PixelRay(1, 0);
+    EXPECT_NEAR(ray.direction[1], sy / std::sqrt(1 + sy * sy), 1e-15);
+    EXPECT_NEAR(ray.direction[2], -1 / std::sqrt(1 + sy * sy), 1e-15);
+}
+
+}  // namespace
+}  // namespace hpray

@@ -1,0 +1,57 @@
+// Primary rays of the scene camera (the camera contract of design.md), double precision.
+#pragma once
+
+#include <array>
+
+#include "scene/scene.h"
+
+namespace hpray {
+
+/// A primary ray: world origin and unit world direction; t is world distance along it.
+struct CameraRay {
+    std::array<double, 3> origin{0.0, 0.0, 0.0};
+    std::array<double, 3> direction{0.0, 0.0, 1.0};
+};
+
+/// The camera frame and ray generation of design.md:
+/// forward = normalize(look_at - position), right = normalize(forward x up),
+/// trueUp = right x forward. Pixel (i, j): i left to right, j top to bottom, sampled at
+/// its centre. Cheap to copy; immutable after construction.
+class Camera {
+  public:
+    /// `settings` must be valid (LoadScene guarantees it); a degenerate frame is an
+    /// internal error here.
+    explicit Camera(const SceneCamera& settings);
+
+    /// The ray through the centre of pixel (i, j), i in [0, width), j in [0, height).
+    CameraRay PixelRay(int i, int j) const { return RayAt(i + 0.5, j + 0.5); }
+
+    /// The ray through the continuous image point (x, y): x in [0, width] from the left
+    /// edge, y in [0, height] from the top edge, in pixels (pixel centres at +0.5).
+    /// Perspective: origin = position, direction = normalize(forward + sx right + sy
+    /// trueUp) with sx = (2x/W - 1)(W/H) tan(fov_y/2), sy = (1 - 2y/H) tan(fov_y/2).
+    /// Orthographic: direction = forward, origin = position + sx' right + sy' trueUp with
+    /// sx' = (2x/W - 1)(W/H) ortho_height/2, sy' = (1 - 2y/H) ortho_height/2.
+    CameraRay RayAt(double x, double y) const;
+
+    int Width() const { return width_; }
+    int Height() const { return height_; }
+    bool Orthographic() const { return orthographic_; }
+    const std::array<double, 3>& Position() const { return position_; }
+    const std::array<double, 3>& Forward() const { return forward_; }  ///< unit
+    const std::array<double, 3>& Right() const { return right_; }      ///< unit
+    const std::array<double, 3>& TrueUp() const { return trueUp_; }    ///< unit
+
+  private:
+    std::array<double, 3> position_{};
+    std::array<double, 3> forward_{};
+    std::array<double, 3> right_{};
+    std::array<double, 3> trueUp_{};
+    int width_ = 1;
+    int height_ = 1;
+    bool orthographic_ = false;
+    double aspect_ = 1.0;      ///< W / H
+    double halfExtent_ = 1.0;  ///< tan(fov_y / 2), or ortho_height / 2
+};
+
+}  // namespace hpray

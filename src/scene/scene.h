@@ -1,0 +1,175 @@
+// The scene of a render: plain structs parsed and validated from the YAML scene file.
+#pragma once
+
+#include <array>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace hpray {
+
+// Every struct below is plain data with the documented default of each key. LoadScene
+// fills them from a scene file (schema: design.md "Scene file (YAML)") and guarantees the
+// documented ranges, so consumers need not re-validate. World units are the mesh's.
+
+/// `data:` what to render.
+struct SceneData {
+    /// `data.mesh` (required): an absolute path to a mesh file or partition directory
+    /// (relative paths in the file are resolved against the scene file's folder), or
+    /// "builtin:NAME[?k=v...]" unchanged.
+    std::string mesh;
+};
+
+/// `camera:` a pinhole (fov_y) or orthographic (ortho_height) camera; see camera.h for
+/// the rays. Defaults view the unit cube: position [3, 2, 4], look_at [0.5, 0.5, 0.5], up
+/// [0, 1, 0], fov_y 30, 512 x 512. Exactly one of fov_y / ortho_height may be given.
+struct SceneCamera {
+    std::array<double, 3> position{3.0, 2.0, 4.0};  ///< world
+    std::array<double, 3> lookAt{0.5, 0.5, 0.5};    ///< world; != position
+    std::array<double, 3> up{0.0, 1.0, 0.0};  ///< not parallel to the view direction
+    bool orthographic = false;                ///< true iff ortho_height was given
+    double fovYDegrees = 30.0;  ///< vertical field of view, in (0, 180); perspective only
+    double orthoHeight = 0.0;   ///< world height of the view, > 0; orthographic only
+    int width = 512;            ///< pixels, in [1, 32768]
+    int height = 512;           ///< pixels, in [1, 32768]
+};
+
+/// One entry of `isosurfaces:`. `value` is required.
+struct SceneIsosurface {
+    std::string field = "u";  ///< point field name (builtins name it u)
+    double value = 0.0;       ///< the isovalue C, finite
+    std::array<double, 3> color{0.9, 0.5, 0.2};  ///< linear RGB in [0, 1]
+    double opacity = 1.0;                        ///< in [0, 1]
+};
+
+/// A control point of a colour transfer function: scalar -> linear RGB.
+struct ColorControlPoint {
+    double scalar = 0.0;
+    std::array<double, 3> rgb{0.0, 0.0, 0.0};
+};
+
+/// A control point of an extinction transfer function: scalar -> sigma (per world unit).
+struct ExtinctionControlPoint {
+    double scalar = 0.0;
+    double extinction = 0.0;  ///< >= 0
+};
+
+/// One entry of `slices:` a cut plane showing `field` through `color_tf`. `point`,
+/// `normal` and `color_tf` are required.
+struct SceneSlice {
+    std::array<double, 3> point{0.0, 0.0, 0.0};   ///< world point on the plane
+    std::array<double, 3> normal{0.0, 0.0, 1.0};  ///< world, non-zero (not normalised)
+    std::string field = "u";
+    /// [[s, r, g, b], ...], >= 1 point, s strictly increasing, rgb in [0, 1]; piecewise
+    /// linear, clamped outside the first and last scalar.
+    std::vector<ColorControlPoint> colorTf;
+    double opacity = 1.0;  ///< in [0, 1]
+};
+
+/// `volume.glow`: how color_tf enters the emission.
+enum class GlowModel {
+    WilliamsMax,  ///< "williams-max": colour is chromaticity kappa, emission kappa*tau
+    WilhelmsVanGelder  ///< "wilhelms-van-gelder": colour is the glow g, emission g
+};
+
+/// `volume:` (optional section) absorption + emission volume rendering.
+struct SceneVolume {
+    std::string colorField = "u";
+    std::string extinctionField;  ///< defaults to colorField when absent
+    GlowModel glow = GlowModel::WilliamsMax;
+    /// [[s, r, g, b], ...] (required), >= 1 point, s strictly increasing. Williams-Max:
+    /// rgb in [0, 1]; Wilhelms-Van Gelder: glow per world unit, >= 0.
+    std::vector<ColorControlPoint> colorTf;
+    /// [[s, sigma], ...] (required), >= 1 point, s strictly increasing, sigma >= 0.
+    std::vector<ExtinctionControlPoint> extinctionTf;
+};
+
+/// `lighting:` headlight Blinn-Phong shading of isosurfaces. All >= 0.
+struct SceneLighting {
+    double ambient = 0.1;
+    double diffuse = 0.8;
+    double specular = 0.3;
+    double shininess = 32.0;
+};
+
+/// `accuracy:` the error budget of design.md (all tolerances > 0, absolute).
+struct SceneAccuracy {
+    double mappingTolerance = 1e-12;  ///< eps_M: reference-coordinate inversion
+    /// Order of the polynomial projection along a ray; 0 = `auto` (chosen per segment),
+    /// otherwise an explicit order in [1, 64].
+    int projectionOrder = 0;
+    double projectionTolerance = 1e-12;  ///< eps_P
+    double rootTolerance = 1e-14;        ///< eps_R: in the ray parameter t
+    double volumeTolerance = 1e-10;      ///< eps_V: absolute error of pixel RGB
+};
+
+/// `clip:` ray parameter range and optional world box. near >= 0, far > near (may be
+/// inf).
+struct SceneClip {
+    double near = 0.0;
+    double far = std::numeric_limits<double>::infinity();
+    /// `clip.box: [[x0, y0, z0], [x1, y1, z1]]` with x0 < x1, y0 < y1, z0 < z1.
+    std::optional<std::array<std::array<double, 3>, 2>> box;
+};
+
+/// `output:` absolute paths (relative ones resolved against the working directory);
+/// an empty string means "not written". Every output is optional.
+struct SceneOutput {
+    std::string exr;    ///< OpenEXR channels of design.md
+    std::string png;    ///< RGB over the background, sRGB, 8 bit
+    std::string stats;  ///< JSON statistics
+    std::string hits;   ///< float64 .npy (H, W, 5): t, N.X, N.Y, N.Z, residual
+    std::string rgba;   ///< float64 .npy (H, W, 4): premultiplied R, G, B, A
+};
+
+/// `edges:` (optional section, an extension) overlay of the cell edges on isosurfaces and
+/// slices, drawn where a surface point lies within `width` pixels of a cell face
+/// boundary.
+struct SceneEdges {
+    std::array<double, 3> color{0.0, 0.0, 0.0};  ///< linear RGB in [0, 1]
+    double width = 1.0;                          ///< pixels, in (0, 64]
+    double opacity = 1.0;                        ///< in [0, 1]
+};
+
+/// A whole scene. Top-level keys besides design.md's: `threads` (worker threads per rank,
+/// 0 = all hardware threads; default 0) and `edges` (see SceneEdges).
+struct Scene {
+    std::string sourcePath;  ///< the scene file as given (for messages); empty if parsed
+    SceneData data;
+    SceneCamera camera;
+    std::vector<SceneIsosurface> isosurfaces;  ///< default none
+    std::vector<SceneSlice> slices;            ///< default none
+    std::optional<SceneVolume> volume;         ///< default none
+    SceneLighting lighting;
+    std::array<double, 3> background{1.0, 1.0, 1.0};  ///< linear RGB in [0, 1]
+    SceneAccuracy accuracy;
+    SceneClip clip;
+    SceneOutput output;
+    int threads = 0;                  ///< >= 0; 0 = all hardware threads
+    std::optional<SceneEdges> edges;  ///< default off
+
+    /// Names of the fields the scene uses (isosurfaces, slices, volume), each once, in
+    /// first-use order: the only fields a renderer needs to load.
+    std::vector<std::string> FieldNames() const;
+};
+
+/// Reads and validates the scene file `path`, after applying `overrides`
+/// ("key.path=value", as `hpray render --set`). Throws InputError naming the file, the
+/// key path and the line.
+Scene LoadScene(const std::string& path, const std::vector<std::string>& overrides = {});
+
+/// Parses scene text. `sourceName` names it in messages; relative input paths resolve
+/// against `baseDir` (empty: the working directory). Overrides: each "a.b.0.c=VALUE" sets
+/// that key path (list indices are numbers; the index one past the end appends) to VALUE
+/// parsed as YAML; the value `null` (or `~`) removes the key. A path outside the schema
+/// is an error that suggests the nearest valid key.
+Scene ParseScene(const std::string& yamlText, const std::string& sourceName,
+                 const std::vector<std::string>& overrides = {},
+                 const std::string& baseDir = "");
+
+/// Every key path of the schema, e.g. "camera.fov_y", "isosurfaces.#.value" (# = any
+/// index); for help texts and tests.
+std::vector<std::string> SceneKeyPaths();
+
+}  // namespace hpray
