@@ -1,6 +1,43 @@
 // VTK cell types: classification into (shape, order, family) and node-order conversion.
+//
+// Node orders (VTK node n of a cell; "lattice" is the internal lattice of mesh/cell.h):
+//   10, 24, 71  VTK tetrahedra; VTK's reference tet is the internal one (identity).
+//   12, 25, 29, 72  VTK hexahedra; VTK's [0,1]^3 is the internal one (identity).
+//   73  VTK_LAGRANGE_WEDGE: VTK's reference wedge is the internal one (identity). A
+//       geometrically valid cell has a positive Jacobian in VTK's parameters.
+//   13, 26, 32  VTK_WEDGE, VTK_QUADRATIC_WEDGE, VTK_BIQUADRATIC_QUADRATIC_WEDGE wind the
+//       first triangle the other way: vtkCell::GetFace of all three returns the faces of
+//       vtkWedge ((0,1,2), (3,5,4), (0,3,4,1), ...), which point outward only when the
+//       parametric Jacobian is negative. They are read with VTK's r and s exchanged
+//       (internal (r, s, t) = VTK (s, r, t)), so a valid file cell becomes a positively
+//       oriented internal cell. (VTK 9.1's vtkCellValidator hard-codes the opposite
+//       expectation for 26 and 32 "for backwards compatibility", and gmsh writes 26/32
+//       without the swap it applies to 13; such files come out inverted; a reader that
+//       finds a negative Jacobian can fix the cell with InternalReflection.)
+//   14, 27  VTK pyramids. VTK's parameters (r, s, t) are those of a collapsed hexahedron:
+//       internal (x, y, z) = ((1 - t) r + t/2, (1 - t) s + t/2, t); VTK lists the apex
+//       at (0, 0, 1).
+//   74  VTK_LAGRANGE_PYRAMID. VTK defines no node order for it (VTK 9.1 has no class), so
+//       hpray uses this one, in the style of the other VTK Lagrange cells (vertices,
+//       edges, faces, interior), of the full order-p pyramid lattice,
+//       (p+1)(p+2)(2p+3)/6 nodes; lattice (i, j, k) as in mesh/cell.h:
+//       1. the 5 vertices in VTK_PYRAMID order: (0,0,0) (p,0,0) (p,p,0) (0,p,0), then
+//          the apex (0,0,p);
+//       2. p-1 nodes per edge, edges in VTK_QUADRATIC_PYRAMID order: base edges 0-1 (i
+//          increasing), 1-2 (j increasing), 3-2 (i increasing), 0-3 (j increasing), so
+//          the base is numbered like a VTK Lagrange quadrilateral; then the lateral edges
+//          0-4, 1-4, 2-4, 3-4, each from its base vertex to the apex;
+//       3. face-interior nodes: first the base (k = 0), 1 <= i, j <= p-1, i fastest; then
+//          the triangles 0-1-4 (j = 0), 1-2-4 (i = p-k), 2-3-4 (j = p-k), 3-0-4 (i = 0),
+//          each by level k = 1..p-2 (slowest) and along the base-parallel lattice axis
+//          (i for the first and third, j for the others) increasing;
+//       4. interior nodes (k >= 1, 1 <= i, j <= p-k-1) sorted by (k, j, i), i fastest.
+//       Order 1 is VTK_PYRAMID; at order 2 the first 13 nodes are VTK_QUADRATIC_PYRAMID's
+//       and node 13 is the base centre. VtkParametricCoords reports 74 in VTK's pyramid
+//       parameters (as 14 and 27).
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,25 +54,38 @@ struct CellKind {
 
 /// VTK cell type ids hpray reads (vtkCellType.h).
 enum VtkCellType : int {
-    kVtkTetra = 10, kVtkHexahedron = 12, kVtkWedge = 13, kVtkPyramid = 14,
-    kVtkQuadraticTetra = 24, kVtkQuadraticHexahedron = 25, kVtkQuadraticWedge = 26,
-    kVtkQuadraticPyramid = 27, kVtkTriquadraticHexahedron = 29,
+    kVtkTetra = 10,
+    kVtkHexahedron = 12,
+    kVtkWedge = 13,
+    kVtkPyramid = 14,
+    kVtkQuadraticTetra = 24,
+    kVtkQuadraticHexahedron = 25,
+    kVtkQuadraticWedge = 26,
+    kVtkQuadraticPyramid = 27,
+    kVtkTriquadraticHexahedron = 29,
     kVtkBiquadraticQuadraticWedge = 32,
-    kVtkLagrangeTetrahedron = 71, kVtkLagrangeHexahedron = 72, kVtkLagrangeWedge = 73,
+    kVtkLagrangeTetrahedron = 71,
+    kVtkLagrangeHexahedron = 72,
+    kVtkLagrangeWedge = 73,
     kVtkLagrangePyramid = 74,
 };
 
 /// Classifies a 3-D VTK cell from its type and node count. `degrees` (VTK's
 /// HigherOrderDegrees for this cell, 3 values) is used for Lagrange types when given
-/// (non-null); anisotropic degrees are rejected. Returns std::nullopt when the type is not
-/// a supported 3-D cell or the node count does not fit it; `why` then says which.
-std::optional<CellKind> ClassifyVtkCell(int vtkType, long long nodeCount, const int* degrees,
-                                        std::string* why = nullptr);
+/// (non-null); anisotropic degrees are rejected. Returns std::nullopt when the type is
+/// not a supported 3-D cell or the node count does not fit it; `why` then says which. 24
+/// -> Lagrange tet order 2; 25/26/27 -> serendipity hex/wedge/pyramid order 2; 29 ->
+/// Lagrange hex order 2; 32 -> Lagrange wedge order 2; 71-74 -> Lagrange, order
+/// 1..kMaxOrder from the node count (or the degrees).
+std::optional<CellKind> ClassifyVtkCell(int vtkType, long long nodeCount,
+                                        const int* degrees, std::string* why = nullptr);
 
-/// `perm` with internal[k] = file[perm[k]] for a cell of VTK type `vtkType` and kind `kind`.
-/// `legacyLagrangeHex`: the file's version is below 2.2, so VTK_LAGRANGE_HEXAHEDRON edge
-/// node blocks 10 and 11 are swapped (pre-VTK-9 order; see ../shared/data/README.md).
-/// Cached; thread-safe.
+/// `perm` with internal[k] = file[perm[k]] for a cell of VTK type `vtkType` and kind
+/// `kind` (a pair ClassifyVtkCell returns; anything else is an InternalError).
+/// `legacyLagrangeHex`: the file predates VTK 9's VTK_LAGRANGE_HEXAHEDRON order (see
+/// VtkXmlHasLegacyLagrangeHex), whose node blocks of edges 10 and 11 (p-1 nodes each,
+/// starting at 8+10(p-1) and 8+11(p-1)) are swapped; ignored for other types.
+/// Cached; thread-safe; the reference stays valid for the life of the program.
 const std::vector<int>& VtkToInternal(int vtkType, const CellKind& kind,
                                       bool legacyLagrangeHex = false);
 
@@ -47,5 +97,16 @@ const std::vector<int>& InternalToVtk(const CellKind& kind);
 /// VTK's parametric coordinates of node n of a cell of this type and kind, in VTK's own
 /// reference cell (for tests that compare with VTK's GetParametricCoords).
 std::vector<std::array<double, 3>> VtkParametricCoords(int vtkType, const CellKind& kind);
+
+/// The mirror image of a cell in internal order: reflected[k] = internal[m[k]] exchanges
+/// the lattice indices i and j (a reflection that keeps the reference domain, turning a
+/// negatively oriented cell into a positively oriented one). An involution. Cached.
+const std::vector<int>& InternalReflection(const CellKind& kind);
+
+/// Whether VTK reads VTK_LAGRANGE_HEXAHEDRON of a file of this version in the pre-VTK-9
+/// order (pass legacyLagrangeHex = true then). VTK 9.1's readers: XML (.vtu) version
+/// below 2.1; legacy .vtk "DataFile Version" below 5.1.
+bool VtkXmlHasLegacyLagrangeHex(int major, int minor);
+bool VtkLegacyHasLegacyLagrangeHex(int major, int minor);
 
 }  // namespace hpray
