@@ -1,6 +1,7 @@
 // Tests of scene parsing (schema, defaults, checks, overrides, paths) and camera rays.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
