@@ -1,8 +1,717 @@
-// Placeholder: implementation in progress.
+// Gmsh MSH 4.1 reader (ASCII and binary): nodes, 3-D elements, $NodeData and
+// $ElementData.
+//
+// Layout of the sections read here (gmsh reference manual, "MSH file format" 4.1); in a
+// binary file the numbers are raw (int: 4 bytes, size_t: the data size of $MeshFormat,
+// double: 8 bytes, all in the writer's byte order, told by the integer 1 written after
+// the format line), while section names and the string/real/integer tags of data sections
+// stay text:
+//   $Nodes    numBlocks numNodes minTag maxTag (size_t), then per block
+//             entityDim entityTag parametric (int) numNodesInBlock (size_t),
+//             the block's node tags (size_t), then x y z [u v w] (double) per node
+//   $Elements numBlocks numElements minTag maxTag (size_t), then per block
+//             entityDim entityTag elementType (int) numElementsInBlock (size_t),
+//             then per element its tag and node tags (size_t)
+//   $NodeData / $ElementData  text tags, then per entity tag (int) and values (double)
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+#include "io/gmsh_nodes.h"
 #include "io/mesh_io.h"
+#include "util/check.h"
 #include "util/error.h"
+#include "util/log.h"
+
 namespace hpray {
-Mesh ReadGmsh(const std::string& path, const ReadOptions&) {
-    throw InputError(path, "", "Gmsh reading is not implemented yet");
+namespace {
+
+std::string ReadWholeFile(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path, "", "cannot open file");
+    in.seekg(0, std::ios::end);
+    const std::streamoff size = in.tellg();
+    if (size < 0) throw InputError(path, "", "cannot determine the file size");
+    std::string data(static_cast<std::size_t>(size), '\0');
+    in.seekg(0, std::ios::beg);
+    if (size > 0 && !in.read(data.data(), size))
+        throw InputError(path, "", "read failed");
+    return data;
 }
+
+// Whether a field of this name is to be loaded ("u.x" or "u[0]" in the set selects "u").
+bool FieldWanted(const ReadOptions& options, const std::string& name) {
+    if (!options.fields) return true;
+    for (const std::string& want : *options.fields) {
+        if (want == name) return true;
+        if (want.size() > name.size() && want.compare(0, name.size(), name) == 0 &&
+            (want[name.size()] == '.' || want[name.size()] == '['))
+            return true;
+    }
+    return false;
+}
+
+// Values of one data section, by entity index (point or cell), before choosing a time
+// step.
+struct PendingField {
+    Association association = Association::Point;
+    long long timeStep = 0;
+    int components = 1;
+    std::vector<double> values;       // components per entity; NaN where not given
+    std::vector<std::uint8_t> given;  // 1 where the entity has values
+    std::size_t sectionPos = 0;       // where the (last) section starts, for errors
+};
+
+class MshParser {
+  public:
+    MshParser(const std::string& path, const ReadOptions& options)
+        : path_(path), options_(options), buf_(ReadWholeFile(path)) {}
+
+    Mesh Parse();
+
+  private:
+    // ---- positions and errors ----
+    std::string Where(std::size_t pos) const {
+        std::ostringstream os;
+        if (binary_) {
+            os << "byte " << pos;
+        } else {
+            const std::size_t end = std::min(pos, buf_.size());
+            os << "line " << 1 + std::count(buf_.begin(), buf_.begin() + end, '\n');
+        }
+        return os.str();
+    }
+    [[noreturn]] void FailAt(std::size_t pos, const std::string& message) const {
+        throw InputError(path_, Where(pos), message);
+    }
+    [[noreturn]] void Fail(const std::string& message) const { FailAt(last_, message); }
+
+    // ---- text ----
+    static bool IsSpace(char c) {
+        return c == ' ' || c == '\t' || c == '\r' || c == '\n';
+    }
+    void SkipSpace() {
+        while (pos_ < buf_.size() && IsSpace(buf_[pos_])) ++pos_;
+    }
+    bool AtEnd() {
+        SkipSpace();
+        return pos_ >= buf_.size();
+    }
+    std::string_view Token(const char* what) {
+        SkipSpace();
+        last_ = pos_;
+        if (pos_ >= buf_.size())
+            Fail(std::string("unexpected end of file, expected ") + what);
+        const std::size_t start = pos_;
+        while (pos_ < buf_.size() && !IsSpace(buf_[pos_])) ++pos_;
+        return std::string_view(buf_.data() + start, pos_ - start);
+    }
+    std::uint64_t TextUnsigned(const char* what) {
+        const std::string_view t = Token(what);
+        std::uint64_t v = 0;
+        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        if (ec != std::errc() || end != t.data() + t.size())
+            Fail(std::string("expected ") + what + " (a non-negative integer), found '" +
+                 std::string(t.substr(0, 40)) + "'");
+        return v;
+    }
+    long long TextInt(const char* what) {
+        const std::string_view t = Token(what);
+        long long v = 0;
+        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        if (ec != std::errc() || end != t.data() + t.size())
+            Fail(std::string("expected ") + what + " (an integer), found '" +
+                 std::string(t.substr(0, 40)) + "'");
+        return v;
+    }
+    double TextDouble(const char* what) {
+        const std::string_view t = Token(what);
+        double v = 0;
+        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        if (ec == std::errc::result_out_of_range) {
+            v = std::strtod(std::string(t).c_str(), nullptr);  // subnormal or +-inf
+        } else if (ec != std::errc() || end != t.data() + t.size()) {
+            Fail(std::string("expected ") + what + " (a number), found '" +
+                 std::string(t.substr(0, 40)) + "'");
+        }
+        return v;
+    }
+    // A string tag: "quoted, possibly with spaces" or one bare token.
+    std::string TextString(const char* what) {
+        SkipSpace();
+        last_ = pos_;
+        if (pos_ < buf_.size() && buf_[pos_] == '"') {
+            const std::size_t close = buf_.find('"', pos_ + 1);
+            const std::size_t eol = buf_.find('\n', pos_ + 1);
+            if (close == std::string::npos || (eol != std::string::npos && eol < close))
+                Fail(std::string("unterminated quoted ") + what);
+            std::string s = buf_.substr(pos_ + 1, close - pos_ - 1);
+            pos_ = close + 1;
+            return s;
+        }
+        return std::string(Token(what));
+    }
+    void Expect(const char* keyword) {
+        const std::string_view t = AtEnd() ? std::string_view() : Token(keyword);
+        if (t.empty())
+            FailAt(buf_.size(),
+                   std::string("unexpected end of file, expected ") + keyword);
+        if (t != keyword)
+            Fail(std::string("expected ") + keyword + ", found '" +
+                 std::string(t.substr(0, 40)) + "'");
+    }
+    // Binary data starts right after the newline that ends the preceding text line.
+    void EndOfTextLine() {
+        while (pos_ < buf_.size() &&
+               (buf_[pos_] == ' ' || buf_[pos_] == '\t' || buf_[pos_] == '\r'))
+            ++pos_;
+        last_ = pos_;
+        if (pos_ >= buf_.size() || buf_[pos_] != '\n')
+            Fail("expected the end of the line");
+        ++pos_;
+    }
+
+    // ---- binary ----
+    void Need(std::size_t bytes, const char* what) {
+        last_ = pos_;
+        if (buf_.size() - pos_ < bytes) {
+            std::ostringstream os;
+            os << "binary data cut short: " << what << " needs " << bytes << " bytes, "
+               << buf_.size() - pos_ << " left in the file";
+            Fail(os.str());
+        }
+    }
+    template <typename T>
+    T Raw() {
+        T v;
+        unsigned char b[sizeof(T)];
+        std::memcpy(b, buf_.data() + pos_, sizeof(T));
+        if (swap_) std::reverse(b, b + sizeof(T));
+        std::memcpy(&v, b, sizeof(T));
+        pos_ += sizeof(T);
+        return v;
+    }
+
+    // ---- numbers of either encoding ----
+    std::uint64_t Size(const char* what) {
+        if (!binary_) return TextUnsigned(what);
+        Need(sizeT_, what);
+        return sizeT_ == 8 ? Raw<std::uint64_t>() : Raw<std::uint32_t>();
+    }
+    long long Int(const char* what) {
+        if (!binary_) return TextInt(what);
+        Need(4, what);
+        return Raw<std::int32_t>();
+    }
+    double Double(const char* what) {
+        if (!binary_) return TextDouble(what);
+        Need(8, what);
+        return Raw<double>();
+    }
+    // Skips `count` size_t values (binary) or tokens (ASCII).
+    void SkipSizes(std::uint64_t count, const char* what) {
+        if (binary_) {
+            CheckCount(count, sizeT_, what);
+            pos_ += count * sizeT_;
+        } else {
+            for (std::uint64_t i = 0; i < count; ++i) Token(what);
+        }
+    }
+    // Rejects a declared count that the rest of the file cannot hold at `minBytes` each,
+    // before anything is allocated for it.
+    void CheckCount(std::uint64_t count, std::uint64_t minBytes, const char* what) {
+        const std::uint64_t left = buf_.size() - std::min(pos_, buf_.size());
+        if (minBytes > 0 && count > left / minBytes) {
+            std::ostringstream os;
+            os << "declared " << what << " count " << count << " is more than the "
+               << left << " bytes left in the file can hold";
+            Fail(os.str());
+        }
+    }
+    // Minimal size of an item of `sizes` size_t and `doubles` doubles in this encoding
+    // (ASCII: one digit and one separator per number).
+    std::uint64_t MinBytes(int sizes, int ints, int doubles) const {
+        return binary_ ? std::uint64_t(sizes) * sizeT_ + 4ull * ints + 8ull * doubles
+                       : 2ull * (sizes + ints + doubles);
+    }
+
+    // ---- sections ----
+    void ParseMeshFormat();
+    void SkipEntities();
+    void SkipPartitionedEntities();
+    void ParseNodes();
+    void ParseElements();
+    void ParseData(const std::string& section);
+    void SkipSection(const std::string& name, std::size_t headerPos);
+    std::int64_t NodeIndex(std::uint64_t tag) const {
+        if (denseTags_) return tag < nodeIndexDense_.size() ? nodeIndexDense_[tag] : -1;
+        auto it = nodeIndexSparse_.find(tag);
+        return it == nodeIndexSparse_.end() ? -1 : it->second;
+    }
+    void FinishFields();
+
+    std::string path_;
+    const ReadOptions& options_;
+    std::string buf_;
+    std::size_t pos_ = 0;
+    std::size_t last_ = 0;  // start of the last value read: where errors point
+    bool binary_ = false;
+    bool swap_ = false;
+    int sizeT_ = 8;
+    bool haveNodes_ = false, haveElements_ = false;
+
+    Mesh mesh_;
+    bool denseTags_ = true;
+    std::vector<std::int64_t> nodeIndexDense_;
+    std::unordered_map<std::uint64_t, std::int64_t> nodeIndexSparse_;
+    std::vector<std::uint64_t> cellTags_;
+    std::uint64_t skippedElements_ = 0;
+    std::map<std::string, PendingField> pointData_, cellData_;
+};
+
+void MshParser::ParseMeshFormat() {
+    const std::string_view version = Token("the MSH version");
+    if (version != "4.1") {
+        std::string v(version.substr(0, 20));
+        Fail("MSH version " + v +
+             " is not supported; hpray reads MSH 4.1 (write it with "
+             "gmsh -format msh41, or Mesh.MshFileVersion = 4.1)");
+    }
+    const std::uint64_t fileType = TextUnsigned("the file type (0 ASCII, 1 binary)");
+    if (fileType > 1) Fail("file type must be 0 (ASCII) or 1 (binary)");
+    const std::uint64_t dataSize = TextUnsigned("the data size");
+    if (dataSize != 4 && dataSize != 8) Fail("data size must be 4 or 8");
+    sizeT_ = static_cast<int>(dataSize);
+    if (fileType == 1) {
+        EndOfTextLine();
+        binary_ = true;
+        Need(4, "the endianness check integer");
+        std::uint32_t one;
+        std::memcpy(&one, buf_.data() + pos_, 4);
+        pos_ += 4;
+        if (one == 1) {
+            swap_ = false;
+        } else if (one == 0x01000000u) {
+            swap_ = true;
+        } else {
+            std::ostringstream os;
+            os << "the endianness check integer is " << one << ", expected 1";
+            Fail(os.str());
+        }
+    }
+    Expect("$EndMeshFormat");
+}
+
+void MshParser::SkipEntities() {
+    std::uint64_t counts[4];
+    for (auto& c : counts) c = Size("an entity count");
+    for (int dim = 0; dim < 4; ++dim) {
+        CheckCount(counts[dim], MinBytes(1, 1, dim == 0 ? 3 : 6), "entity");
+        for (std::uint64_t e = 0; e < counts[dim]; ++e) {
+            Int("an entity tag");
+            for (int i = 0; i < (dim == 0 ? 3 : 6); ++i) Double("an entity coordinate");
+            const std::uint64_t physicals = Size("a physical tag count");
+            CheckCount(physicals, MinBytes(0, 1, 0), "physical tag");
+            for (std::uint64_t i = 0; i < physicals; ++i) Int("a physical tag");
+            if (dim > 0) {
+                const std::uint64_t bounding = Size("a bounding entity count");
+                CheckCount(bounding, MinBytes(0, 1, 0), "bounding entity");
+                for (std::uint64_t i = 0; i < bounding; ++i) Int("a bounding entity tag");
+            }
+        }
+    }
+    Expect("$EndEntities");
+}
+
+void MshParser::SkipPartitionedEntities() {
+    Size("the partition count");
+    const std::uint64_t ghosts = Size("the ghost entity count");
+    CheckCount(ghosts, MinBytes(0, 2, 0), "ghost entity");
+    for (std::uint64_t i = 0; i < ghosts; ++i) {
+        Int("a ghost entity tag");
+        Int("a partition");
+    }
+    std::uint64_t counts[4];
+    for (auto& c : counts) c = Size("an entity count");
+    for (int dim = 0; dim < 4; ++dim) {
+        CheckCount(counts[dim], MinBytes(2, 3, dim == 0 ? 3 : 6), "partitioned entity");
+        for (std::uint64_t e = 0; e < counts[dim]; ++e) {
+            Int("an entity tag");
+            Int("a parent dimension");
+            Int("a parent tag");
+            const std::uint64_t parts = Size("a partition count");
+            CheckCount(parts, MinBytes(0, 1, 0), "partition tag");
+            for (std::uint64_t i = 0; i < parts; ++i) Int("a partition tag");
+            for (int i = 0; i < (dim == 0 ? 3 : 6); ++i) Double("an entity coordinate");
+            const std::uint64_t physicals = Size("a physical tag count");
+            CheckCount(physicals, MinBytes(0, 1, 0), "physical tag");
+            for (std::uint64_t i = 0; i < physicals; ++i) Int("a physical tag");
+            if (dim > 0) {
+                const std::uint64_t bounding = Size("a bounding entity count");
+                CheckCount(bounding, MinBytes(0, 1, 0), "bounding entity");
+                for (std::uint64_t i = 0; i < bounding; ++i) Int("a bounding entity tag");
+            }
+        }
+    }
+    Expect("$EndPartitionedEntities");
+}
+
+void MshParser::ParseNodes() {
+    if (haveNodes_) Fail("a second $Nodes section");
+    haveNodes_ = true;
+    if (binary_) EndOfTextLine();
+    const std::uint64_t numBlocks = Size("the entity block count");
+    CheckCount(numBlocks, MinBytes(1, 3, 0), "node entity block");
+    const std::uint64_t numNodes = Size("the node count");
+    CheckCount(numNodes, MinBytes(1, 0, 3), "node");
+    const std::uint64_t minTag = Size("the minimum node tag");
+    const std::uint64_t maxTag = Size("the maximum node tag");
+    if (numNodes > 0 && (minTag > maxTag || minTag == 0))
+        Fail("node tag range [" + std::to_string(minTag) + ", " + std::to_string(maxTag) +
+             "] is invalid");
+    // A dense tag -> index table when the tags are not much sparser than the nodes.
+    denseTags_ = numNodes == 0 || maxTag <= 2 * numNodes + 1024;
+    if (denseTags_) nodeIndexDense_.assign(numNodes == 0 ? 0 : maxTag + 1, -1);
+    mesh_.points.reserve(3 * numNodes);
+
+    std::vector<std::uint64_t> tags;
+    std::uint64_t total = 0;
+    for (std::uint64_t b = 0; b < numBlocks; ++b) {
+        const long long entityDim = Int("an entity dimension");
+        if (entityDim < 0 || entityDim > 3) Fail("entity dimension must be 0..3");
+        Int("an entity tag");
+        const long long parametric = Int("the parametric flag");
+        if (parametric != 0 && parametric != 1) Fail("parametric flag must be 0 or 1");
+        const std::uint64_t count = Size("the block's node count");
+        const std::size_t countPos = last_;
+        if (count > numNodes - total)
+            FailAt(countPos, "node blocks hold more nodes than the declared " +
+                                 std::to_string(numNodes));
+        const int extra = parametric ? static_cast<int>(entityDim) : 0;
+        CheckCount(count, MinBytes(1, 0, 3 + extra), "node");
+        tags.resize(count);
+        for (std::uint64_t i = 0; i < count; ++i) {
+            const std::uint64_t tag = Size("a node tag");
+            if (tag < minTag || tag > maxTag)
+                Fail("node tag " + std::to_string(tag) +
+                     " is outside the declared range [" + std::to_string(minTag) + ", " +
+                     std::to_string(maxTag) + "]");
+            const std::int64_t index = static_cast<std::int64_t>(total + i);
+            bool fresh;
+            if (denseTags_) {
+                fresh = nodeIndexDense_[tag] < 0;
+                if (fresh) nodeIndexDense_[tag] = index;
+            } else {
+                fresh = nodeIndexSparse_.emplace(tag, index).second;
+            }
+            if (!fresh) Fail("node tag " + std::to_string(tag) + " is defined twice");
+            tags[i] = tag;
+        }
+        for (std::uint64_t i = 0; i < count; ++i) {
+            for (int c = 0; c < 3; ++c) {
+                const double x = Double("a node coordinate");
+                if (!std::isfinite(x))
+                    Fail("node tag " + std::to_string(tags[i]) +
+                         " has a NaN or infinite coordinate");
+                mesh_.points.push_back(x);
+            }
+            for (int c = 0; c < extra; ++c) Double("a parametric coordinate");
+        }
+        total += count;
+    }
+    if (total != numNodes)
+        Fail("node blocks hold " + std::to_string(total) +
+             " nodes, the header declares " + std::to_string(numNodes));
+    Expect("$EndNodes");
+}
+
+void MshParser::ParseElements() {
+    if (!haveNodes_) Fail("$Elements before $Nodes");
+    if (haveElements_) Fail("a second $Elements section");
+    haveElements_ = true;
+    if (binary_) EndOfTextLine();
+    const std::uint64_t numBlocks = Size("the entity block count");
+    CheckCount(numBlocks, MinBytes(1, 3, 0), "element entity block");
+    const std::uint64_t numElements = Size("the element count");
+    CheckCount(numElements, MinBytes(2, 0, 0), "element");
+    Size("the minimum element tag");
+    Size("the maximum element tag");
+
+    std::vector<std::int64_t> fileNodes, cellNodes;
+    std::uint64_t total = 0;
+    for (std::uint64_t b = 0; b < numBlocks; ++b) {
+        Int("an entity dimension");
+        Int("an entity tag");
+        const long long type = Int("an element type");
+        const std::size_t typePos = last_;
+        const std::uint64_t count = Size("the block's element count");
+        if (count > numElements - total)
+            Fail("element blocks hold more elements than the declared " +
+                 std::to_string(numElements));
+        const int nodes = GmshTypeNodeCount(static_cast<int>(type));
+        const int dim = GmshTypeDimension(static_cast<int>(type));
+        if (nodes <= 0)
+            FailAt(typePos,
+                   "unknown or variable-size gmsh element type " + std::to_string(type));
+        CheckCount(count, MinBytes(1 + nodes, 0, 0), "element");
+        total += count;
+        if (dim < 3) {
+            SkipSizes(count * (1 + nodes), "an element tag or node tag");
+            skippedElements_ += count;
+            continue;
+        }
+        const std::optional<GmshCellType> kind = ClassifyGmshType(static_cast<int>(type));
+        if (!kind)
+            FailAt(typePos, "gmsh element type " + std::to_string(type) + " (" +
+                                std::to_string(nodes) +
+                                " nodes) is not supported: hpray reads complete Lagrange "
+                                "tetrahedra, hexahedra, prisms and pyramids and the "
+                                "20-node hex, 15-node prism and 13-node pyramid");
+        const std::vector<int>& perm = GmshToInternal(kind->type);
+        fileNodes.resize(nodes);
+        cellNodes.resize(nodes);
+        mesh_.connectivity.reserve(mesh_.connectivity.size() + count * nodes);
+        for (std::uint64_t e = 0; e < count; ++e) {
+            const std::uint64_t tag = Size("an element tag");
+            const std::size_t tagPos = last_;
+            for (int k = 0; k < nodes; ++k) {
+                const std::uint64_t nodeTag = Size("a node tag");
+                const std::int64_t index = NodeIndex(nodeTag);
+                if (index < 0)
+                    FailAt(tagPos, "element " + std::to_string(tag) +
+                                       " references undefined node tag " +
+                                       std::to_string(nodeTag));
+                fileNodes[k] = index;
+            }
+            for (int k = 0; k < nodes; ++k) cellNodes[k] = fileNodes[perm[k]];
+            mesh_.AddCell(kind->shape, kind->order, kind->family, cellNodes.data(),
+                          nodes);
+            cellTags_.push_back(tag);
+        }
+    }
+    if (total != numElements)
+        Fail("element blocks hold " + std::to_string(total) +
+             " elements, the header declares " + std::to_string(numElements));
+    Expect("$EndElements");
+}
+
+void MshParser::ParseData(const std::string& section) {
+    const std::size_t sectionPos = last_;
+    const bool isNode = section == "NodeData";
+    const bool isElementNode = section == "ElementNodeData";
+    const long long numStrings = TextInt("the string tag count");
+    if (numStrings < 0 || numStrings > 64) Fail("bad string tag count");
+    std::vector<std::string> strings;
+    for (long long i = 0; i < numStrings; ++i)
+        strings.push_back(TextString("a string tag"));
+    const long long numReals = TextInt("the real tag count");
+    if (numReals < 0 || numReals > 64) Fail("bad real tag count");
+    for (long long i = 0; i < numReals; ++i) TextDouble("a real tag");
+    const long long numInts = TextInt("the integer tag count");
+    if (numInts < 3 || numInts > 64)
+        Fail(
+            "a data section needs at least 3 integer tags (time step, components, "
+            "count)");
+    std::vector<long long> ints;
+    for (long long i = 0; i < numInts; ++i) ints.push_back(TextInt("an integer tag"));
+    const std::string name = strings.empty() ? std::string("unnamed") : strings[0];
+    const long long timeStep = ints[0];
+    const long long components = ints[1];
+    const long long count = ints[2];
+    if (components < 1 || components > 64)
+        Fail("'" + name + "': component count must be 1..64");
+    if (count < 0) Fail("'" + name + "': negative entity count");
+    if (binary_) EndOfTextLine();
+    const std::uint64_t itemBytes =
+        binary_ ? 4 + 8ull * components : 2ull * (1 + components);
+
+    if (!haveNodes_ || (!isNode && !haveElements_))
+        FailAt(sectionPos, "$" + section + " before the " +
+                               (isNode ? "$Nodes" : "$Elements") + " it refers to");
+    if (isElementNode) {
+        if (options_.fields && FieldWanted(options_, name))
+            FailAt(sectionPos, "field '" + name +
+                                   "' is $ElementNodeData, which hpray does not read; "
+                                   "write it as $NodeData");
+        log::Warn(path_ + ": skipping $ElementNodeData '" + name +
+                  "' (element-node data is not read)");
+        SkipSection(section, sectionPos);
+        return;
+    }
+    CheckCount(static_cast<std::uint64_t>(count), itemBytes, "data entry");
+    const bool wanted = FieldWanted(options_, name);
+    if (!wanted) {
+        if (binary_) {
+            pos_ += count * itemBytes;
+        } else {
+            for (long long i = 0; i < count * (1 + components); ++i) Token("a value");
+        }
+        Expect(("$End" + section).c_str());
+        return;
+    }
+
+    auto& fields = isNode ? pointData_ : cellData_;
+    const std::int64_t entities = isNode ? mesh_.PointCount() : mesh_.CellCount();
+    auto it = fields.find(name);
+    if (it != fields.end() && timeStep < it->second.timeStep) {  // an older step: skip
+        if (binary_) {
+            pos_ += count * itemBytes;
+        } else {
+            for (long long i = 0; i < count * (1 + components); ++i) Token("a value");
+        }
+        Expect(("$End" + section).c_str());
+        return;
+    }
+    if (it == fields.end() || timeStep > it->second.timeStep ||
+        it->second.components != components) {
+        if (it != fields.end() && timeStep == it->second.timeStep)
+            FailAt(sectionPos, "'" + name + "' has " + std::to_string(components) +
+                                   " components here and " +
+                                   std::to_string(it->second.components) + " before");
+        PendingField f;
+        f.association = isNode ? Association::Point : Association::Cell;
+        f.timeStep = timeStep;
+        f.components = static_cast<int>(components);
+        f.values.assign(entities * components, std::numeric_limits<double>::quiet_NaN());
+        f.given.assign(entities, 0);
+        it = fields.insert_or_assign(name, std::move(f)).first;
+    }
+    PendingField& f = it->second;
+    f.sectionPos = sectionPos;
+
+    // Element tag -> cell index, built once (lower-dimensional elements are not cells).
+    std::unordered_map<std::uint64_t, std::int64_t> cellIndexLocal;
+    if (!isNode) {
+        cellIndexLocal.reserve(cellTags_.size());
+        for (std::size_t c = 0; c < cellTags_.size(); ++c)
+            cellIndexLocal.emplace(cellTags_[c], static_cast<std::int64_t>(c));
+    }
+    for (long long i = 0; i < count; ++i) {
+        const long long tag = Int(isNode ? "a node tag" : "an element tag");
+        const std::size_t tagPos = last_;
+        std::int64_t index = -1;
+        if (isNode) {
+            if (tag > 0) index = NodeIndex(static_cast<std::uint64_t>(tag));
+            if (index < 0)
+                FailAt(tagPos, "$NodeData '" + name + "' refers to undefined node tag " +
+                                   std::to_string(tag));
+        } else if (tag > 0) {
+            auto c = cellIndexLocal.find(static_cast<std::uint64_t>(tag));
+            if (c != cellIndexLocal.end()) index = c->second;
+        }
+        for (long long k = 0; k < components; ++k) {
+            const double v = Double("a value");
+            if (!std::isfinite(v))
+                Fail("'" + name + "' has a NaN or infinite value at tag " +
+                     std::to_string(tag));
+            if (index >= 0) f.values[index * components + k] = v;
+        }
+        if (index >= 0) f.given[index] = 1;
+    }
+    Expect(("$End" + section).c_str());
+}
+
+void MshParser::SkipSection(const std::string& name, std::size_t headerPos) {
+    const std::string end = "$End" + name;
+    std::size_t at = pos_;
+    while (true) {
+        at = buf_.find(end, at);
+        if (at == std::string::npos)
+            FailAt(headerPos, "section $" + name + " has no " + end);
+        const bool startsLine = at == 0 || buf_[at - 1] == '\n';
+        const std::size_t after = at + end.size();
+        const bool endsToken = after >= buf_.size() || IsSpace(buf_[after]);
+        if (startsLine && endsToken) break;
+        at = after;
+    }
+    pos_ = at + end.size();
+}
+
+void MshParser::FinishFields() {
+    auto finish = [&](std::map<std::string, PendingField>& pending,
+                      std::vector<Field>& out, std::int64_t entities, const char* what) {
+        for (auto& [name, f] : pending) {
+            const std::int64_t given = std::count(f.given.begin(), f.given.end(), 1);
+            if (given != entities)
+                FailAt(f.sectionPos, "'" + name + "' (time step " +
+                                         std::to_string(f.timeStep) +
+                                         ") gives values for " + std::to_string(given) +
+                                         " of the " + std::to_string(entities) + " " +
+                                         what + "; hpray needs a value for each");
+            Field field;
+            field.name = name;
+            field.association = f.association;
+            field.components = f.components;
+            field.values = std::move(f.values);
+            out.push_back(std::move(field));
+        }
+    };
+    finish(pointData_, mesh_.pointFields, mesh_.PointCount(), "nodes");
+    finish(cellData_, mesh_.cellFields, mesh_.CellCount(), "3-D elements");
+}
+
+Mesh MshParser::Parse() {
+    bool first = true;
+    while (!AtEnd()) {
+        const std::string_view token = Token("a section header");
+        const std::size_t headerPos = last_;
+        if (first && token != "$MeshFormat")
+            Fail("not a gmsh MSH file: it must start with $MeshFormat");
+        if (token.empty() || token[0] != '$')
+            Fail("expected a section header ($Name), found '" +
+                 std::string(token.substr(0, 40)) + "'");
+        const std::string name(token.substr(1));
+        if (first) {
+            ParseMeshFormat();
+            first = false;
+            continue;
+        }
+        if (name == "MeshFormat")
+            Fail("a second $MeshFormat section");
+        else if (name == "Nodes")
+            ParseNodes();
+        else if (name == "Elements")
+            ParseElements();
+        else if (name == "Entities") {
+            if (binary_) EndOfTextLine();
+            SkipEntities();
+        } else if (name == "PartitionedEntities") {
+            if (binary_) EndOfTextLine();
+            SkipPartitionedEntities();
+        } else if (name == "NodeData" || name == "ElementData" ||
+                   name == "ElementNodeData")
+            ParseData(name);
+        else if (name.rfind("End", 0) == 0)
+            Fail("unexpected " + std::string(token));
+        else
+            SkipSection(name, headerPos);  // $PhysicalNames, $Periodic, ... : not needed
+    }
+    if (first) FailAt(0, "empty file: not a gmsh MSH file");
+    if (!haveNodes_) FailAt(buf_.size(), "no $Nodes section");
+    if (!haveElements_) FailAt(buf_.size(), "no $Elements section");
+    if (skippedElements_ > 0)
+        log::Warn(path_ + ": skipped " + std::to_string(skippedElements_) +
+                  " elements of dimension below 3");
+    FinishFields();
+    mesh_.Validate(path_);
+    return std::move(mesh_);
+}
+
+}  // namespace
+
+Mesh ReadGmsh(const std::string& path, const ReadOptions& options) {
+    MshParser parser(path, options);
+    return parser.Parse();
+}
+
 }  // namespace hpray
