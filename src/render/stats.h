@@ -1,0 +1,80 @@
+// Render statistics: the counters of the stats contract (design.md), merged over threads
+// and ranks, and written as JSON by rank 0.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace hpray {
+
+/// Wall-clock seconds of each phase. Across ranks the maximum is reported.
+struct PhaseTimes {
+    double load = 0, accel = 0, render = 0, composite = 0, write = 0, total = 0;
+};
+
+/// Counters accumulated per thread and summed; plain so they can be reduced over MPI as
+/// arrays of doubles (see ToArray / FromArray).
+struct RenderCounters {
+    double rays = 0;
+    double segments = 0;
+    double segmentsCulled = 0;  ///< skipped: field range cannot contribute
+    // Isosurfaces.
+    double isoHits = 0;
+    double isoResidualSqSum = 0;
+    double isoResidualMax = 0;          ///< reduced with max
+    double isoResidualRelMax = 0;       ///< reduced with max
+    double projections = 0;             ///< projected segments
+    double projectionOrderSum = 0;
+    double projectionOrderMax = 0;      ///< reduced with max
+    double projectionUnconverged = 0;
+    double rootFailures = 0;
+    double fieldEvaluations = 0;
+    // Mapping inversion.
+    double inversions = 0;
+    double inversionIterations = 0;
+    double inversionFailures = 0;
+    // Volume.
+    double volumeErrorSqSum = 0;
+    double volumeErrorMax = 0;          ///< reduced with max
+    double volumePixels = 0;
+
+    static constexpr int kSize = 19;
+    /// Indices of the fields reduced with max rather than sum.
+    static bool IsMax(int index);
+    std::array<double, kSize> ToArray() const;
+    static RenderCounters FromArray(const std::array<double, kSize>& a);
+    /// Adds (or maxes) `other` into this.
+    void Merge(const RenderCounters& other);
+};
+
+struct CompositeStats {
+    int rounds = 0;
+    int bytesPerPixel = 0;
+    double bytesSentMax = 0;
+    double bytesSentTotal = 0;
+    double bytesGather = 0;
+};
+
+struct RenderStats {
+    int ranks = 1;
+    int threads = 1;
+    int width = 0, height = 0;
+    PhaseTimes timing;
+    RenderCounters counters;
+    CompositeStats composite;
+    int bricksLoaded = 0;
+    int bricksTotal = 0;
+    std::array<double, 2> isoFieldRange{0, 0};  ///< [min, max] of the isosurface fields
+    double accelBytes = 0;
+    double accelBytesPerCell = 0;
+    std::string scene;
+    std::string mesh;
+};
+
+/// The stats JSON of design.md (pretty-printed).
+std::string StatsToJson(const RenderStats& stats);
+/// Writes StatsToJson to `path` atomically (tmp + rename). Throws InputError(path).
+void WriteStats(const std::string& path, const RenderStats& stats);
+
+}  // namespace hpray
