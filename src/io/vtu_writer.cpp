@@ -1,1 +1,166 @@
-// Placeholder: implementation in progress.
+// WriteVtu: VTK XML UnstructuredGrid, version 2.2, appended raw binary with UInt64 headers.
+#include "io/vtu_writer.h"
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "io/vtk_cells.h"
+#include "util/check.h"
+#include "util/error.h"
+
+namespace hpray {
+namespace {
+
+bool HostIsBigEndian() {
+    const std::uint16_t one = 1;
+    std::uint8_t first;
+    std::memcpy(&first, &one, 1);
+    return first == 0;
+}
+
+std::string XmlEscape(const std::string& s) {
+    std::string out;
+    for (char c : s) {
+        switch (c) {
+            case '&': out += "&amp;"; break;
+            case '<': out += "&lt;"; break;
+            case '>': out += "&gt;"; break;
+            case '"': out += "&quot;"; break;
+            case '\'': out += "&apos;"; break;
+            default: out += c;
+        }
+    }
+    return out;
+}
+
+/// One appended array: its XML attributes and where its bytes come from.
+struct Block {
+    std::string type;  ///< "Float64", "Int64", "UInt8"
+    std::string name;
+    int components = 1;
+    const void* data = nullptr;
+    std::uint64_t bytes = 0;
+    std::uint64_t offset = 0;  ///< after the '_' marker
+};
+
+template <typename T>
+Block MakeBlock(const char* type, const std::string& name, int components,
+                const std::vector<T>& values) {
+    Block b;
+    b.type = type;
+    b.name = name;
+    b.components = components;
+    b.data = values.data();
+    b.bytes = values.size() * sizeof(T);
+    return b;
+}
+
+void WriteArrayTag(std::ostream& os, const Block& b, const char* indent) {
+    os << indent << "<DataArray type=\"" << b.type << "\" Name=\"" << XmlEscape(b.name)
+       << "\"";
+    if (b.components != 1) os << " NumberOfComponents=\"" << b.components << "\"";
+    os << " format=\"appended\" offset=\"" << b.offset << "\"/>\n";
+}
+
+}  // namespace
+
+void WriteVtu(const std::string& path, const Mesh& mesh) {
+    const std::int64_t nCells = mesh.CellCount();
+
+    // Cells in VTK order; HigherOrderDegrees for Lagrange cells (serendipity: 2 2 2).
+    std::vector<std::int64_t> connectivity(mesh.connectivity.size());
+    std::vector<std::int64_t> offsets(nCells);
+    std::vector<std::uint8_t> types(nCells);
+    std::vector<double> degrees(3 * nCells);
+    bool anyLagrange = false;
+    for (std::int64_t c = 0; c < nCells; ++c) {
+        const CellKind kind{mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]};
+        const std::vector<int>& perm = InternalToVtk(kind);
+        const std::int64_t* nodes = mesh.CellNodes(c);
+        const std::int64_t begin = mesh.cellOffsets[c];
+        HPRAY_CHECK_EQ(static_cast<std::int64_t>(perm.size()), mesh.CellNodeCount(c));
+        for (std::size_t k = 0; k < perm.size(); ++k) connectivity[begin + k] = nodes[perm[k]];
+        offsets[c] = mesh.cellOffsets[c + 1];
+        types[c] = static_cast<std::uint8_t>(VtkTypeFor(kind));
+        for (int k = 0; k < 3; ++k) degrees[3 * c + k] = kind.order;
+        anyLagrange |= kind.family == CellFamily::Lagrange;
+    }
+
+    std::vector<Block> pointData, cellData;
+    for (const Field& f : mesh.pointFields)
+        pointData.push_back(MakeBlock("Float64", f.name, f.components, f.values));
+    for (const Field& f : mesh.cellFields)
+        cellData.push_back(MakeBlock("Float64", f.name, f.components, f.values));
+    if (anyLagrange) cellData.push_back(MakeBlock("Float64", "HigherOrderDegrees", 3, degrees));
+    if (!mesh.ghost.empty()) cellData.push_back(MakeBlock("UInt8", "vtkGhostType", 1, mesh.ghost));
+    Block points = MakeBlock("Float64", "Points", 3, mesh.points);
+    Block conn = MakeBlock("Int64", "connectivity", 1, connectivity);
+    Block offs = MakeBlock("Int64", "offsets", 1, offsets);
+    Block typ = MakeBlock("UInt8", "types", 1, types);
+
+    std::vector<Block*> order;
+    for (Block& b : pointData) order.push_back(&b);
+    for (Block& b : cellData) order.push_back(&b);
+    for (Block* b : {&points, &conn, &offs, &typ}) order.push_back(b);
+    std::uint64_t offset = 0;
+    for (Block* b : order) {
+        b->offset = offset;
+        offset += sizeof(std::uint64_t) + b->bytes;
+    }
+
+    std::ostringstream xml;
+    xml << "<?xml version=\"1.0\"?>\n"
+        << "<VTKFile type=\"UnstructuredGrid\" version=\"2.2\" byte_order=\""
+        << (HostIsBigEndian() ? "BigEndian" : "LittleEndian") << "\" header_type=\"UInt64\">\n"
+        << "  <UnstructuredGrid>\n"
+        << "    <Piece NumberOfPoints=\"" << mesh.PointCount() << "\" NumberOfCells=\"" << nCells
+        << "\">\n";
+    xml << "      <PointData>\n";
+    for (const Block& b : pointData) WriteArrayTag(xml, b, "        ");
+    xml << "      </PointData>\n";
+    xml << "      <CellData" << (anyLagrange ? " HigherOrderDegrees=\"HigherOrderDegrees\"" : "")
+        << ">\n";
+    for (const Block& b : cellData) WriteArrayTag(xml, b, "        ");
+    xml << "      </CellData>\n";
+    xml << "      <Points>\n";
+    WriteArrayTag(xml, points, "        ");
+    xml << "      </Points>\n      <Cells>\n";
+    for (const Block* b : {&conn, &offs, &typ}) WriteArrayTag(xml, *b, "        ");
+    xml << "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n"
+        << "  <AppendedData encoding=\"raw\">\n   _";
+
+    const std::string tmp = path + ".tmp";
+    auto fail = [&](const std::string& what) {
+        const std::string reason = std::strerror(errno);
+        std::error_code ec;
+        std::filesystem::remove(tmp, ec);
+        throw InputError(path, "", what + ": " + reason);
+    };
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) fail("cannot create " + tmp);
+        const std::string head = xml.str();
+        out.write(head.data(), static_cast<std::streamsize>(head.size()));
+        for (const Block* b : order) {
+            const std::uint64_t size = b->bytes;
+            out.write(reinterpret_cast<const char*>(&size), sizeof(size));
+            if (size > 0)
+                out.write(static_cast<const char*>(b->data), static_cast<std::streamsize>(size));
+        }
+        const char* tail = "\n  </AppendedData>\n</VTKFile>\n";
+        out.write(tail, static_cast<std::streamsize>(std::strlen(tail)));
+        out.close();
+        if (!out) fail("cannot write " + tmp);
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) {
+        std::filesystem::remove(tmp, ec);
+        throw InputError(path, "", "cannot rename " + tmp + ": " + ec.message());
+    }
+}
+
+}  // namespace hpray
