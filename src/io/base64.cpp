@@ -90,7 +90,8 @@ std::size_t Decoder::Decode(std::uint8_t* out, std::size_t n) {
             const std::uint8_t c = kTable[static_cast<unsigned char>(text_[pos_ + 2])];
             const std::uint8_t d = kTable[static_cast<unsigned char>(text_[pos_ + 3])];
             if ((a | b | c | d) >= 64) break;
-            const std::uint32_t bits = (std::uint32_t(a) << 18) | (std::uint32_t(b) << 12) |
+            const std::uint32_t bits = (std::uint32_t(a) << 18) |
+                                       (std::uint32_t(b) << 12) |
                                        (std::uint32_t(c) << 6) | d;
             out[got] = static_cast<std::uint8_t>(bits >> 16);
             out[got + 1] = static_cast<std::uint8_t>(bits >> 8);

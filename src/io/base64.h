@@ -12,11 +12,11 @@ namespace hpray::base64 {
 /// data as two base64 blocks) decodes to the concatenation of their bytes. The text is
 /// borrowed and must outlive the decoder.
 class Decoder {
-public:
+  public:
     Decoder(const char* text, std::size_t size) : text_(text), size_(size) {}
 
-    /// Decodes up to `n` bytes into `out`. Returns the number written; fewer than `n` only
-    /// when the text ends or holds an invalid character (then Failed() is true).
+    /// Decodes up to `n` bytes into `out`. Returns the number written; fewer than `n`
+    /// only when the text ends or holds an invalid character (then Failed() is true).
     std::size_t Decode(std::uint8_t* out, std::size_t n);
 
     /// True after an invalid character (or a lone trailing character) was met.
@@ -25,9 +25,11 @@ public:
     /// failure.
     std::size_t Position() const { return pos_; }
     /// An upper bound on the bytes still decodable.
-    std::size_t RemainingBound() const { return (size_ - pos_) / 4 * 3 + 3 + pendingCount_; }
+    std::size_t RemainingBound() const {
+        return (size_ - pos_) / 4 * 3 + 3 + pendingCount_;
+    }
 
-private:
+  private:
     /// Decodes the next group of up to 4 characters into `group`; returns its byte count
     /// (0 at the end of the text or on failure).
     int NextGroup(std::uint8_t group[3]);

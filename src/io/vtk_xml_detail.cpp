@@ -58,9 +58,9 @@ T ByteSwap(T v) {
     if constexpr (sizeof(T) == 1) {
         return v;
     } else {
-        using U = std::conditional_t<sizeof(T) == 2, std::uint16_t,
-                                     std::conditional_t<sizeof(T) == 4, std::uint32_t,
-                                                        std::uint64_t>>;
+        using U = std::conditional_t<
+            sizeof(T) == 2, std::uint16_t,
+            std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>>;
         U u;
         std::memcpy(&u, &v, sizeof(T));
         if constexpr (sizeof(T) == 2) u = __builtin_bswap16(u);
@@ -91,16 +91,33 @@ void ConvertTyped(const std::uint8_t* src, std::size_t n, bool swap, Dst* dst) {
 /// Converts n values of `type` at `src` to Dst. Integer Dst only from integer types (the
 /// caller checks), so no float-to-integer conversion happens here.
 template <typename Dst>
-void Convert(const std::uint8_t* src, ScalarType type, std::size_t n, bool swap, Dst* dst) {
+void Convert(const std::uint8_t* src, ScalarType type, std::size_t n, bool swap,
+             Dst* dst) {
     switch (type) {
-        case ScalarType::Int8: ConvertTyped<std::int8_t>(src, n, swap, dst); break;
-        case ScalarType::UInt8: ConvertTyped<std::uint8_t>(src, n, swap, dst); break;
-        case ScalarType::Int16: ConvertTyped<std::int16_t>(src, n, swap, dst); break;
-        case ScalarType::UInt16: ConvertTyped<std::uint16_t>(src, n, swap, dst); break;
-        case ScalarType::Int32: ConvertTyped<std::int32_t>(src, n, swap, dst); break;
-        case ScalarType::UInt32: ConvertTyped<std::uint32_t>(src, n, swap, dst); break;
-        case ScalarType::Int64: ConvertTyped<std::int64_t>(src, n, swap, dst); break;
-        case ScalarType::UInt64: ConvertTyped<std::uint64_t>(src, n, swap, dst); break;
+        case ScalarType::Int8:
+            ConvertTyped<std::int8_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt8:
+            ConvertTyped<std::uint8_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int16:
+            ConvertTyped<std::int16_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt16:
+            ConvertTyped<std::uint16_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int32:
+            ConvertTyped<std::int32_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt32:
+            ConvertTyped<std::uint32_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int64:
+            ConvertTyped<std::int64_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt64:
+            ConvertTyped<std::uint64_t>(src, n, swap, dst);
+            break;
         case ScalarType::Float32:
             if constexpr (std::is_floating_point_v<Dst>)
                 ConvertTyped<float>(src, n, swap, dst);
@@ -109,7 +126,8 @@ void Convert(const std::uint8_t* src, ScalarType type, std::size_t n, bool swap,
             if constexpr (std::is_floating_point_v<Dst>)
                 ConvertTyped<double>(src, n, swap, dst);
             break;
-        case ScalarType::NonNumeric: break;
+        case ScalarType::NonNumeric:
+            break;
     }
 }
 
@@ -121,17 +139,20 @@ bool SameRepresentation(ScalarType type) {
     return false;
 }
 
-/// The bytes of one binary array: raw bytes in the file, or base64 text decoded on demand.
+/// The bytes of one binary array: raw bytes in the file, or base64 text decoded on
+/// demand.
 class BinarySource {
-public:
-    static BinarySource Raw(const std::uint8_t* data, std::size_t size, std::size_t fileOffset) {
+  public:
+    static BinarySource Raw(const std::uint8_t* data, std::size_t size,
+                            std::size_t fileOffset) {
         BinarySource s;
         s.raw_ = data;
         s.size_ = size;
         s.fileOffset_ = fileOffset;
         return s;
     }
-    static BinarySource Base64(const char* text, std::size_t size, std::size_t fileOffset) {
+    static BinarySource Base64(const char* text, std::size_t size,
+                               std::size_t fileOffset) {
         BinarySource s;
         s.decoder_ = std::make_unique<base64::Decoder>(text, size);
         s.text_ = text;
@@ -176,7 +197,7 @@ public:
         return p;
     }
 
-private:
+  private:
     BinarySource() = default;
     const std::uint8_t* raw_ = nullptr;
     const char* text_ = nullptr;
@@ -187,8 +208,9 @@ private:
 };
 
 /// Reports why a binary read came up short.
-[[noreturn]] void FailShort(const XmlFile& file, const ArrayDesc& a, const BinarySource& src,
-                            const std::string& what, std::uint64_t needed) {
+[[noreturn]] void FailShort(const XmlFile& file, const ArrayDesc& a,
+                            const BinarySource& src, const std::string& what,
+                            std::uint64_t needed) {
     if (src.Base64Failed()) {
         const char c = src.BadCharacter();
         std::ostringstream os;
@@ -200,7 +222,8 @@ private:
         Fail(file, ByteWhere(a.where, src.FileOffset()), os.str());
     }
     std::ostringstream os;
-    os << what << " needs " << needed << " bytes but the data ends first (file truncated, "
+    os << what << " needs " << needed
+       << " bytes but the data ends first (file truncated, "
        << "or wrong offsets or sizes)";
     Fail(file, ByteWhere(a.where, src.FileOffset()), os.str());
 }
@@ -212,8 +235,8 @@ Dst ParseAsciiValue(const XmlFile& file, const ArrayDesc& a, const char* begin,
     if (p < end && *p == '+' && end - p > 1 && p[1] != '-') ++p;
     auto bad = [&](const char* why) -> Dst {
         std::ostringstream os;
-        os << "value " << index << " '" << std::string(begin, std::min<std::size_t>(end - begin, 40))
-           << "' " << why;
+        os << "value " << index << " '"
+           << std::string(begin, std::min<std::size_t>(end - begin, 40)) << "' " << why;
         Fail(file, ByteWhere(a.where, textOffset), os.str());
     };
     switch (a.type) {
@@ -238,30 +261,54 @@ Dst ParseAsciiValue(const XmlFile& file, const ArrayDesc& a, const char* begin,
         default: {
             std::int64_t v = 0;
             auto [ptr, ec] = std::from_chars(p, end, v);
-            if (ec != std::errc() || ptr != end) return bad(("is not an " + a.typeName).c_str());
+            if (ec != std::errc() || ptr != end)
+                return bad(("is not an " + a.typeName).c_str());
             std::int64_t lo = 0, hi = 0;
             switch (a.type) {
-                case ScalarType::Int8: lo = -128; hi = 127; break;
-                case ScalarType::UInt8: lo = 0; hi = 255; break;
-                case ScalarType::Int16: lo = -32768; hi = 32767; break;
-                case ScalarType::UInt16: lo = 0; hi = 65535; break;
-                case ScalarType::Int32: lo = INT32_MIN; hi = INT32_MAX; break;
-                case ScalarType::UInt32: lo = 0; hi = UINT32_MAX; break;
-                default: lo = INT64_MIN; hi = INT64_MAX; break;
+                case ScalarType::Int8:
+                    lo = -128;
+                    hi = 127;
+                    break;
+                case ScalarType::UInt8:
+                    lo = 0;
+                    hi = 255;
+                    break;
+                case ScalarType::Int16:
+                    lo = -32768;
+                    hi = 32767;
+                    break;
+                case ScalarType::UInt16:
+                    lo = 0;
+                    hi = 65535;
+                    break;
+                case ScalarType::Int32:
+                    lo = INT32_MIN;
+                    hi = INT32_MAX;
+                    break;
+                case ScalarType::UInt32:
+                    lo = 0;
+                    hi = UINT32_MAX;
+                    break;
+                default:
+                    lo = INT64_MIN;
+                    hi = INT64_MAX;
+                    break;
             }
-            if (v < lo || v > hi) return bad(("is out of range for " + a.typeName).c_str());
+            if (v < lo || v > hi)
+                return bad(("is out of range for " + a.typeName).c_str());
             return static_cast<Dst>(v);
         }
     }
 }
 
 template <typename Dst>
-void ReadAscii(const XmlFile& file, const ArrayDesc& a, bool exact, std::uint64_t expected,
-               std::vector<Dst>& out) {
+void ReadAscii(const XmlFile& file, const ArrayDesc& a, bool exact,
+               std::uint64_t expected, std::vector<Dst>& out) {
     const char* text = a.node.text().get();
     const std::size_t len = std::strlen(text);
     const bool inBuffer = text >= file.xmlBase;
-    const std::size_t textOffset = inBuffer ? static_cast<std::size_t>(text - file.xmlBase) : 0;
+    const std::size_t textOffset =
+        inBuffer ? static_cast<std::size_t>(text - file.xmlBase) : 0;
     // Each value takes at least one character and one separator.
     if (exact && expected > (len + 1) / 2) {
         std::ostringstream os;
@@ -300,8 +347,8 @@ void ReadAscii(const XmlFile& file, const ArrayDesc& a, bool exact, std::uint64_
     }
     if (!exact && index % a.components != 0) {
         std::ostringstream os;
-        os << "holds " << index << " values, not a multiple of NumberOfComponents="
-           << a.components;
+        os << "holds " << index
+           << " values, not a multiple of NumberOfComponents=" << a.components;
         Fail(file, a.where, os.str());
     }
 }
@@ -311,16 +358,21 @@ void ReadAscii(const XmlFile& file, const ArrayDesc& a, bool exact, std::uint64_
 int ScalarSize(ScalarType type) {
     switch (type) {
         case ScalarType::Int8:
-        case ScalarType::UInt8: return 1;
+        case ScalarType::UInt8:
+            return 1;
         case ScalarType::Int16:
-        case ScalarType::UInt16: return 2;
+        case ScalarType::UInt16:
+            return 2;
         case ScalarType::Int32:
         case ScalarType::UInt32:
-        case ScalarType::Float32: return 4;
+        case ScalarType::Float32:
+            return 4;
         case ScalarType::Int64:
         case ScalarType::UInt64:
-        case ScalarType::Float64: return 8;
-        case ScalarType::NonNumeric: return 0;
+        case ScalarType::Float64:
+            return 8;
+        case ScalarType::NonNumeric:
+            return 0;
     }
     return 0;
 }
@@ -352,7 +404,9 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     file->path = path;
     {
         std::ifstream in(path, std::ios::binary);
-        if (!in) throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
+        if (!in)
+            throw InputError(path, "",
+                             std::string("cannot open: ") + std::strerror(errno));
         in.seekg(0, std::ios::end);
         const std::streamoff size = in.tellg();
         if (size < 0) throw InputError(path, "", "cannot determine the file size");
@@ -370,7 +424,8 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     if (tag != std::string::npos) {
         const std::size_t close = bytes.find('>', tag);
         if (close == std::string::npos)
-            Fail(*file, ByteWhere("<AppendedData>", tag), "unterminated tag (file truncated?)");
+            Fail(*file, ByteWhere("<AppendedData>", tag),
+                 "unterminated tag (file truncated?)");
         const std::size_t marker = bytes.find_first_not_of(" \t\r\n", close + 1);
         if (marker == std::string::npos || bytes[marker] != '_')
             Fail(*file, ByteWhere("<AppendedData>", tag),
@@ -384,16 +439,17 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
         xmlSize = file->xmlCopy.size();
     }
     file->xmlBase = xml;
-    const pugi::xml_parse_result parsed =
-        file->doc.load_buffer_inplace(xml, xmlSize, pugi::parse_default, pugi::encoding_utf8);
+    const pugi::xml_parse_result parsed = file->doc.load_buffer_inplace(
+        xml, xmlSize, pugi::parse_default, pugi::encoding_utf8);
     if (!parsed) {
         Fail(*file, ByteWhere("", static_cast<std::size_t>(parsed.offset)),
              std::string("XML error: ") + parsed.description());
     }
     file->root = file->doc.document_element();
     if (std::strcmp(file->root.name(), "VTKFile") != 0)
-        Fail(*file, "", std::string("root element is <") + file->root.name() +
-                            ">, expected <VTKFile>");
+        Fail(*file, "",
+             std::string("root element is <") + file->root.name() +
+                 ">, expected <VTKFile>");
     file->type = file->root.attribute("type").value();
 
     const std::string version = file->root.attribute("version").value();
@@ -403,7 +459,8 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
             dot != std::string::npos &&
             ParseInteger(version.substr(0, dot).c_str(), file->versionMajor) &&
             ParseInteger(version.substr(dot + 1).c_str(), file->versionMinor);
-        if (!ok) Fail(*file, "<VTKFile>", "version " + Quote(version) + " is not MAJOR.MINOR");
+        if (!ok)
+            Fail(*file, "<VTKFile>", "version " + Quote(version) + " is not MAJOR.MINOR");
     }
 
     const std::string order = file->root.attribute("byte_order").value();
@@ -421,7 +478,8 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     if (header == "UInt64")
         file->headerUInt64 = true;
     else if (!header.empty() && header != "UInt32")
-        Fail(*file, "<VTKFile>", "header_type " + Quote(header) + " is not UInt32 or UInt64");
+        Fail(*file, "<VTKFile>",
+             "header_type " + Quote(header) + " is not UInt32 or UInt64");
 
     const std::string compressor = file->root.attribute("compressor").value();
     if (compressor == "vtkZLibDataCompressor")
@@ -451,17 +509,20 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     return file;
 }
 
-ArrayDesc DescribeArray(const XmlFile& file, pugi::xml_node node, const std::string& context) {
+ArrayDesc DescribeArray(const XmlFile& file, pugi::xml_node node,
+                        const std::string& context) {
     ArrayDesc a;
     a.node = node;
     a.name = node.attribute("Name").value();
     a.typeName = node.attribute("type").value();
     a.type = ParseScalarType(a.typeName);
-    a.where = context + (context.empty() ? "" : " ") + "<DataArray Name=\"" + a.name + "\">";
+    a.where =
+        context + (context.empty() ? "" : " ") + "<DataArray Name=\"" + a.name + "\">";
     if (const pugi::xml_attribute nc = node.attribute("NumberOfComponents")) {
         if (!ParseInteger(nc.value(), a.components) || a.components < 1 ||
             a.components > 1000000)
-            Fail(file, a.where, "NumberOfComponents " + Quote(nc.value()) + " is invalid");
+            Fail(file, a.where,
+                 "NumberOfComponents " + Quote(nc.value()) + " is invalid");
     }
     const std::string format = node.attribute("format").value();
     if (format == "ascii") {
@@ -470,12 +531,15 @@ ArrayDesc DescribeArray(const XmlFile& file, pugi::xml_node node, const std::str
         a.format = ArrayDesc::Format::Binary;
     } else if (format == "appended") {
         a.format = ArrayDesc::Format::Appended;
-        if (!file.hasAppended) Fail(file, a.where, "format is appended but there is no <AppendedData>");
+        if (!file.hasAppended)
+            Fail(file, a.where, "format is appended but there is no <AppendedData>");
         if (!ParseInteger(node.attribute("offset").value(), a.offset))
-            Fail(file, a.where,
-                 "offset " + Quote(node.attribute("offset").value()) + " is not a number");
+            Fail(
+                file, a.where,
+                "offset " + Quote(node.attribute("offset").value()) + " is not a number");
     } else {
-        Fail(file, a.where, "format " + Quote(format) + " is not ascii, binary or appended");
+        Fail(file, a.where,
+             "format " + Quote(format) + " is not ascii, binary or appended");
     }
     return a;
 }
@@ -512,16 +576,17 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
         const std::size_t available = file.appendedEnd - file.appendedBegin;
         if (a.offset >= available) {
             std::ostringstream os;
-            os << "appended offset " << a.offset << " is beyond the end of the appended data ("
-               << available << " bytes)";
+            os << "appended offset " << a.offset
+               << " is beyond the end of the appended data (" << available << " bytes)";
             Fail(file, a.where, os.str());
         }
         const std::size_t begin = file.appendedBegin + a.offset;
         const std::size_t size = file.appendedEnd - begin;
         if (file.appendedBase64)
             return BinarySource::Base64(file.bytes.data() + begin, size, begin);
-        return BinarySource::Raw(reinterpret_cast<const std::uint8_t*>(file.bytes.data()) + begin,
-                                 size, begin);
+        return BinarySource::Raw(
+            reinterpret_cast<const std::uint8_t*>(file.bytes.data()) + begin, size,
+            begin);
     }();
 
     const std::size_t headerSize = file.headerUInt64 ? 8 : 4;
@@ -571,14 +636,16 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
         return;
     }
 
-    // zlib: [nblocks, blockSize, lastPartialSize, compressedSize[nblocks]], then the blocks.
+    // zlib: [nblocks, blockSize, lastPartialSize, compressedSize[nblocks]], then the
+    // blocks.
     const std::size_t headerAt = src.FileOffset();
     const std::uint64_t blocks = readWord("the compression header");
     const std::uint64_t blockSize = readWord("the compression header");
     const std::uint64_t lastSize = readWord("the compression header");
     if (blocks > src.RemainingBound() / headerSize) {
         std::ostringstream os;
-        os << "compression header declares " << blocks << " blocks, more than the data holds";
+        os << "compression header declares " << blocks
+           << " blocks, more than the data holds";
         Fail(file, ByteWhere(a.where, headerAt), os.str());
     }
     std::vector<std::uint64_t> compressed(blocks);
@@ -604,7 +671,8 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
     const std::size_t dataAt = src.FileOffset();
     if (compressedTotal > src.RemainingBound())
         FailShort(file, a, src, "the compressed blocks", compressedTotal);
-    // deflate expands at most 1032:1, so a larger claim is not backed by the data present.
+    // deflate expands at most 1032:1, so a larger claim is not backed by the data
+    // present.
     for (std::uint64_t b = 0; b < blocks; ++b) {
         const std::uint64_t len = (b + 1 == blocks && lastSize) ? lastSize : blockSize;
         if (len / 1032 > compressed[b] + 1) {
@@ -631,7 +699,8 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
         const std::uint8_t* c = src.Take(compressed[b], scratch);
         if (!c) FailShort(file, a, src, "a compressed block", compressed[b]);
         uLongf produced = static_cast<uLongf>(len);
-        const int rc = uncompress(dst + at, &produced, c, static_cast<uLong>(compressed[b]));
+        const int rc =
+            uncompress(dst + at, &produced, c, static_cast<uLong>(compressed[b]));
         if (rc != Z_OK || produced != len) {
             std::ostringstream os;
             os << "zlib block " << b << " of " << blocks << ": ";

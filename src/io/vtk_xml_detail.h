@@ -1,20 +1,22 @@
-// Private to the VTK XML reader: the file held in memory, DataArray descriptions, decoding.
+// Private to the VTK XML reader: the file held in memory, DataArray descriptions,
+// decoding.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <pugixml.hpp>
 #include <string>
 #include <vector>
-
-#include <pugixml.hpp>
 
 namespace hpray::vtkxml {
 
 /// VTK's numeric array types; NonNumeric covers String, Bit and anything unknown.
+// clang-format off
 enum class ScalarType : std::uint8_t {
     Int8, UInt8, Int16, UInt16, Int32, UInt32, Int64, UInt64, Float32, Float64, NonNumeric
 };
+// clang-format on
 /// Bytes per value (0 for NonNumeric).
 int ScalarSize(ScalarType type);
 bool IsIntegerType(ScalarType type);
@@ -50,7 +52,8 @@ struct XmlFile {
 std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path);
 
 /// Throws InputError(file.path, where, what).
-[[noreturn]] void Fail(const XmlFile& file, const std::string& where, const std::string& what);
+[[noreturn]] void Fail(const XmlFile& file, const std::string& where,
+                       const std::string& what);
 
 /// One <DataArray> element, described but not decoded.
 struct ArrayDesc {
@@ -65,7 +68,8 @@ struct ArrayDesc {
 };
 
 /// Describes a <DataArray>; `context` prefixes the position (e.g. "<Piece> 0").
-ArrayDesc DescribeArray(const XmlFile& file, pugi::xml_node node, const std::string& context);
+ArrayDesc DescribeArray(const XmlFile& file, pugi::xml_node node,
+                        const std::string& context);
 
 /// Decodes `array` into `out` (resized to the value count), converting every value to
 /// Dst (double or std::int64_t; integer destinations require an integer array type).
@@ -78,7 +82,7 @@ void ReadArray(const XmlFile& file, const ArrayDesc& array, std::int64_t tuples,
 
 extern template void ReadArray<double>(const XmlFile&, const ArrayDesc&, std::int64_t,
                                        std::vector<double>&);
-extern template void ReadArray<std::int64_t>(const XmlFile&, const ArrayDesc&, std::int64_t,
-                                             std::vector<std::int64_t>&);
+extern template void ReadArray<std::int64_t>(const XmlFile&, const ArrayDesc&,
+                                             std::int64_t, std::vector<std::int64_t>&);
 
 }  // namespace hpray::vtkxml

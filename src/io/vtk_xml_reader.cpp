@@ -1,6 +1,7 @@
 // ReadVtkXml: VTK XML UnstructuredGrid (.vtu), its parallel index (.pvtu) and
 // StructuredGrid (.vts, .pvts) into the mesh model, cells converted to internal order.
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -29,19 +30,18 @@ constexpr int kVtkVoxel = 11;
 
 /// VTK cell types of dimension 0, 1 or 2 (vertices, lines, faces): skipped, not errors.
 bool IsLowerDimensional(std::int64_t type) {
-    switch (type) {
-        case 0:                                        // empty cell
-        case 1: case 2: case 3: case 4: case 5:        // vertex .. triangle
-        case 6: case 7: case 8: case 9:                // strip, polygon, pixel, quad
-        case 21: case 22: case 23: case 28: case 30:   // quadratic edge / faces
-        case 34: case 35: case 36:                     // biquadratic tri, cubic line, polygon
-        case 51: case 52: case 53: case 54:            // parametric curve / surfaces
-        case 60: case 61: case 62: case 63:            // higher-order edge / faces
-        case 68: case 69: case 70:                     // Lagrange curve, triangle, quad
-        case 75: case 76: case 77:                     // Bezier curve, triangle, quad
-            return true;
-        default: return false;
-    }
+    // empty, vertex, poly-vertex, line, poly-line, triangle, strip, polygon, pixel, quad;
+    // quadratic edge, triangle, quad, biquadratic quad, quadratic-linear quad,
+    // biquadratic triangle, cubic line, quadratic polygon; parametric curve and
+    // surfaces; higher-order edge and faces; Lagrange and Bezier curve, triangle, quad.
+    static const std::array<bool, 256> kLower = [] {
+        std::array<bool, 256> lower{};
+        for (int t : {0,  1,  2,  3,  4,  5,  6,  7,  8,  9,  21, 22, 23, 28, 30, 34,
+                      35, 36, 51, 52, 53, 54, 60, 61, 62, 63, 68, 69, 70, 75, 76, 77})
+            lower[t] = true;
+        return lower;
+    }();
+    return type >= 0 && type < 256 && kLower[type];
 }
 
 std::string PieceWhere(int index) { return "<Piece> " + std::to_string(index); }
@@ -56,8 +56,9 @@ std::int64_t RequireCount(const XmlFile& file, pugi::xml_node node, const char* 
     const long long value = std::strtoll(text, &end, 10);
     while (end && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r')) ++end;
     if (!attr || end == text || *end != '\0' || errno != 0 || value < 0)
-        Fail(file, where, std::string(attribute) + " '" + attr.value() +
-                              "' is not a non-negative integer");
+        Fail(file, where,
+             std::string(attribute) + " '" + attr.value() +
+                 "' is not a non-negative integer");
     return value;
 }
 
@@ -80,8 +81,8 @@ struct PieceArrays {
     std::optional<ArrayDesc> degrees;
 };
 
-PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece, const std::string& where,
-                          const ReadOptions& options) {
+PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
+                          const std::string& where, const ReadOptions& options) {
     PieceArrays arrays;
     std::vector<std::string> available;
     auto collect = [&](const char* element, std::vector<ArrayDesc>& out, bool cellData) {
@@ -130,9 +131,10 @@ PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece, const std::
                  (list.empty() ? std::string("(none)") : list));
     }
     auto keep = [&](std::vector<ArrayDesc>& v) {
-        v.erase(std::remove_if(v.begin(), v.end(),
-                               [&](const ArrayDesc& a) { return !selected.count(a.name); }),
-                v.end());
+        v.erase(
+            std::remove_if(v.begin(), v.end(),
+                           [&](const ArrayDesc& a) { return !selected.count(a.name); }),
+            v.end());
     };
     keep(arrays.pointFields);
     keep(arrays.cellFields);
@@ -148,8 +150,8 @@ void ReadPoints(const XmlFile& file, pugi::xml_node piece, const std::string& wh
     }
     const ArrayDesc a = vtkxml::DescribeArray(file, node, where + " <Points>");
     if (a.components != 3)
-        Fail(file, a.where, "points have " + std::to_string(a.components) +
-                                " components, expected 3");
+        Fail(file, a.where,
+             "points have " + std::to_string(a.components) + " components, expected 3");
     vtkxml::ReadArray(file, a, count, mesh.points);
 }
 
@@ -167,8 +169,9 @@ void ReadPointFields(const XmlFile& file, const PieceArrays& arrays, std::int64_
 
 /// Reads the cell fields and ghost flags of `fileCells` cells and keeps those listed in
 /// `kept` (all when `kept` is null).
-void ReadCellFields(const XmlFile& file, const PieceArrays& arrays, std::int64_t fileCells,
-                    const std::vector<std::int64_t>* kept, Mesh& mesh) {
+void ReadCellFields(const XmlFile& file, const PieceArrays& arrays,
+                    std::int64_t fileCells, const std::vector<std::int64_t>* kept,
+                    Mesh& mesh) {
     for (const ArrayDesc& a : arrays.cellFields) {
         Field f;
         f.name = a.name;
@@ -195,9 +198,10 @@ void ReadCellFields(const XmlFile& file, const PieceArrays& arrays, std::int64_t
         for (std::int64_t i = 0; i < n; ++i) {
             const std::int64_t v = values[kept ? (*kept)[i] : i];
             if (v < 0 || v > 255)
-                Fail(file, a.where, "value " + std::to_string(v) + " of cell " +
-                                        std::to_string(kept ? (*kept)[i] : i) +
-                                        " is not a UInt8 ghost flag");
+                Fail(file, a.where,
+                     "value " + std::to_string(v) + " of cell " +
+                         std::to_string(kept ? (*kept)[i] : i) +
+                         " is not a UInt8 ghost flag");
             mesh.ghost[i] = static_cast<std::uint8_t>(v);
         }
     }
@@ -232,7 +236,8 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
             if (std::strcmp(n.attribute("Name").value(), name) == 0)
                 return vtkxml::DescribeArray(file, n, where + " <Cells>");
         if (nCells > 0)
-            Fail(file, where + " <Cells>", std::string("has no DataArray named '") + name + "'");
+            Fail(file, where + " <Cells>",
+                 std::string("has no DataArray named '") + name + "'");
         return std::nullopt;
     };
     const auto offsetsDesc = findCellArray("offsets");
@@ -248,16 +253,17 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
         if (static_cast<std::int64_t>(offsets.size()) == nCells + 1 && offsets[0] == 0)
             offsets.erase(offsets.begin());
         if (static_cast<std::int64_t>(offsets.size()) != nCells)
-            Fail(file, offsetsDesc->where, "holds " + std::to_string(offsets.size()) +
-                                               " values, expected NumberOfCells = " +
-                                               std::to_string(nCells));
+            Fail(file, offsetsDesc->where,
+                 "holds " + std::to_string(offsets.size()) +
+                     " values, expected NumberOfCells = " + std::to_string(nCells));
         std::int64_t previous = 0;
         for (std::int64_t c = 0; c < nCells; ++c) {
             if (offsets[c] < previous)
                 Fail(file, offsetsDesc->where,
-                     "offset of cell " + std::to_string(c) + " (" + std::to_string(offsets[c]) +
-                         ") is smaller than the previous one (" + std::to_string(previous) +
-                         ")");
+                     "offset of cell " + std::to_string(c) + " (" +
+                         std::to_string(offsets[c]) +
+                         ") is smaller than the previous one (" +
+                         std::to_string(previous) + ")");
             previous = offsets[c];
         }
         vtkxml::ReadArray(file, *typesDesc, nCells, types);
@@ -271,7 +277,8 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
         vtkxml::ReadArray(file, *arrays.degrees, nCells, degrees);
     }
     // As VTK's reader: old files carry the pre-VTK-9 Lagrange hex order (trap 1).
-    const bool legacyHex = VtkXmlHasLegacyLagrangeHex(file.versionMajor, file.versionMinor);
+    const bool legacyHex =
+        VtkXmlHasLegacyLagrangeHex(file.versionMajor, file.versionMinor);
 
     // Classify each cell; consecutive cells usually share a kind, so cache the last one.
     struct Cached {
@@ -352,25 +359,29 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
     return result;
 }
 
-PieceResult ReadStructuredPiece(const XmlFile& file, pugi::xml_node grid, pugi::xml_node piece,
-                                int index, const ReadOptions& options) {
+PieceResult ReadStructuredPiece(const XmlFile& file, pugi::xml_node grid,
+                                pugi::xml_node piece, int index,
+                                const ReadOptions& options) {
     const std::string where = PieceWhere(index);
     pugi::xml_attribute extentAttr = piece.attribute("Extent");
     if (!extentAttr) extentAttr = grid.attribute("WholeExtent");
     std::istringstream is(extentAttr.value());
     long long e[6];
     for (long long& v : e)
-        if (!(is >> v)) Fail(file, where, std::string("Extent '") + extentAttr.value() +
-                                              "' is not six integers");
+        if (!(is >> v))
+            Fail(file, where,
+                 std::string("Extent '") + extentAttr.value() + "' is not six integers");
     std::int64_t n[3];
     std::uint64_t nPoints = 1;
     for (int a = 0; a < 3; ++a) {
         if (e[2 * a + 1] < e[2 * a] || e[2 * a + 1] - e[2 * a] >= (1LL << 31))
-            Fail(file, where, std::string("Extent '") + extentAttr.value() + "' is invalid");
+            Fail(file, where,
+                 std::string("Extent '") + extentAttr.value() + "' is invalid");
         n[a] = e[2 * a + 1] - e[2 * a] + 1;
         if (__builtin_mul_overflow(nPoints, static_cast<std::uint64_t>(n[a]), &nPoints) ||
             nPoints > (1ULL << 62))
-            Fail(file, where, std::string("Extent '") + extentAttr.value() + "' is too large");
+            Fail(file, where,
+                 std::string("Extent '") + extentAttr.value() + "' is too large");
     }
     PieceResult result;
     Mesh& mesh = result.mesh;
@@ -419,7 +430,8 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
         into = std::move(piece);
         return;
     }
-    auto matchFields = [&](std::vector<Field>& a, std::vector<Field>& b, const char* kind) {
+    auto matchFields = [&](std::vector<Field>& a, std::vector<Field>& b,
+                           const char* kind) {
         if (a.size() != b.size())
             throw InputError(source, where,
                              std::string("has a different set of ") + kind +
@@ -428,9 +440,10 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
             auto it = std::find_if(b.begin(), b.end(),
                                    [&](const Field& g) { return g.name == f.name; });
             if (it == b.end() || it->components != f.components)
-                throw InputError(source, where,
-                                 std::string(kind) + " field '" + f.name +
-                                     "' is missing or has a different number of components");
+                throw InputError(
+                    source, where,
+                    std::string(kind) + " field '" + f.name +
+                        "' is missing or has a different number of components");
             f.values.insert(f.values.end(), it->values.begin(), it->values.end());
         }
     };
@@ -441,11 +454,14 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
     const std::int64_t connBefore = static_cast<std::int64_t>(into.connectivity.size());
     into.points.insert(into.points.end(), piece.points.begin(), piece.points.end());
     into.connectivity.reserve(into.connectivity.size() + piece.connectivity.size());
-    for (std::int64_t p : piece.connectivity) into.connectivity.push_back(p + pointOffset);
+    for (std::int64_t p : piece.connectivity)
+        into.connectivity.push_back(p + pointOffset);
     for (std::size_t c = 1; c < piece.cellOffsets.size(); ++c)
         into.cellOffsets.push_back(piece.cellOffsets[c] + connBefore);
-    into.cellShape.insert(into.cellShape.end(), piece.cellShape.begin(), piece.cellShape.end());
-    into.cellOrder.insert(into.cellOrder.end(), piece.cellOrder.begin(), piece.cellOrder.end());
+    into.cellShape.insert(into.cellShape.end(), piece.cellShape.begin(),
+                          piece.cellShape.end());
+    into.cellOrder.insert(into.cellOrder.end(), piece.cellOrder.begin(),
+                          piece.cellOrder.end());
     into.cellFamily.insert(into.cellFamily.end(), piece.cellFamily.begin(),
                            piece.cellFamily.end());
     if (!into.ghost.empty() || !piece.ghost.empty()) {
@@ -457,22 +473,26 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
     }
 }
 
-/// Reads every <Piece> of a serial file (UnstructuredGrid or StructuredGrid), unvalidated.
+/// Reads every <Piece> of a serial file (UnstructuredGrid or StructuredGrid),
+/// unvalidated.
 PieceResult ReadSerial(const XmlFile& file, const ReadOptions& options) {
     const bool structured = file.type == "StructuredGrid";
     if (!structured && file.type != "UnstructuredGrid")
         Fail(file, "<VTKFile>",
              "type '" + file.type +
-                 "' is not supported (UnstructuredGrid, PUnstructuredGrid, StructuredGrid, "
+                 "' is not supported (UnstructuredGrid, PUnstructuredGrid, "
+                 "StructuredGrid, "
                  "PStructuredGrid)");
     const pugi::xml_node grid = file.root.child(file.type.c_str());
     if (!grid) Fail(file, "<VTKFile>", "has no <" + file.type + "> element");
     PieceResult all;
     int index = 0;
     for (pugi::xml_node piece : grid.children("Piece")) {
-        PieceResult r = structured ? ReadStructuredPiece(file, grid, piece, index, options)
-                                   : ReadUnstructuredPiece(file, piece, index, options);
-        AppendPiece(all.mesh, index == 0, std::move(r.mesh), file.path, PieceWhere(index));
+        PieceResult r = structured
+                            ? ReadStructuredPiece(file, grid, piece, index, options)
+                            : ReadUnstructuredPiece(file, piece, index, options);
+        AppendPiece(all.mesh, index == 0, std::move(r.mesh), file.path,
+                    PieceWhere(index));
         all.skipped += r.skipped;
         ++index;
     }
@@ -496,8 +516,8 @@ Mesh ReadVtkXml(const std::string& path, const ReadOptions& options) {
         r.mesh.Validate(path);
         return std::move(r.mesh);
     }
-    // A parallel index: read each piece file (relative to this file's folder), validate it
-    // under its own name, and concatenate.
+    // A parallel index: read each piece file (relative to this file's folder), validate
+    // it under its own name, and concatenate.
     const std::string serialType = file->type.substr(1);
     const pugi::xml_node grid = file->root.child(file->type.c_str());
     if (!grid) Fail(*file, "<VTKFile>", "has no <" + file->type + "> element");
@@ -512,7 +532,8 @@ Mesh ReadVtkXml(const std::string& path, const ReadOptions& options) {
         const std::string piecePath = (folder / source).lexically_normal().string();
         std::error_code ec;
         if (!std::filesystem::is_regular_file(piecePath, ec))
-            Fail(*file, where + " Source=\"" + source + "\"", "no such file: " + piecePath);
+            Fail(*file, where + " Source=\"" + source + "\"",
+                 "no such file: " + piecePath);
         const std::unique_ptr<XmlFile> pieceFile = vtkxml::LoadXmlFile(piecePath);
         if (pieceFile->type != serialType)
             Fail(*pieceFile, "<VTKFile>",

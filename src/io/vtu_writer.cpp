@@ -1,4 +1,5 @@
-// WriteVtu: VTK XML UnstructuredGrid, version 2.2, appended raw binary with UInt64 headers.
+// WriteVtu: VTK XML UnstructuredGrid, version 2.2, appended raw binary with UInt64
+// headers.
 #include "io/vtu_writer.h"
 
 #include <cerrno>
@@ -25,12 +26,23 @@ std::string XmlEscape(const std::string& s) {
     std::string out;
     for (char c : s) {
         switch (c) {
-            case '&': out += "&amp;"; break;
-            case '<': out += "&lt;"; break;
-            case '>': out += "&gt;"; break;
-            case '"': out += "&quot;"; break;
-            case '\'': out += "&apos;"; break;
-            default: out += c;
+            case '&':
+                out += "&amp;";
+                break;
+            case '<':
+                out += "&lt;";
+                break;
+            case '>':
+                out += "&gt;";
+                break;
+            case '"':
+                out += "&quot;";
+                break;
+            case '\'':
+                out += "&apos;";
+                break;
+            default:
+                out += c;
         }
     }
     return out;
@@ -78,13 +90,25 @@ void WriteVtu(const std::string& path, const Mesh& mesh) {
     bool anyLagrange = false;
     for (std::int64_t c = 0; c < nCells; ++c) {
         const CellKind kind{mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]};
-        const std::vector<int>& perm = InternalToVtk(kind);
         const std::int64_t* nodes = mesh.CellNodes(c);
-        const std::int64_t begin = mesh.cellOffsets[c];
-        HPRAY_CHECK_EQ(static_cast<std::int64_t>(perm.size()), mesh.CellNodeCount(c));
-        for (std::size_t k = 0; k < perm.size(); ++k) connectivity[begin + k] = nodes[perm[k]];
+        std::int64_t* out = connectivity.data() + mesh.cellOffsets[c];
+        const int count = mesh.CellNodeCount(c);
+        // VTK 9.1 has no Lagrange pyramid class, so a linear pyramid is written as a
+        // VTK_PYRAMID (file[perm[k]] = internal[k] with perm = VtkToInternal(14)).
+        const bool linearPyramid = kind.shape == CellShape::Pyramid && kind.order == 1 &&
+                                   kind.family == CellFamily::Lagrange;
+        if (linearPyramid) {
+            const std::vector<int>& perm = VtkToInternal(kVtkPyramid, kind);
+            HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
+            for (int k = 0; k < count; ++k) out[perm[k]] = nodes[k];
+            types[c] = kVtkPyramid;
+        } else {
+            const std::vector<int>& perm = InternalToVtk(kind);
+            HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
+            for (int k = 0; k < count; ++k) out[k] = nodes[perm[k]];
+            types[c] = static_cast<std::uint8_t>(VtkTypeFor(kind));
+        }
         offsets[c] = mesh.cellOffsets[c + 1];
-        types[c] = static_cast<std::uint8_t>(VtkTypeFor(kind));
         for (int k = 0; k < 3; ++k) degrees[3 * c + k] = kind.order;
         anyLagrange |= kind.family == CellFamily::Lagrange;
     }
@@ -94,8 +118,10 @@ void WriteVtu(const std::string& path, const Mesh& mesh) {
         pointData.push_back(MakeBlock("Float64", f.name, f.components, f.values));
     for (const Field& f : mesh.cellFields)
         cellData.push_back(MakeBlock("Float64", f.name, f.components, f.values));
-    if (anyLagrange) cellData.push_back(MakeBlock("Float64", "HigherOrderDegrees", 3, degrees));
-    if (!mesh.ghost.empty()) cellData.push_back(MakeBlock("UInt8", "vtkGhostType", 1, mesh.ghost));
+    if (anyLagrange)
+        cellData.push_back(MakeBlock("Float64", "HigherOrderDegrees", 3, degrees));
+    if (!mesh.ghost.empty())
+        cellData.push_back(MakeBlock("UInt8", "vtkGhostType", 1, mesh.ghost));
     Block points = MakeBlock("Float64", "Points", 3, mesh.points);
     Block conn = MakeBlock("Int64", "connectivity", 1, connectivity);
     Block offs = MakeBlock("Int64", "offsets", 1, offsets);
@@ -114,15 +140,16 @@ void WriteVtu(const std::string& path, const Mesh& mesh) {
     std::ostringstream xml;
     xml << "<?xml version=\"1.0\"?>\n"
         << "<VTKFile type=\"UnstructuredGrid\" version=\"2.2\" byte_order=\""
-        << (HostIsBigEndian() ? "BigEndian" : "LittleEndian") << "\" header_type=\"UInt64\">\n"
+        << (HostIsBigEndian() ? "BigEndian" : "LittleEndian")
+        << "\" header_type=\"UInt64\">\n"
         << "  <UnstructuredGrid>\n"
-        << "    <Piece NumberOfPoints=\"" << mesh.PointCount() << "\" NumberOfCells=\"" << nCells
-        << "\">\n";
+        << "    <Piece NumberOfPoints=\"" << mesh.PointCount() << "\" NumberOfCells=\""
+        << nCells << "\">\n";
     xml << "      <PointData>\n";
     for (const Block& b : pointData) WriteArrayTag(xml, b, "        ");
     xml << "      </PointData>\n";
-    xml << "      <CellData" << (anyLagrange ? " HigherOrderDegrees=\"HigherOrderDegrees\"" : "")
-        << ">\n";
+    xml << "      <CellData"
+        << (anyLagrange ? " HigherOrderDegrees=\"HigherOrderDegrees\"" : "") << ">\n";
     for (const Block& b : cellData) WriteArrayTag(xml, b, "        ");
     xml << "      </CellData>\n";
     xml << "      <Points>\n";
@@ -148,7 +175,8 @@ void WriteVtu(const std::string& path, const Mesh& mesh) {
             const std::uint64_t size = b->bytes;
             out.write(reinterpret_cast<const char*>(&size), sizeof(size));
             if (size > 0)
-                out.write(static_cast<const char*>(b->data), static_cast<std::streamsize>(size));
+                out.write(static_cast<const char*>(b->data),
+                          static_cast<std::streamsize>(size));
         }
         const char* tail = "\n  </AppendedData>\n</VTKFile>\n";
         out.write(tail, static_cast<std::streamsize>(std::strlen(tail)));

@@ -2,6 +2,7 @@
 // files with known content, VTK-written fixtures, the real data files, round trips and
 // malformed input.
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -17,8 +18,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 #include "io/mesh_io.h"
 #include "io/vtu_writer.h"
@@ -36,8 +35,9 @@ namespace fs = std::filesystem;
 
 fs::path TempDir() {
     static const fs::path dir = [] {
-        fs::path d = fs::temp_directory_path() /
-                     ("hpray_test_vtk_xml_" + std::to_string(static_cast<long>(getpid())));
+        fs::path d =
+            fs::temp_directory_path() /
+            ("hpray_test_vtk_xml_" + std::to_string(static_cast<long>(getpid())));
         fs::create_directories(d);
         return d;
     }();
@@ -59,7 +59,8 @@ std::string ReadBytes(const std::string& path) {
 }
 
 std::string Base64(const std::string& in) {
-    static const char* a = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    static const char* a =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     std::string out;
     std::size_t i = 0;
     for (; i + 2 < in.size(); i += 3) {
@@ -100,20 +101,32 @@ double Round(const std::string& type, double v) {
     return type == "Float32" ? static_cast<double>(static_cast<float>(v)) : v;
 }
 
-std::string TypedBytes(const std::string& type, const std::vector<double>& values, bool big) {
+std::string TypedBytes(const std::string& type, const std::vector<double>& values,
+                       bool big) {
     std::string out;
     for (double d : values) {
-        if (type == "Int8") Put(out, static_cast<std::int8_t>(d), big);
-        else if (type == "UInt8") Put(out, static_cast<std::uint8_t>(d), big);
-        else if (type == "Int16") Put(out, static_cast<std::int16_t>(d), big);
-        else if (type == "UInt16") Put(out, static_cast<std::uint16_t>(d), big);
-        else if (type == "Int32") Put(out, static_cast<std::int32_t>(d), big);
-        else if (type == "UInt32") Put(out, static_cast<std::uint32_t>(d), big);
-        else if (type == "Int64") Put(out, static_cast<std::int64_t>(d), big);
-        else if (type == "UInt64") Put(out, static_cast<std::uint64_t>(d), big);
-        else if (type == "Float32") Put(out, static_cast<float>(d), big);
-        else if (type == "Float64") Put(out, d, big);
-        else ADD_FAILURE() << "type " << type;
+        if (type == "Int8")
+            Put(out, static_cast<std::int8_t>(d), big);
+        else if (type == "UInt8")
+            Put(out, static_cast<std::uint8_t>(d), big);
+        else if (type == "Int16")
+            Put(out, static_cast<std::int16_t>(d), big);
+        else if (type == "UInt16")
+            Put(out, static_cast<std::uint16_t>(d), big);
+        else if (type == "Int32")
+            Put(out, static_cast<std::int32_t>(d), big);
+        else if (type == "UInt32")
+            Put(out, static_cast<std::uint32_t>(d), big);
+        else if (type == "Int64")
+            Put(out, static_cast<std::int64_t>(d), big);
+        else if (type == "UInt64")
+            Put(out, static_cast<std::uint64_t>(d), big);
+        else if (type == "Float32")
+            Put(out, static_cast<float>(d), big);
+        else if (type == "Float64")
+            Put(out, d, big);
+        else
+            ADD_FAILURE() << "type " << type;
     }
     return out;
 }
@@ -124,11 +137,15 @@ std::string AsciiText(const std::string& type, const std::vector<double>& values
     for (std::size_t i = 0; i < values.size(); ++i) {
         if (i) os << (i % 6 == 0 ? "\n" : " ");
         const double v = values[i];
-        if (type == "UInt64") os << static_cast<std::uint64_t>(v);
+        if (type == "UInt64")
+            os << static_cast<std::uint64_t>(v);
         else if (type == "Float32" || type == "Float64") {
-            if (std::isnan(v)) os << "nan";
-            else os << Round(type, v);
-        } else os << static_cast<std::int64_t>(v);
+            if (std::isnan(v))
+                os << "nan";
+            else
+                os << Round(type, v);
+        } else
+            os << static_cast<std::int64_t>(v);
     }
     return os.str();
 }
@@ -175,8 +192,10 @@ struct Payload {
 Payload MakePayload(const std::string& bytes, const Encoding& e) {
     Payload p;
     auto word = [&](std::uint64_t v) {
-        if (e.header64) Put(p.header, v, e.bigEndian);
-        else Put(p.header, static_cast<std::uint32_t>(v), e.bigEndian);
+        if (e.header64)
+            Put(p.header, v, e.bigEndian);
+        else
+            Put(p.header, static_cast<std::uint32_t>(v), e.bigEndian);
     };
     if (!e.zlib) {
         word(bytes.size());
@@ -214,17 +233,21 @@ std::string BuildVtu(const Doc& d, const Encoding& e) {
         std::string x = "<DataArray type=\"" + a.type + "\" Name=\"" + a.name + "\"";
         if (a.comps != 1) x += " NumberOfComponents=\"" + std::to_string(a.comps) + "\"";
         if (e.format == Format::Ascii || a.type == "String")
-            return x + " format=\"ascii\">\n" + AsciiText(a.type, a.values) + "\n</DataArray>\n";
+            return x + " format=\"ascii\">\n" + AsciiText(a.type, a.values) +
+                   "\n</DataArray>\n";
         const Payload p = MakePayload(TypedBytes(a.type, a.values, e.bigEndian), e);
         if (e.format == Format::Binary)
             return x + " format=\"binary\">\n" + Base64Payload(p, e) + "\n</DataArray>\n";
-        x += " format=\"appended\" offset=\"" + std::to_string(appended.size()) + "\"/>\n";
-        appended += e.format == Format::AppendedRaw ? p.header + p.data : Base64Payload(p, e);
+        x +=
+            " format=\"appended\" offset=\"" + std::to_string(appended.size()) + "\"/>\n";
+        appended +=
+            e.format == Format::AppendedRaw ? p.header + p.data : Base64Payload(p, e);
         return x;
     };
-    std::string x = "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"" +
-                    d.version + "\" byte_order=\"" +
-                    (e.bigEndian ? "BigEndian" : "LittleEndian") + "\"";
+    std::string x =
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"" +
+        d.version + "\" byte_order=\"" + (e.bigEndian ? "BigEndian" : "LittleEndian") +
+        "\"";
     if (!d.headerTypeAttribute.empty())
         x += " header_type=\"" + d.headerTypeAttribute + "\"";
     else if (e.header64)
@@ -244,8 +267,8 @@ std::string BuildVtu(const Doc& d, const Encoding& e) {
     x += "</Cells>\n</Piece>\n</UnstructuredGrid>\n";
     if (e.format == Format::AppendedRaw || e.format == Format::AppendedBase64)
         x += std::string("<AppendedData encoding=\"") +
-             (e.format == Format::AppendedRaw ? "raw" : "base64") + "\">\n   _" + appended +
-             "\n</AppendedData>\n";
+             (e.format == Format::AppendedRaw ? "raw" : "base64") + "\">\n   _" +
+             appended + "\n</AppendedData>\n";
     x += "</VTKFile>\n";
     return x;
 }
@@ -259,7 +282,7 @@ std::array<double, 3> Geometry(int cell, double r, double s, double t) {
     return {r + 0.25 * s + 5.0 * cell, s - 0.125 * t, t + 0.5 * r};
 }
 
-const char* kPointFieldTypes[] = {"Int8",  "UInt8", "Int16", "UInt16",  "Int32",
+const char* kPointFieldTypes[] = {"Int8",   "UInt8", "Int16",  "UInt16",  "Int32",
                                   "UInt32", "Int64", "UInt64", "Float32", "Float64"};
 
 double PointFieldValue(const std::string& type, int i) {
@@ -289,9 +312,12 @@ Doc SyntheticDoc(const Encoding& e) {
     d.nCells = 4;
     // Output cell 0 = file cell 0 (hex), 1 = file cell 2 (tet), 2 = file cell 3 (voxel).
     std::vector<double> xyz;
-    for (const auto& p : kHexParam) for (double v : Geometry(0, p[0], p[1], p[2])) xyz.push_back(v);
-    for (const auto& p : kTetParam) for (double v : Geometry(1, p[0], p[1], p[2])) xyz.push_back(v);
-    for (const auto& p : kVoxelParam) for (double v : Geometry(2, p[0], p[1], p[2])) xyz.push_back(v);
+    for (const auto& p : kHexParam)
+        for (double v : Geometry(0, p[0], p[1], p[2])) xyz.push_back(v);
+    for (const auto& p : kTetParam)
+        for (double v : Geometry(1, p[0], p[1], p[2])) xyz.push_back(v);
+    for (const auto& p : kVoxelParam)
+        for (double v : Geometry(2, p[0], p[1], p[2])) xyz.push_back(v);
     d.points = {"Points", e.pointType, 3, xyz};
     d.connectivity = {"connectivity", e.connType, 1, {}};
     for (int i = 0; i < 8; ++i) d.connectivity.values.push_back(i);
@@ -301,7 +327,8 @@ Doc SyntheticDoc(const Encoding& e) {
     d.types = {"types", "UInt8", 1, {12, 5, 10, 11}};
     for (const char* type : kPointFieldTypes) {
         Arr a{type, type, 1, {}};
-        for (int i = 0; i < kSynthPoints; ++i) a.values.push_back(PointFieldValue(type, i));
+        for (int i = 0; i < kSynthPoints; ++i)
+            a.values.push_back(PointFieldValue(type, i));
         d.pointData.push_back(a);
     }
     Arr vec{"vec", "Float64", 3, {}};
@@ -314,7 +341,9 @@ Doc SyntheticDoc(const Encoding& e) {
     return d;
 }
 
-std::string Basename(const std::string& path) { return fs::path(path).filename().string(); }
+std::string Basename(const std::string& path) {
+    return fs::path(path).filename().string();
+}
 
 /// Runs `read` and expects an InputError whose message names the file and contains every
 /// string of `parts`.
@@ -373,7 +402,8 @@ void ExpectSynthetic(const Mesh& m, const Encoding& e) {
         EXPECT_EQ(f->components, 1);
         ASSERT_EQ(f->values.size(), static_cast<std::size_t>(kSynthPoints));
         for (int i = 0; i < kSynthPoints; ++i)
-            EXPECT_EQ(f->values[i], Round(type, PointFieldValue(type, i))) << type << " " << i;
+            EXPECT_EQ(f->values[i], Round(type, PointFieldValue(type, i)))
+                << type << " " << i;
     }
     const Field* vec = m.FindPointField("vec");
     ASSERT_NE(vec, nullptr);
@@ -396,8 +426,8 @@ void ExpectSynthetic(const Mesh& m, const Encoding& e) {
 
 std::vector<Encoding> AllEncodings() {
     std::vector<Encoding> v;
-    auto add = [&](std::string label, Format f, bool h64, bool z, bool big, std::size_t bs,
-                   bool sep, std::string pt, std::string ct) {
+    auto add = [&](std::string label, Format f, bool h64, bool z, bool big,
+                   std::size_t bs, bool sep, std::string pt, std::string ct) {
         Encoding e;
         e.label = label;
         e.format = f;
@@ -413,21 +443,28 @@ std::vector<Encoding> AllEncodings() {
     add("ascii", Format::Ascii, false, false, false, 0, false, "Float64", "Int64");
     add("ascii_f32", Format::Ascii, false, false, false, 0, false, "Float32", "Int32");
     add("binary_u32", Format::Binary, false, false, false, 0, false, "Float32", "Int32");
-    add("binary_u64_sep", Format::Binary, true, false, false, 0, true, "Float64", "Int64");
-    add("binary_u32_zlib", Format::Binary, false, true, false, 64, false, "Float64", "UInt32");
-    add("binary_u64_zlib", Format::Binary, true, true, false, 1 << 20, false, "Float32", "Int64");
-    add("raw_u32", Format::AppendedRaw, false, false, false, 0, false, "Float64", "Int32");
-    add("raw_u64_zlib", Format::AppendedRaw, true, true, false, 64, false, "Float32", "Int64");
-    add("raw_u32_zlib_odd", Format::AppendedRaw, false, true, false, 100, false, "Float64",
-        "Int16");
-    add("b64_u32", Format::AppendedBase64, false, false, false, 0, false, "Float64", "UInt64");
+    add("binary_u64_sep", Format::Binary, true, false, false, 0, true, "Float64",
+        "Int64");
+    add("binary_u32_zlib", Format::Binary, false, true, false, 64, false, "Float64",
+        "UInt32");
+    add("binary_u64_zlib", Format::Binary, true, true, false, 1 << 20, false, "Float32",
+        "Int64");
+    add("raw_u32", Format::AppendedRaw, false, false, false, 0, false, "Float64",
+        "Int32");
+    add("raw_u64_zlib", Format::AppendedRaw, true, true, false, 64, false, "Float32",
+        "Int64");
+    add("raw_u32_zlib_odd", Format::AppendedRaw, false, true, false, 100, false,
+        "Float64", "Int16");
+    add("b64_u32", Format::AppendedBase64, false, false, false, 0, false, "Float64",
+        "UInt64");
     add("b64_u64_zlib", Format::AppendedBase64, true, true, false, 100, false, "Float32",
         "Int32");
     add("big_raw_u64_zlib", Format::AppendedRaw, true, true, true, 64, false, "Float64",
         "Int64");
-    add("big_binary_u32", Format::Binary, false, false, true, 0, false, "Float32", "UInt16");
-    add("big_b64_u32_zlib", Format::AppendedBase64, false, true, true, 40, false, "Float64",
-        "Int32");
+    add("big_binary_u32", Format::Binary, false, false, true, 0, false, "Float32",
+        "UInt16");
+    add("big_b64_u32_zlib", Format::AppendedBase64, false, true, true, 40, false,
+        "Float64", "Int32");
     return v;
 }
 
@@ -445,7 +482,8 @@ class EncodingTest : public ::testing::TestWithParam<Encoding> {};
 
 TEST_P(EncodingTest, ReadsKnownContent) {
     const Encoding& e = GetParam();
-    const std::string path = WriteFile("xml_" + e.label + ".vtu", BuildVtu(SyntheticDoc(e), e));
+    const std::string path =
+        WriteFile("xml_" + e.label + ".vtu", BuildVtu(SyntheticDoc(e), e));
     const Mesh m = ReadVtkXml(path, {});
     ExpectSynthetic(m, e);
 }
@@ -477,8 +515,9 @@ TEST_P(EncodingTest, TruncatedFileRejected) {
     const Encoding& e = GetParam();
     const std::string full = BuildVtu(SyntheticDoc(e), e);
     for (double fraction : {0.3, 0.6, 0.9, 0.99}) {
-        const std::string path = WriteFile(
-            "xml_trunc_" + e.label + ".vtu", full.substr(0, static_cast<std::size_t>(full.size() * fraction)));
+        const std::string path =
+            WriteFile("xml_trunc_" + e.label + ".vtu",
+                      full.substr(0, static_cast<std::size_t>(full.size() * fraction)));
         ExpectInputError(path, {});
     }
 }
@@ -500,10 +539,18 @@ TEST(VtkXmlFuzz, CorruptedFilesGiveInputErrorOrAMesh) {
             for (int k = 0; k < edits; ++k) {
                 const std::size_t at = rng() % bytes.size();
                 switch (rng() % 4) {
-                    case 0: bytes[at] = static_cast<char>(rng()); break;
-                    case 1: bytes[at] = "0123456789<>\"_=/ "[rng() % 17]; break;
-                    case 2: bytes.erase(at, 1 + rng() % 16); break;
-                    case 3: bytes.resize(at); break;
+                    case 0:
+                        bytes[at] = static_cast<char>(rng());
+                        break;
+                    case 1:
+                        bytes[at] = "0123456789<>\"_=/ "[rng() % 17];
+                        break;
+                    case 2:
+                        bytes.erase(at, 1 + rng() % 16);
+                        break;
+                    case 3:
+                        bytes.resize(at);
+                        break;
                 }
                 if (bytes.empty()) bytes = "x";
             }
@@ -547,7 +594,6 @@ TEST(VtkXmlWarnings, SkippedCellsAreCountedInOneWarning) {
 // ---------------------------------------------------------------------------------------
 // Specific malformed inputs.
 
-
 std::string Replace(std::string s, const std::string& from, const std::string& to) {
     const auto at = s.find(from);
     EXPECT_NE(at, std::string::npos) << from;
@@ -572,7 +618,8 @@ TEST(VtkXmlErrors, BadBase64Character) {
     const std::size_t at = text.find('\n', tag) + 5;
     text[at] = '!';
     ExpectInputError(WriteFile("xml_badb64.vtu", text),
-                     {"<DataArray Name=\"Float64\">", "invalid base64 character '!'", "byte " + std::to_string(at)});
+                     {"<DataArray Name=\"Float64\">", "invalid base64 character '!'",
+                      "byte " + std::to_string(at)});
 }
 
 TEST(VtkXmlErrors, ZlibCorruption) {
@@ -582,7 +629,8 @@ TEST(VtkXmlErrors, ZlibCorruption) {
     const std::size_t data = text.find("   _") + 4;
     const std::size_t at = data + 4 * 4 + 6;
     text[at] = static_cast<char>(text[at] ^ 0x5a);
-    ExpectInputError(WriteFile("xml_badzlib.vtu", text), {"<DataArray Name=\"Int8\">", "zlib"});
+    ExpectInputError(WriteFile("xml_badzlib.vtu", text),
+                     {"<DataArray Name=\"Int8\">", "zlib"});
 }
 
 TEST(VtkXmlErrors, ImplausibleCompressedSizeRejected) {
@@ -607,16 +655,19 @@ TEST(VtkXmlErrors, UnknownCellTypeNamesCellAndType) {
     const Encoding e = Enc(Format::AppendedRaw, true);
     Doc d = SyntheticDoc(e);
     d.types.values[3] = 200;
-    ExpectInputError(WriteFile("xml_badtype.vtu", BuildVtu(d, e)), {"cell 3", "type 200"});
+    ExpectInputError(WriteFile("xml_badtype.vtu", BuildVtu(d, e)),
+                     {"cell 3", "type 200"});
     d.types.values[3] = 42;  // polyhedron: 3-D but unsupported
-    ExpectInputError(WriteFile("xml_polyhedron.vtu", BuildVtu(d, e)), {"cell 3", "type 42"});
+    ExpectInputError(WriteFile("xml_polyhedron.vtu", BuildVtu(d, e)),
+                     {"cell 3", "type 42"});
 }
 
 TEST(VtkXmlErrors, WrongNodeCountForType) {
     const Encoding e = Enc(Format::Ascii);
     Doc d = SyntheticDoc(e);
     d.types.values[2] = 12;  // a hexahedron with 4 nodes
-    ExpectInputError(WriteFile("xml_badcount.vtu", BuildVtu(d, e)), {"cell 2", "type 12"});
+    ExpectInputError(WriteFile("xml_badcount.vtu", BuildVtu(d, e)),
+                     {"cell 2", "type 12"});
 }
 
 TEST(VtkXmlErrors, NanAndInfInPointsAndFields) {
@@ -624,7 +675,8 @@ TEST(VtkXmlErrors, NanAndInfInPointsAndFields) {
         const Encoding e = Enc(f, f == Format::AppendedRaw);
         Doc d = SyntheticDoc(e);
         d.points.values[3 * 5 + 1] = std::nan("");
-        ExpectInputError(WriteFile("xml_nanpoint.vtu", BuildVtu(d, e)), {"point 5", "NaN"});
+        ExpectInputError(WriteFile("xml_nanpoint.vtu", BuildVtu(d, e)),
+                         {"point 5", "NaN"});
         d = SyntheticDoc(e);
         d.pointData[9].values[7] = HUGE_VAL;  // the Float64 field
         if (f == Format::Ascii) d.pointData[9].values[7] = std::nan("");
@@ -633,7 +685,8 @@ TEST(VtkXmlErrors, NanAndInfInPointsAndFields) {
         d = SyntheticDoc(e);
         d.cellData[1].values[4] = -HUGE_VAL;  // cvec of file cell 2 = output cell 1
         if (f == Format::Ascii) d.cellData[1].values[4] = std::nan("");
-        ExpectInputError(WriteFile("xml_nancell.vtu", BuildVtu(d, e)), {"'cvec'", "entry 1"});
+        ExpectInputError(WriteFile("xml_nancell.vtu", BuildVtu(d, e)),
+                         {"'cvec'", "entry 1"});
     }
 }
 
@@ -648,8 +701,7 @@ TEST(VtkXmlErrors, OffsetsMustNotDecrease) {
 TEST(VtkXmlErrors, AsciiGarbageAndRange) {
     const Encoding e = Enc(Format::Ascii);
     std::string text = BuildVtu(SyntheticDoc(e), e);
-    ExpectInputError(WriteFile("xml_asciibad.vtu",
-                               Replace(text, "-60 -53", "-60 abc")),
+    ExpectInputError(WriteFile("xml_asciibad.vtu", Replace(text, "-60 -53", "-60 abc")),
                      {"<DataArray Name=\"Int8\">", "'abc'"});
     ExpectInputError(WriteFile("xml_asciirange.vtu", Replace(text, "-60 -53", "-60 300")),
                      {"<DataArray Name=\"Int8\">", "out of range"});
@@ -664,17 +716,19 @@ TEST(VtkXmlErrors, UnsupportedHeaderAttributes) {
     d.compressorAttribute = "vtkLZ4DataCompressor";
     ExpectInputError(WriteFile("xml_lz4.vtu", BuildVtu(d, e)), {"vtkLZ4DataCompressor"});
     std::string text = BuildVtu(SyntheticDoc(e), e);
-    ExpectInputError(WriteFile("xml_badorder.vtu",
-                               Replace(text, "LittleEndian", "MiddleEndian")),
-                     {"byte_order"});
+    ExpectInputError(
+        WriteFile("xml_badorder.vtu", Replace(text, "LittleEndian", "MiddleEndian")),
+        {"byte_order"});
     ExpectInputError(WriteFile("xml_badformat.vtu",
                                Replace(text, "format=\"appended\"", "format=\"zipped\"")),
                      {"zipped"});
-    ExpectInputError(WriteFile("xml_notvtk.vtu", "<?xml version=\"1.0\"?><Foo/>"), {"<Foo>"});
+    ExpectInputError(WriteFile("xml_notvtk.vtu", "<?xml version=\"1.0\"?><Foo/>"),
+                     {"<Foo>"});
     ExpectInputError(WriteFile("xml_empty.vtu", ""), {});
-    ExpectInputError(WriteFile("xml_badtype2.vtu",
-                               Replace(text, "type=\"UnstructuredGrid\"", "type=\"ImageData\"")),
-                     {"ImageData"});
+    ExpectInputError(
+        WriteFile("xml_badtype2.vtu",
+                  Replace(text, "type=\"UnstructuredGrid\"", "type=\"ImageData\"")),
+        {"ImageData"});
     ExpectInputError(WriteFile("xml_nounderscore.vtu", Replace(text, "   _", "   ")),
                      {"'_'"});
     ExpectInputError(WriteFile("xml_missingcells.vtu",
@@ -713,7 +767,8 @@ TEST(VtkXmlFields, OnlyRequestedFieldsAreLoaded) {
 
 TEST(VtkXmlFields, MissingRequestedFieldListsAvailable) {
     const Encoding e = Enc(Format::Binary);
-    const std::string path = WriteFile("xml_missingfield.vtu", BuildVtu(SyntheticDoc(e), e));
+    const std::string path =
+        WriteFile("xml_missingfield.vtu", BuildVtu(SyntheticDoc(e), e));
     ReadOptions options;
     options.fields = std::set<std::string>{"pressure"};
     ExpectInputError(path, {"'pressure'", "available", "Float64", "vec", "cid"}, options);
@@ -723,9 +778,10 @@ TEST(VtkXmlFields, NonNumericArraysAreSkipped) {
     const Encoding e = Enc(Format::AppendedRaw);
     Doc d = SyntheticDoc(e);
     std::string text = BuildVtu(d, e);
-    text = Replace(text, "<PointData>\n",
-                   "<PointData>\n<DataArray type=\"String\" Name=\"label\" format=\"ascii\">"
-                   "104 105 0</DataArray>\n");
+    text =
+        Replace(text, "<PointData>\n",
+                "<PointData>\n<DataArray type=\"String\" Name=\"label\" format=\"ascii\">"
+                "104 105 0</DataArray>\n");
     const Mesh m = ReadVtkXml(WriteFile("xml_string.vtu", text), {});
     EXPECT_EQ(m.FindField("label"), nullptr);
     ExpectSynthetic(m, e);
@@ -741,7 +797,9 @@ TEST(VtkXmlFields, OffsetsWithLeadingZeroAccepted) {
 // ---------------------------------------------------------------------------------------
 // Fixtures written by VTK itself (scripts/gen_xml_fixtures.py): closed-form content.
 
-std::string TestData(const std::string& name) { return std::string(HPRAY_TEST_DATA) + "/" + name; }
+std::string TestData(const std::string& name) {
+    return std::string(HPRAY_TEST_DATA) + "/" + name;
+}
 
 double F(double x, double y, double z) { return x + 2 * y + 3 * z; }
 
@@ -752,19 +810,21 @@ std::array<double, 3> Mapped(double r, double s, double t, int c) {
 void ExpectVtkLagrangeFixture(const Mesh& m, double tol) {
     ASSERT_EQ(m.CellCount(), 4);
     EXPECT_EQ(m.PointCount(), 27 + 64 + 20 + 18);
-    const CellShape shapes[] = {CellShape::Hex, CellShape::Hex, CellShape::Tet, CellShape::Wedge};
+    const CellShape shapes[] = {CellShape::Hex, CellShape::Hex, CellShape::Tet,
+                                CellShape::Wedge};
     const int orders[] = {2, 3, 3, 2};
     for (int c = 0; c < 4; ++c) {
         EXPECT_EQ(m.cellShape[c], shapes[c]) << c;
         EXPECT_EQ(m.cellOrder[c], orders[c]) << c;
         EXPECT_EQ(m.cellFamily[c], CellFamily::Lagrange);
-        ExpectCellGeometry(m, c, [&](double r, double s, double t) { return Mapped(r, s, t, c); },
-                           tol);
+        ExpectCellGeometry(
+            m, c, [&](double r, double s, double t) { return Mapped(r, s, t, c); }, tol);
     }
     const Field* f = m.FindPointField("f");
     ASSERT_NE(f, nullptr);
     for (std::int64_t p = 0; p < m.PointCount(); ++p)
-        EXPECT_NEAR(f->values[p], F(m.points[3 * p], m.points[3 * p + 1], m.points[3 * p + 2]),
+        EXPECT_NEAR(f->values[p],
+                    F(m.points[3 * p], m.points[3 * p + 1], m.points[3 * p + 2]),
                     1e-12 + 10 * tol);
     const Field* cid = m.FindCellField("cid");
     ASSERT_NE(cid, nullptr);
@@ -811,13 +871,13 @@ TEST(VtkXmlFixtures, StructuredGridWrittenByVtk) {
                 EXPECT_EQ(cid->values[c], c);
                 // A linear hex's node at reference (r, s, t) in {0,1}^3 is grid point
                 // (i + r, j + s, k + t).
-                ExpectCellGeometry(m, c,
-                                   [&](double r, double s, double t) {
-                                       return GridPoint(i + static_cast<int>(r),
-                                                        j + static_cast<int>(s),
-                                                        k + static_cast<int>(t));
-                                   },
-                                   1e-14);
+                ExpectCellGeometry(
+                    m, c,
+                    [&](double r, double s, double t) {
+                        return GridPoint(i + static_cast<int>(r), j + static_cast<int>(s),
+                                         k + static_cast<int>(t));
+                    },
+                    1e-14);
             }
     const Field* f = m.FindPointField("f");
     const Field* g = m.FindPointField("g");
@@ -827,7 +887,8 @@ TEST(VtkXmlFixtures, StructuredGridWrittenByVtk) {
     for (std::int64_t p = 0; p < m.PointCount(); ++p) {
         const double* x = &m.points[3 * p];
         EXPECT_NEAR(f->values[p], F(x[0], x[1], x[2]), 1e-12);
-        for (int a = 0; a < 3; ++a) EXPECT_EQ(g->values[3 * p + a], Round("Float32", 2 * x[a]));
+        for (int a = 0; a < 3; ++a)
+            EXPECT_EQ(g->values[3 * p + a], Round("Float32", 2 * x[a]));
     }
 }
 
@@ -837,16 +898,18 @@ TEST(VtkXmlFixtures, ParallelPiecesConcatenated) {
     ASSERT_EQ(m.CellCount(), 3);
     const double x0[] = {0, 1, 3};
     for (int c = 0; c < 3; ++c)
-        ExpectCellGeometry(m, c,
-                           [&](double r, double s, double t) {
-                               return std::array<double, 3>{x0[c] + r, s, t};
-                           },
-                           0.0);
+        ExpectCellGeometry(
+            m, c,
+            [&](double r, double s, double t) {
+                return std::array<double, 3>{x0[c] + r, s, t};
+            },
+            0.0);
     EXPECT_EQ(m.FindCellField("cid")->values, (std::vector<double>{0, 1, 10}));
     const Field* f = m.FindPointField("f");
     ASSERT_NE(f, nullptr);
     for (std::int64_t p = 0; p < m.PointCount(); ++p)
-        EXPECT_EQ(f->values[p], F(m.points[3 * p], m.points[3 * p + 1], m.points[3 * p + 2]));
+        EXPECT_EQ(f->values[p],
+                  F(m.points[3 * p], m.points[3 * p + 1], m.points[3 * p + 2]));
 }
 
 TEST(VtkXmlFixtures, ParallelIndexErrorsNameThePiece) {
@@ -859,10 +922,14 @@ TEST(VtkXmlFixtures, ParallelIndexErrorsNameThePiece) {
         std::ofstream(dir / "missing.pvtu")
             << Replace(index, "xml_vtk_pieces_1.vtu", "xml_vtk_pieces_7.vtu");
     }
-    ExpectInputError((dir / "missing.pvtu").string(), {"<Piece> 1", "xml_vtk_pieces_7.vtu"});
+    ExpectInputError((dir / "missing.pvtu").string(),
+                     {"<Piece> 1", "xml_vtk_pieces_7.vtu"});
     // A piece whose fields differ from the first one.
     const std::string piece1 = ReadBytes(TestData("xml_vtk_pieces_1.vtu"));
-    { std::ofstream(dir / "xml_vtk_pieces_1.vtu") << Replace(piece1, "Name=\"f\"", "Name=\"h\""); }
+    {
+        std::ofstream(dir / "xml_vtk_pieces_1.vtu")
+            << Replace(piece1, "Name=\"f\"", "Name=\"h\"");
+    }
     { std::ofstream(dir / "ok.pvtu") << index; }
     try {
         ReadVtkXml((dir / "ok.pvtu").string(), {});
@@ -887,10 +954,10 @@ TEST(VtkXmlFixtures, StructuredGridFromTestWriter) {
     EXPECT_EQ(m.PointCount(), 4);
     EXPECT_EQ(m.CellCount(), 0);
     ASSERT_NE(m.FindPointField("u"), nullptr);
-    ExpectInputError(WriteFile("xml_badextent.vts",
-                               Replace(text, "<Piece Extent=\"0 1 0 1 0 0\"",
-                                       "<Piece Extent=\"0 1 0 x 0 0\"")),
-                     {"Extent"});
+    ExpectInputError(
+        WriteFile("xml_badextent.vts", Replace(text, "<Piece Extent=\"0 1 0 1 0 0\"",
+                                               "<Piece Extent=\"0 1 0 x 0 0\"")),
+        {"Extent"});
     ExpectInputError(WriteFile("xml_hugeextent.vts",
                                Replace(text, "<Piece Extent=\"0 1 0 1 0 0\"",
                                        "<Piece Extent=\"0 100000 0 100000 0 100000\"")),
@@ -900,7 +967,9 @@ TEST(VtkXmlFixtures, StructuredGridFromTestWriter) {
 // ---------------------------------------------------------------------------------------
 // Real data (../shared/data, counts from its README).
 
-std::string Shared(const std::string& name) { return std::string(HPRAY_SHARED_DATA) + "/" + name; }
+std::string Shared(const std::string& name) {
+    return std::string(HPRAY_SHARED_DATA) + "/" + name;
+}
 
 struct RealFile {
     const char* name;
@@ -913,31 +982,69 @@ struct RealFile {
 std::vector<RealFile> RealFiles() {
     using S = CellShape;
     return {
-        {"gmsh_boolean_tet_p4.vtu", 16460, {{{S::Tet, 4}, 1170}}, {{"analytic", 1}}, {"region"}},
-        {"mfem_escher_tet_p3.vtu", 103825, {{{S::Tet, 3}, 21504}}, {{"analytic", 1}, {"u", 1}},
+        {"gmsh_boolean_tet_p4.vtu",
+         16460,
+         {{{S::Tet, 4}, 1170}},
+         {{"analytic", 1}},
+         {"region"}},
+        {"mfem_escher_tet_p3.vtu",
+         103825,
+         {{{S::Tet, 3}, 21504}},
+         {{"analytic", 1}, {"u", 1}},
          {"attribute"}},
-        {"mfem_toroid_wedge_p3.vtu", 6552, {{{S::Wedge, 3}, 384}}, {{"analytic", 1}, {"u", 1}},
+        {"mfem_toroid_wedge_p3.vtu",
+         6552,
+         {{{S::Wedge, 3}, 384}},
+         {{"analytic", 1}, {"u", 1}},
          {"attribute"}},
-        {"mfem_toroid_hex_p3.vtu", 12168, {{{S::Hex, 3}, 384}}, {{"analytic", 1}, {"u", 1}},
+        {"mfem_toroid_hex_p3.vtu",
+         12168,
+         {{{S::Hex, 3}, 384}},
+         {{"analytic", 1}, {"u", 1}},
          {"attribute"}},
-        {"mfem_spiral_hex_p9.vtu", 6859, {{{S::Hex, 9}, 8}}, {{"analytic", 1}, {"u", 1}},
+        {"mfem_spiral_hex_p9.vtu",
+         6859,
+         {{{S::Hex, 9}, 8}},
+         {{"analytic", 1}, {"u", 1}},
          {"attribute"}},
-        {"mfem_fichera_mixed_p3.vtu", 1946,
+        {"mfem_fichera_mixed_p3.vtu",
+         1946,
          {{{S::Tet, 3}, 40}, {{S::Hex, 3}, 24}, {{S::Wedge, 3}, 48}},
-         {{"analytic", 1}, {"u", 1}}, {"attribute"}},
-        {"mfem_escher_quadtet_p2.vtu", 117, {{{S::Tet, 2}, 42}}, {{"analytic", 1}}, {"material"}},
-        {"dealii_step65_hex_q3.vtu", 425984, {{{S::Hex, 3}, 6656}},
-         {{"solution", 1}, {"material_ids", 1}}, {}},
-        {"dealii_step44_hex_q2.vtu", 13824, {{{S::Hex, 2}, 512}},
-         {{"displacement", 3}, {"pressure", 1}, {"dilatation", 1}}, {}},
-        {"mfem_beam_hex_elasticity_p3.vtu", 16393, {{{S::Hex, 3}, 512}},
-         {{"displacement", 3}, {"displacement_magnitude", 1}}, {"attribute"}},
-        {"mfem_fichera_mixed16_linear.vtu", 31841,
-         {{{S::Tet, 1}, 50400}, {{S::Hex, 1}, 4096}, {{S::Wedge, 1}, 24576},
+         {{"analytic", 1}, {"u", 1}},
+         {"attribute"}},
+        {"mfem_escher_quadtet_p2.vtu",
+         117,
+         {{{S::Tet, 2}, 42}},
+         {{"analytic", 1}},
+         {"material"}},
+        {"dealii_step65_hex_q3.vtu",
+         425984,
+         {{{S::Hex, 3}, 6656}},
+         {{"solution", 1}, {"material_ids", 1}},
+         {}},
+        {"dealii_step44_hex_q2.vtu",
+         13824,
+         {{{S::Hex, 2}, 512}},
+         {{"displacement", 3}, {"pressure", 1}, {"dilatation", 1}},
+         {}},
+        {"mfem_beam_hex_elasticity_p3.vtu",
+         16393,
+         {{{S::Hex, 3}, 512}},
+         {{"displacement", 3}, {"displacement_magnitude", 1}},
+         {"attribute"}},
+        {"mfem_fichera_mixed16_linear.vtu",
+         31841,
+         {{{S::Tet, 1}, 50400},
+          {{S::Hex, 1}, 4096},
+          {{S::Wedge, 1}, 24576},
           {{S::Pyramid, 1}, 11664}},
-         {{"u", 1}, {"analytic", 1}}, {"attribute"}},
-        {"mfem_gmsh_t16_tets_1M.vtu", 212956, {{{S::Tet, 1}, 1251511}},
-         {{"u", 1}, {"analytic", 1}}, {"attribute"}},
+         {{"u", 1}, {"analytic", 1}},
+         {"attribute"}},
+        {"mfem_gmsh_t16_tets_1M.vtu",
+         212956,
+         {{{S::Tet, 1}, 1251511}},
+         {{"u", 1}, {"analytic", 1}},
+         {"attribute"}},
     };
 }
 
@@ -975,7 +1082,8 @@ TEST_P(RealFileTest, CountsAndFieldsMatchTheReadme) {
         EXPECT_EQ(f->components, comps) << name;
     }
     ASSERT_EQ(m.cellFields.size(), rf.cellFields.size());
-    for (const std::string& name : rf.cellFields) EXPECT_NE(m.FindCellField(name), nullptr);
+    for (const std::string& name : rf.cellFields)
+        EXPECT_NE(m.FindCellField(name), nullptr);
     EXPECT_TRUE(m.ghost.empty());
 }
 
@@ -999,13 +1107,12 @@ TEST_P(RealFileTest, AnalyticFieldEqualsClosedFormAtTheNodes) {
     // Float32 data (the t16 file) carries ~7 digits in both the point and the value.
     const double exact = name == "mfem_gmsh_t16_tets_1M.vtu" ? 2e-6 : 1e-12;
     // gmsh files sample f at every node, and so do the linear and the p2 MFEM files. The
-    // MFEM ParaView output of order >= 3 evaluates its interpolant (on MFEM's own nodes) at
-    // VTK's equispaced nodes, which coincide with MFEM's only at the vertices; elsewhere
-    // the value differs from f by the interpolation error.
-    const bool everyNode = name.rfind("gmsh_", 0) == 0 ||
-                           name.find("linear") != std::string::npos ||
-                           name.find("1M") != std::string::npos ||
-                           name == "mfem_escher_quadtet_p2.vtu";
+    // MFEM ParaView output of order >= 3 evaluates its interpolant (on MFEM's own nodes)
+    // at VTK's equispaced nodes, which coincide with MFEM's only at the vertices;
+    // elsewhere the value differs from f by the interpolation error.
+    const bool everyNode =
+        name.rfind("gmsh_", 0) == 0 || name.find("linear") != std::string::npos ||
+        name.find("1M") != std::string::npos || name == "mfem_escher_quadtet_p2.vtu";
     const std::vector<char> vertex = VertexPoints(m);
     double worstVertex = 0, worstOther = 0;
     for (std::int64_t p = 0; p < m.PointCount(); ++p) {
@@ -1044,10 +1151,12 @@ std::vector<double> LatticeTurningAngles(const Mesh& m) {
                 const double* xb = X(b);
                 const double u[3] = {xm[0] - xa[0], xm[1] - xa[1], xm[2] - xa[2]};
                 const double v[3] = {xb[0] - xm[0], xb[1] - xm[1], xb[2] - xm[2]};
-                const double cosine = (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) /
-                                      std::sqrt((u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) *
-                                                (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
-                worst = std::max(worst, std::acos(std::clamp(cosine, -1.0, 1.0)) * 180 / M_PI);
+                const double cosine =
+                    (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) /
+                    std::sqrt((u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) *
+                              (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+                worst = std::max(worst,
+                                 std::acos(std::clamp(cosine, -1.0, 1.0)) * 180 / M_PI);
             }
         angles.push_back(worst);
     }
@@ -1063,7 +1172,8 @@ constexpr double kFoldDegrees = 90.0;
 TEST_P(RealFileTest, HighOrderNodesAreOrdered) {
     if (!HaveSharedData()) GTEST_SKIP() << "no shared data";
     const std::vector<double> angles = LatticeTurningAngles(RealMesh(GetParam().name));
-    const double worst = angles.empty() ? 0 : *std::max_element(angles.begin(), angles.end());
+    const double worst =
+        angles.empty() ? 0 : *std::max_element(angles.begin(), angles.end());
     EXPECT_LT(worst, kFoldDegrees);
 }
 
@@ -1077,8 +1187,9 @@ INSTANTIATE_TEST_SUITE_P(SharedData, RealFileTest, ::testing::ValuesIn(RealFiles
 TEST(VtkXmlRealData, LegacyHexOrderIsNeededForDealIIFiles) {
     if (!HaveSharedData()) GTEST_SKIP() << "no shared data";
     // Trap 1: the deal.II files say version 0.1 and are valid only with the pre-VTK-9
-    // swap of hex edges 10 and 11. Claim version 2.2 (same length, inline data, so nothing
-    // shifts) and the swap is not applied: the nodes must then come out disordered.
+    // swap of hex edges 10 and 11. Claim version 2.2 (same length, inline data, so
+    // nothing shifts) and the swap is not applied: the nodes must then come out
+    // disordered.
     for (const char* name : {"dealii_step44_hex_q2.vtu", "dealii_step65_hex_q3.vtu"}) {
         const std::vector<double> good = LatticeTurningAngles(RealMesh(name));
         ASSERT_FALSE(good.empty());
@@ -1113,13 +1224,19 @@ double LinearCellVolume(const Mesh& m, std::int64_t c) {
     const CellShape shape = m.cellShape[c];
     std::vector<std::array<int, 4>> tets;
     switch (shape) {
-        case CellShape::Tet: tets = {{0, 1, 2, 3}}; break;
+        case CellShape::Tet:
+            tets = {{0, 1, 2, 3}};
+            break;
         case CellShape::Hex:  // six tets around the diagonal 0-7
             tets = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7},
                     {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}};
             break;
-        case CellShape::Wedge: tets = {{0, 1, 2, 3}, {1, 2, 3, 4}, {2, 3, 4, 5}}; break;
-        case CellShape::Pyramid: tets = {{0, 1, 3, 4}, {0, 3, 2, 4}}; break;
+        case CellShape::Wedge:
+            tets = {{0, 1, 2, 3}, {1, 2, 3, 4}, {2, 3, 4, 5}};
+            break;
+        case CellShape::Pyramid:
+            tets = {{0, 1, 3, 4}, {0, 3, 2, 4}};
+            break;
     }
     const auto& lattice = LatticeNodes(shape, 1);
     auto det = [](const double* a, const double* b, const double* c, const double* d) {
@@ -1203,7 +1320,8 @@ Mesh MixedMesh() {
         m.AddCell(shape, order, family, nodes.data(), static_cast<int>(nodes.size()));
         ++cell;
     };
-    for (CellShape s : {CellShape::Tet, CellShape::Hex, CellShape::Wedge, CellShape::Pyramid})
+    for (CellShape s :
+         {CellShape::Tet, CellShape::Hex, CellShape::Wedge, CellShape::Pyramid})
         for (int p = 1; p <= 4; ++p) add(s, p, CellFamily::Lagrange);
     for (CellShape s : {CellShape::Hex, CellShape::Wedge, CellShape::Pyramid})
         add(s, 2, CellFamily::Serendipity);
@@ -1211,7 +1329,8 @@ Mesh MixedMesh() {
     Field v{"velocity", Association::Point, 3, {}};
     for (std::int64_t p = 0; p < m.PointCount(); ++p) {
         u.values.push_back(std::sin(m.points[3 * p]) + 1e6);
-        for (int a = 0; a < 3; ++a) v.values.push_back(m.points[3 * p + a] * (a + 1) / 3.0);
+        for (int a = 0; a < 3; ++a)
+            v.values.push_back(m.points[3 * p + a] * (a + 1) / 3.0);
     }
     Field id{"id & <name>", Association::Cell, 1, {}};
     Field t{"tensor", Association::Cell, 2, {}};
@@ -1261,9 +1380,10 @@ TEST(VtuWriter, RoundTripMixedMesh) {
     // The file says what the contract says.
     const std::string bytes = ReadBytes(path);
     const std::string head = bytes.substr(0, bytes.find("<AppendedData"));
-    for (const char* s : {"version=\"2.2\"", "header_type=\"UInt64\"", "encoding=\"raw\"",
-                          "Name=\"HigherOrderDegrees\"", "Name=\"vtkGhostType\"",
-                          "type=\"Int64\" Name=\"connectivity\"", "type=\"UInt8\" Name=\"types\""})
+    for (const char* s :
+         {"version=\"2.2\"", "header_type=\"UInt64\"", "encoding=\"raw\"",
+          "Name=\"HigherOrderDegrees\"", "Name=\"vtkGhostType\"",
+          "type=\"Int64\" Name=\"connectivity\"", "type=\"UInt8\" Name=\"types\""})
         EXPECT_NE(bytes.find(s), std::string::npos) << s;
     EXPECT_EQ(head.find("format=\"ascii\""), std::string::npos);
     EXPECT_EQ(head.find("Float32"), std::string::npos);
@@ -1277,7 +1397,8 @@ TEST(VtuWriter, RoundTripThroughParallelIndex) {
     WriteVtu((dir / "a.vtu").string(), m);
     WriteVtu((dir / "b.vtu").string(), m);
     std::ofstream(dir / "both.pvtu")
-        << "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\">\n"
+        << "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" "
+           "version=\"2.2\">\n"
            "<PUnstructuredGrid GhostLevel=\"1\">\n<Piece Source=\"a.vtu\"/>\n"
            "<Piece Source=\"./b.vtu\"/>\n</PUnstructuredGrid>\n</VTKFile>\n";
     const Mesh both = ReadVtkXml((dir / "both.pvtu").string(), {});
@@ -1285,7 +1406,8 @@ TEST(VtuWriter, RoundTripThroughParallelIndex) {
     ASSERT_EQ(both.CellCount(), 2 * m.CellCount());
     for (std::int64_t c = 0; c < m.CellCount(); ++c)
         for (int k = 0; k < m.CellNodeCount(c); ++k)
-            EXPECT_EQ(both.CellNodes(c + m.CellCount())[k], m.CellNodes(c)[k] + m.PointCount());
+            EXPECT_EQ(both.CellNodes(c + m.CellCount())[k],
+                      m.CellNodes(c)[k] + m.PointCount());
     ASSERT_EQ(both.ghost.size(), 2 * m.ghost.size());
     EXPECT_EQ(both.pointFields[1].values.size(), 2 * m.pointFields[1].values.size());
 }
@@ -1297,7 +1419,8 @@ TEST(VtuWriter, EmptyMeshAndUnwritablePath) {
     const Mesh back = ReadVtkXml(path, {});
     EXPECT_EQ(back.PointCount(), 0);
     EXPECT_EQ(back.CellCount(), 0);
-    EXPECT_THROW(WriteVtu((TempDir() / "no_such_dir" / "x.vtu").string(), empty), InputError);
+    EXPECT_THROW(WriteVtu((TempDir() / "no_such_dir" / "x.vtu").string(), empty),
+                 InputError);
 }
 
 }  // namespace
