@@ -85,6 +85,10 @@ PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
                           const std::string& where, const ReadOptions& options) {
     PieceArrays arrays;
     std::vector<std::string> available;
+    // <CellData HigherOrderDegrees="name"> may name the degrees array; VTK's writers call
+    // it HigherOrderDegrees.
+    std::string degreesName = piece.child("CellData").attribute(kDegreesName).value();
+    if (degreesName.empty()) degreesName = kDegreesName;
     auto collect = [&](const char* element, std::vector<ArrayDesc>& out, bool cellData) {
         for (pugi::xml_node n : piece.child(element).children("DataArray")) {
             ArrayDesc a = vtkxml::DescribeArray(file, n, where + " <" + element + ">");
@@ -92,7 +96,7 @@ PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
                 arrays.ghost = a;
                 continue;
             }
-            if (cellData && a.name == kDegreesName) {
+            if (cellData && a.name == degreesName) {
                 arrays.degrees = a;
                 continue;
             }
@@ -334,9 +338,8 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
                 cached.perm = &IdentityPermutation(8);
             } else {
                 std::ostringstream os;
-                os << "cell " << c << " has VTK cell type " << type << " with " << nodes
-                   << " nodes, which is not a supported 3-D cell";
-                if (!why.empty()) os << " (" << why << ")";
+                os << "cell " << c << " (VTK cell type " << type << ", " << nodes
+                   << " nodes): " << (why.empty() ? "not a supported 3-D cell" : why);
                 Fail(file, where, os.str());
             }
             cached.type = type;
@@ -347,7 +350,15 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
         HPRAY_CHECK_EQ(static_cast<std::int64_t>(perm.size()), nodes);
         const std::int64_t* src = conn.data() + begin;
         std::int64_t* dst = mesh.connectivity.data() + out;
-        for (std::size_t k = 0; k < perm.size(); ++k) dst[k] = src[perm[k]];
+        for (std::size_t k = 0; k < perm.size(); ++k) {
+            const std::int64_t point = src[perm[k]];
+            if (point < 0 || point >= nPoints)
+                Fail(file, connDesc->where,
+                     "cell " + std::to_string(c) + " refers to point " +
+                         std::to_string(point) + ", outside [0, " +
+                         std::to_string(nPoints) + ")");
+            dst[k] = point;
+        }
         out += nodes;
         mesh.cellOffsets.push_back(out);
         mesh.cellShape.push_back(cached.kind.shape);

@@ -648,7 +648,12 @@ TEST(VtkXmlErrors, OutOfRangeConnectivity) {
     const Encoding e = Enc(Format::Ascii);
     Doc d = SyntheticDoc(e);
     d.connectivity.values[13] = kSynthPoints;
-    ExpectInputError(WriteFile("xml_badconn.vtu", BuildVtu(d, e)), {"20", "outside"});
+    ExpectInputError(
+        WriteFile("xml_badconn.vtu", BuildVtu(d, e)),
+        {"<DataArray Name=\"connectivity\">", "cell 2", "point 20", "outside"});
+    d.connectivity.values[13] = -1;
+    ExpectInputError(WriteFile("xml_badconn.vtu", BuildVtu(d, e)),
+                     {"cell 2", "point -1"});
 }
 
 TEST(VtkXmlErrors, UnknownCellTypeNamesCellAndType) {
@@ -835,6 +840,30 @@ void ExpectVtkLagrangeFixture(const Mesh& m, double tol) {
 TEST(VtkXmlFixtures, LagrangeCellsWrittenByVtk) {
     const Mesh m = ReadVtkXml(TestData("xml_vtk_lagrange.vtu"), {});
     ExpectVtkLagrangeFixture(m, 1e-14);
+}
+
+TEST(VtkXmlFixtures, DegreesArrayNamedByTheCellDataAttribute) {
+    // VTK identifies the degrees by the attribute; rename the array and point at it.
+    std::string bytes = ReadBytes(TestData("xml_vtk_lagrange.vtu"));
+    bytes = Replace(bytes, "HigherOrderDegrees=\"HigherOrderDegrees\"",
+                    "HigherOrderDegrees=\"OrderOfCell\"");
+    bytes = Replace(bytes, "Name=\"HigherOrderDegrees\"", "Name=\"OrderOfCell\"");
+    const Mesh m = ReadVtkXml(WriteFile("xml_degrees_renamed.vtu", bytes), {});
+    ExpectVtkLagrangeFixture(m, 1e-14);
+    EXPECT_EQ(m.FindField("OrderOfCell"), nullptr);
+    // Degrees that contradict the node count are an error naming the cell: set cell 0
+    // (27 nodes) to degree 3. The array is appended raw Int32 after a UInt32 size.
+    bytes = ReadBytes(TestData("xml_vtk_lagrange.vtu"));
+    const std::size_t tag = bytes.find("Name=\"HigherOrderDegrees\"");
+    ASSERT_NE(tag, std::string::npos);
+    const std::size_t off = bytes.find("offset=\"", tag) + 8;
+    const std::size_t data = bytes.find('_', bytes.find("<AppendedData")) + 1;
+    const std::size_t at = data + std::stoul(bytes.substr(off, 20)) + 4;
+    for (int k = 0; k < 3; ++k) {
+        const std::int32_t three = 3;
+        std::memcpy(&bytes[at + 4 * k], &three, 4);
+    }
+    ExpectInputError(WriteFile("xml_degrees_wrong.vtu", bytes), {"cell 0", "type 72"});
 }
 
 TEST(VtkXmlFixtures, BigEndianZlibWrittenByVtk) {
