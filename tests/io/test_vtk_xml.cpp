@@ -44,6 +44,17 @@ fs::path TempDir() {
     return dir;
 }
 
+/// Removes the scratch folder when the test binary ends (gtest owns the environment).
+class TempDirCleanup : public ::testing::Environment {
+  public:
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(TempDir(), ec);
+    }
+};
+const ::testing::Environment* const kCleanup =
+    ::testing::AddGlobalTestEnvironment(new TempDirCleanup);
+
 std::string WriteFile(const std::string& name, const std::string& bytes) {
     const std::string path = (TempDir() / name).string();
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
