@@ -1,0 +1,462 @@
+// Guaranteed field ranges and geometry boxes from Bernstein coefficients (see bounds.h).
+#include "elements/bounds.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <tuple>
+#include <vector>
+
+#include "util/check.h"
+
+namespace hpray {
+namespace {
+
+using LD = long double;
+constexpr double kUnit = std::numeric_limits<double>::epsilon() / 2;
+
+LD Binomial(int n, int k) {
+    LD r = 1;
+    for (int i = 1; i <= k; ++i) r = r * (n - k + i) / i;
+    return r;
+}
+
+LD Factorial(int n) {
+    LD r = 1;
+    for (int i = 2; i <= n; ++i) r *= i;
+    return r;
+}
+
+LD PowInt(LD x, int k) {
+    LD r = 1;
+    for (int i = 0; i < k; ++i) r *= x;
+    return r;
+}
+
+// Inverse of the n x n row-major matrix `a` by Gauss-Jordan with partial pivoting in
+// extended precision; checks the residual so that the stored transform is exact to
+// double rounding.
+std::vector<LD> InvertExtended(const std::vector<LD>& matrix, int n) {
+    std::vector<LD> a = matrix, inv(static_cast<std::size_t>(n) * n, 0.0L);
+    for (int i = 0; i < n; ++i) inv[static_cast<std::size_t>(i) * n + i] = 1.0L;
+    for (int col = 0; col < n; ++col) {
+        int piv = col;
+        for (int r = col + 1; r < n; ++r)
+            if (std::abs(a[static_cast<std::size_t>(r) * n + col]) >
+                std::abs(a[static_cast<std::size_t>(piv) * n + col]))
+                piv = r;
+        HPRAY_CHECK(a[static_cast<std::size_t>(piv) * n + col] != 0.0L);
+        if (piv != col)
+            for (int c = 0; c < n; ++c) {
+                std::swap(a[static_cast<std::size_t>(piv) * n + c],
+                          a[static_cast<std::size_t>(col) * n + c]);
+                std::swap(inv[static_cast<std::size_t>(piv) * n + c],
+                          inv[static_cast<std::size_t>(col) * n + c]);
+            }
+        const LD d = a[static_cast<std::size_t>(col) * n + col];
+        for (int c = 0; c < n; ++c) {
+            a[static_cast<std::size_t>(col) * n + c] /= d;
+            inv[static_cast<std::size_t>(col) * n + c] /= d;
+        }
+        for (int r = 0; r < n; ++r) {
+            if (r == col) continue;
+            const LD f = a[static_cast<std::size_t>(r) * n + col];
+            if (f == 0.0L) continue;
+            for (int c = 0; c < n; ++c) {
+                a[static_cast<std::size_t>(r) * n + c] -= f * a[static_cast<std::size_t>(col) * n + c];
+                inv[static_cast<std::size_t>(r) * n + c] -=
+                    f * inv[static_cast<std::size_t>(col) * n + c];
+            }
+        }
+    }
+    // Residual of matrix * inv - I, relative to the size of the inverse.
+    LD worst = 0.0L, scale = 0.0L;
+    for (LD v : inv) scale = std::max(scale, std::abs(v));
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            LD s = (i == j) ? -1.0L : 0.0L;
+            for (int k = 0; k < n; ++k)
+                s += matrix[static_cast<std::size_t>(i) * n + k] *
+                     inv[static_cast<std::size_t>(k) * n + j];
+            worst = std::max(worst, std::abs(s));
+        }
+    HPRAY_CHECK_MSG(worst <= 1e-16L * std::max(scale, 1.0L),
+                    "Bernstein transform residual " << static_cast<double>(worst));
+    return inv;
+}
+
+struct Matrix {
+    int rows = 0, cols = 0;
+    std::vector<double> v, abs;  // row-major, and the entry-wise absolute values
+};
+
+Matrix ToMatrix(const std::vector<LD>& m, int rows, int cols) {
+    Matrix out;
+    out.rows = rows;
+    out.cols = cols;
+    for (LD x : m) {
+        out.v.push_back(static_cast<double>(x));
+        out.abs.push_back(std::abs(static_cast<double>(x)));
+    }
+    return out;
+}
+
+// Nodal -> Bernstein transform of one (shape, order), Lagrange family.
+struct BernsteinTable {
+    int p = 1;
+    CellShape shape = CellShape::Hex;
+    std::vector<LD> line;  // 1-D transform in extended precision (pyramid set-up)
+    Matrix m1;             // 1-D: bern_k = sum_i m1[k][i] f(i/p)
+    Matrix simplex;        // triangle (wedge) or tet: bern = simplex * nodal
+    std::vector<Matrix> aBern;  // pyramid level k: (p+1) x (q+1), Bernstein of l^(q)_i(a)
+    std::vector<std::vector<double>> cBern, cBernAbs;  // level k: Bernstein in c
+    double gamma = 0.0;         // relative error bound of the computed coefficients
+};
+
+std::vector<LD> LineTransform(int p) {
+    std::vector<LD> b(static_cast<std::size_t>(p + 1) * (p + 1));
+    for (int i = 0; i <= p; ++i) {
+        const LD x = static_cast<LD>(i) / p;
+        for (int k = 0; k <= p; ++k)
+            b[static_cast<std::size_t>(i) * (p + 1) + k] =
+                Binomial(p, k) * PowInt(x, k) * PowInt(1.0L - x, p - k);
+    }
+    return InvertExtended(b, p + 1);
+}
+
+// Simplex Bernstein collocation at the equispaced lattice, lattice order of mesh/cell.h
+// (k outer, then j, then i; dims = 2 for the triangle).
+std::vector<LD> SimplexTransform(int p, int dims) {
+    std::vector<std::array<int, 3>> idx;
+    for (int k = 0; k <= (dims == 3 ? p : 0); ++k)
+        for (int j = 0; j + k <= p; ++j)
+            for (int i = 0; i + j + k <= p; ++i) idx.push_back({i, j, k});
+    const int n = static_cast<int>(idx.size());
+    std::vector<LD> b(static_cast<std::size_t>(n) * n);
+    const LD pf = Factorial(p);
+    for (int r = 0; r < n; ++r) {
+        const LD x = static_cast<LD>(idx[r][0]) / p, y = static_cast<LD>(idx[r][1]) / p,
+                 z = static_cast<LD>(idx[r][2]) / p, w = 1.0L - x - y - z;
+        for (int c = 0; c < n; ++c) {
+            const auto& e = idx[c];
+            const int l = p - e[0] - e[1] - e[2];
+            b[static_cast<std::size_t>(r) * n + c] =
+                pf / (Factorial(e[0]) * Factorial(e[1]) * Factorial(e[2]) * Factorial(l)) *
+                PowInt(x, e[0]) * PowInt(y, e[1]) * PowInt(z, e[2]) * PowInt(w, l);
+        }
+    }
+    return InvertExtended(b, n);
+}
+
+// Degree-p Bernstein coefficients of a polynomial of degree <= p given by its values at
+// j/p, in extended precision.
+std::vector<LD> BernsteinOfValues(const std::vector<LD>& line, const std::vector<LD>& vals) {
+    const int n = static_cast<int>(vals.size());
+    std::vector<LD> out(n, 0.0L);
+    for (int k = 0; k < n; ++k)
+        for (int i = 0; i < n; ++i) out[k] += line[static_cast<std::size_t>(k) * n + i] * vals[i];
+    return out;
+}
+
+LD Silvester(int p, int m, LD x) {
+    LD s = 1.0L;
+    for (int q = 0; q < m; ++q) s *= (p * x - q) / (q + 1);
+    return s;
+}
+
+std::unique_ptr<BernsteinTable> BuildTable(CellShape shape, int p) {
+    auto t = std::make_unique<BernsteinTable>();
+    t->p = p;
+    t->shape = shape;
+    t->line = LineTransform(p);
+    t->m1 = ToMatrix(t->line, p + 1, p + 1);
+    const int n = NodeCount(shape, p);
+    double length = 0;  // longest chain of floating-point sums a coefficient goes through
+    switch (shape) {
+        case CellShape::Hex: length = 3 * (p + 1); break;
+        case CellShape::Tet:
+            t->simplex = ToMatrix(SimplexTransform(p, 3), n, n);
+            length = n;
+            break;
+        case CellShape::Wedge: {
+            const int n2 = (p + 1) * (p + 2) / 2;
+            t->simplex = ToMatrix(SimplexTransform(p, 2), n2, n2);
+            length = n2 + (p + 1);
+            break;
+        }
+        case CellShape::Pyramid: {
+            for (int k = 0; k <= p; ++k) {
+                const int q = p - k;
+                std::vector<LD> a(static_cast<std::size_t>(p + 1) * (q + 1));
+                for (int i = 0; i <= q; ++i) {
+                    std::vector<LD> vals(p + 1);
+                    for (int j = 0; j <= p; ++j) {
+                        const LD x = static_cast<LD>(j) / p;
+                        // l^(q)_i(x) = S^q_i(x) S^q_{q-i}(1 - x); q = 0: the constant 1.
+                        vals[j] = q == 0 ? 1.0L : Silvester(q, i, x) * Silvester(q, q - i, 1 - x);
+                    }
+                    const auto bern = BernsteinOfValues(t->line, vals);
+                    for (int r = 0; r <= p; ++r) a[static_cast<std::size_t>(r) * (q + 1) + i] = bern[r];
+                }
+                t->aBern.push_back(ToMatrix(a, p + 1, q + 1));
+                std::vector<LD> vals(p + 1);
+                for (int j = 0; j <= p; ++j) {
+                    const LD c = static_cast<LD>(j) / p;
+                    const LD w = q == 0 ? 1.0L : PowInt((1.0L - c) * p / q, q);
+                    vals[j] = w * Silvester(p, k, c);
+                }
+                const auto bern = BernsteinOfValues(t->line, vals);
+                std::vector<double> cb, cba;
+                for (LD v : bern) {
+                    cb.push_back(static_cast<double>(v));
+                    cba.push_back(std::abs(static_cast<double>(v)));
+                }
+                t->cBern.push_back(cb);
+                t->cBernAbs.push_back(cba);
+            }
+            length = n + 3 * (p + 1);
+            break;
+        }
+    }
+    // n u per length-n sum, the stored transforms' rounding, and a factor 4 of slack.
+    t->gamma = 4.0 * (length + 16.0) * kUnit;
+    return t;
+}
+
+const BernsteinTable& GetTable(CellShape shape, int order) {
+    static std::mutex mutex;
+    static std::map<std::pair<int, int>, std::unique_ptr<BernsteinTable>> cache;
+    std::lock_guard<std::mutex> lock(mutex);
+    auto key = std::make_pair(static_cast<int>(shape), order);
+    auto it = cache.find(key);
+    if (it == cache.end()) it = cache.emplace(key, BuildTable(shape, order)).first;
+    return *it->second;
+}
+
+// y = M x and ay = |M| ax along one axis of a 3-D array of extent n1 per axis.
+void ApplyAxis(const Matrix& m, int n1, int axis, std::vector<double>& x,
+               std::vector<double>& ax) {
+    const int stride = axis == 0 ? 1 : (axis == 1 ? n1 : n1 * n1);
+    const int outerStride = axis == 2 ? n1 : n1 * n1;  // the remaining two axes
+    const int innerStride = axis == 0 ? n1 : 1;
+    double in[kMaxOrder + 1], ain[kMaxOrder + 1];
+    for (int o = 0; o < n1; ++o)
+        for (int i = 0; i < n1; ++i) {
+            const int base = o * outerStride + i * innerStride;
+            for (int l = 0; l < n1; ++l) {
+                in[l] = x[base + l * stride];
+                ain[l] = ax[base + l * stride];
+            }
+            for (int r = 0; r < n1; ++r) {
+                double s = 0.0, as = 0.0;
+                for (int l = 0; l < n1; ++l) {
+                    s += m.v[r * n1 + l] * in[l];
+                    as += m.abs[r * n1 + l] * ain[l];
+                }
+                x[base + r * stride] = s;
+                ax[base + r * stride] = as;
+            }
+        }
+}
+
+// Bernstein coefficients (and |T| |f|) of order-p Lagrange nodal values of a shape.
+// `af` bounds |f| entry-wise (it may be larger, to carry the input's own error bound).
+void Bernstein(const BernsteinTable& t, const BasisTable& basis, const std::vector<double>& f,
+               const std::vector<double>& af, std::vector<double>& out,
+               std::vector<double>& outAbs) {
+    const int p = t.p, n1 = p + 1;
+    const int n = static_cast<int>(f.size());
+    switch (t.shape) {
+        case CellShape::Hex:
+            out = f;
+            outAbs = af;
+            for (int axis = 0; axis < 3; ++axis) ApplyAxis(t.m1, n1, axis, out, outAbs);
+            return;
+        case CellShape::Tet:
+            out.assign(n, 0.0);
+            outAbs.assign(n, 0.0);
+            for (int r = 0; r < n; ++r) {
+                double s = 0.0, as = 0.0;
+                const double* row = t.simplex.v.data() + static_cast<std::size_t>(r) * n;
+                const double* arow = t.simplex.abs.data() + static_cast<std::size_t>(r) * n;
+                for (int c = 0; c < n; ++c) {
+                    s += row[c] * f[c];
+                    as += arow[c] * af[c];
+                }
+                out[r] = s;
+                outAbs[r] = as;
+            }
+            return;
+        case CellShape::Wedge: {
+            const int n2 = t.simplex.rows;
+            std::vector<double> tmp(n), atmp(n);
+            for (int k = 0; k < n1; ++k)
+                for (int r = 0; r < n2; ++r) {
+                    double s = 0.0, as = 0.0;
+                    for (int c = 0; c < n2; ++c) {
+                        s += t.simplex.v[r * n2 + c] * f[k * n2 + c];
+                        as += t.simplex.abs[r * n2 + c] * af[k * n2 + c];
+                    }
+                    tmp[k * n2 + r] = s;
+                    atmp[k * n2 + r] = as;
+                }
+            out.assign(n, 0.0);
+            outAbs.assign(n, 0.0);
+            for (int r = 0; r < n2; ++r)
+                for (int k = 0; k < n1; ++k) {
+                    double s = 0.0, as = 0.0;
+                    for (int l = 0; l < n1; ++l) {
+                        s += t.m1.v[k * n1 + l] * tmp[l * n2 + r];
+                        as += t.m1.abs[k * n1 + l] * atmp[l * n2 + r];
+                    }
+                    out[k * n2 + r] = s;
+                    outAbs[k * n2 + r] = as;
+                }
+            return;
+        }
+        case CellShape::Pyramid: {
+            // alpha = C f (coefficients of the level functions psi), block-triangular C.
+            std::vector<double> alpha(n), aAlpha(n);
+            int l = 0;
+            for (int k = 0; k <= p; ++k)
+                for (; l < basis.levelEnd[k]; ++l) {
+                    const double* row = basis.psiToNodal.data() + static_cast<std::size_t>(l) * n;
+                    double s = 0.0, as = 0.0;
+                    for (int m = 0; m < basis.levelEnd[k]; ++m) {
+                        s += row[m] * f[m];
+                        as += std::abs(row[m]) * af[m];
+                    }
+                    alpha[l] = s;
+                    aAlpha[l] = as;
+                }
+            out.assign(n1 * n1 * n1, 0.0);
+            outAbs.assign(n1 * n1 * n1, 0.0);
+            std::vector<double> t1, at1, t2(n1 * n1), at2(n1 * n1);
+            int start = 0;
+            for (int k = 0; k <= p; ++k) {
+                const int q = p - k, nq = q + 1;
+                const Matrix& a = t.aBern[k];
+                // t1[j][r] = sum_i a[r][i] alpha[k][j][i]
+                t1.assign(nq * n1, 0.0);
+                at1.assign(nq * n1, 0.0);
+                for (int j = 0; j < nq; ++j)
+                    for (int r = 0; r < n1; ++r) {
+                        double s = 0.0, as = 0.0;
+                        for (int i = 0; i < nq; ++i) {
+                            s += a.v[r * nq + i] * alpha[start + j * nq + i];
+                            as += a.abs[r * nq + i] * aAlpha[start + j * nq + i];
+                        }
+                        t1[j * n1 + r] = s;
+                        at1[j * n1 + r] = as;
+                    }
+                // t2[b][r] = sum_j a[b][j] t1[j][r]
+                for (int b = 0; b < n1; ++b)
+                    for (int r = 0; r < n1; ++r) {
+                        double s = 0.0, as = 0.0;
+                        for (int j = 0; j < nq; ++j) {
+                            s += a.v[b * nq + j] * t1[j * n1 + r];
+                            as += a.abs[b * nq + j] * at1[j * n1 + r];
+                        }
+                        t2[b * n1 + r] = s;
+                        at2[b * n1 + r] = as;
+                    }
+                for (int c = 0; c < n1; ++c) {
+                    const double w = t.cBern[k][c], aw = t.cBernAbs[k][c];
+                    if (w == 0.0) continue;
+                    for (int i = 0; i < n1 * n1; ++i) {
+                        out[c * n1 * n1 + i] += w * t2[i];
+                        outAbs[c * n1 * n1 + i] += aw * at2[i];
+                    }
+                }
+                start += nq * nq;
+            }
+            return;
+        }
+    }
+}
+
+Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
+    // Constants are reproduced exactly by both bases, so transform f - shift and add the
+    // shift back: the rounding margin then scales with the variation of the data, not
+    // with its offset (fields like 1e6 + O(1)).
+    double nodalLo = std::numeric_limits<double>::infinity(), nodalHi = -nodalLo;
+    for (int m = 0; m < basis.nodeCount; ++m) {
+        nodalLo = std::min(nodalLo, coeffsIn[m * stride]);
+        nodalHi = std::max(nodalHi, coeffsIn[m * stride]);
+    }
+    const double shift = 0.5 * nodalLo + 0.5 * nodalHi;
+    std::vector<double> shifted(basis.nodeCount);
+    for (int m = 0; m < basis.nodeCount; ++m) shifted[m] = coeffsIn[m * stride] - shift;
+    // The subtraction rounds: |error| <= u |f - shift| per entry, carried below.
+    const double* coeffs = shifted.data();
+    stride = 1;
+    const BasisTable* full = &basis;
+    std::vector<double> f, af;
+    double gammaInput = 0.0;
+    if (basis.family == CellFamily::Serendipity) {
+        // Exact expansion to the order-2 Lagrange space that contains the serendipity
+        // space; the dyadic corrections are exact, only the sums round: |error| <=
+        // gammaInput * sum |c f|, which the absolute path carries.
+        full = basis.full;
+        f.assign(full->nodeCount, 0.0);
+        af.assign(full->nodeCount, 0.0);
+        for (int m = 0; m < basis.nodeCount; ++m) {
+            f[basis.fullIndex[m]] = coeffs[m * stride];
+            af[basis.fullIndex[m]] = std::abs(coeffs[m * stride]);
+        }
+        for (std::size_t r = 0; r < basis.dropped.size(); ++r) {
+            double s = 0.0, as = 0.0;
+            for (int m = 0; m < basis.nodeCount; ++m) {
+                const double c = basis.correction[r * basis.nodeCount + m];
+                s += c * coeffs[m * stride];
+                as += std::abs(c * coeffs[m * stride]);
+            }
+            f[basis.dropped[r]] = s;
+            af[basis.dropped[r]] = as;
+        }
+        gammaInput = 2.0 * (basis.nodeCount + 2) * kUnit;
+    } else {
+        f.resize(basis.nodeCount);
+        af.resize(basis.nodeCount);
+        for (int m = 0; m < basis.nodeCount; ++m) {
+            f[m] = coeffs[m * stride];
+            af[m] = std::abs(f[m]);
+        }
+    }
+    const BernsteinTable& t = GetTable(full->shape, full->order);
+    std::vector<double> b, ab;
+    Bernstein(t, *full, f, af, b, ab);
+    const double gamma = t.gamma + gammaInput + 2.0 * kUnit;
+    const double inf = std::numeric_limits<double>::infinity();
+    Interval out{inf, -inf};
+    for (std::size_t k = 0; k < b.size(); ++k) {
+        const double margin = gamma * ab[k];
+        out.lo = std::min(out.lo, b[k] - margin);
+        out.hi = std::max(out.hi, b[k] + margin);
+    }
+    // Adding the shift rounds once more (half an ulp): step outward twice.
+    out.lo = std::nextafter(std::nextafter(out.lo + shift, -inf), -inf);
+    out.hi = std::nextafter(std::nextafter(out.hi + shift, inf), inf);
+    return out;
+}
+
+}  // namespace
+
+Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride) {
+    return Bounds(basis, coeffs, stride);
+}
+
+Box3 GeometryBox(const BasisTable& basis, const double* nodeXyz) {
+    Box3 box;
+    for (int d = 0; d < 3; ++d) {
+        const Interval i = Bounds(basis, nodeXyz + d, 3);
+        box.lo[d] = i.lo;
+        box.hi[d] = i.hi;
+    }
+    return box;
+}
+
+}  // namespace hpray

@@ -1,0 +1,47 @@
+// Guaranteed per-cell bounds: the range of a field and the box of the geometry, from
+// Bernstein-Bezier coefficients (convex hull property).
+//
+// Method by shape (nodal values -> Bernstein coefficients -> min/max):
+//   Hex      tensor product of the 1-D equispaced-Lagrange -> Bernstein transform.
+//   Tet      simplex Bernstein polynomials of degree p (dense transform).
+//   Wedge    triangle Bernstein (degree p) x 1-D Bernstein (degree p).
+//   Pyramid  every function of the Bergot space is, in the collapsed coordinates
+//            (a, b, c) in [0,1]^3 of basis.h, a polynomial of degree <= p in each of a, b,
+//            c (a^i b^j (1-c)^max(i,j) c^k with i, j <= p and max(i,j) + k <= p). The
+//            collapse map is onto the pyramid, so the range of f over the pyramid is the
+//            range of a Q_p polynomial over the unit cube, bounded by its tensor Bernstein
+//            coefficients. They are computed exactly from the level functions psi of
+//            basis.h, each a product of 1-D polynomials of degree <= p in a, b and c.
+//   Serendipity  the space is contained in the order-2 Lagrange space of the shape: the
+//            dropped nodal values are interpolated exactly, then as above.
+// Transforms are computed once in extended precision. Rounding is covered rigorously:
+// each coefficient is widened by gamma * (|T| |f|)_k, with gamma bounding the relative
+// error of the floating-point sums (n u per length-n sum) and of the stored transforms.
+#pragma once
+
+#include <array>
+
+#include "elements/basis.h"
+
+namespace hpray {
+
+struct Interval {
+    double lo = 0.0;
+    double hi = 0.0;
+};
+
+struct Box3 {
+    std::array<double, 3> lo{};
+    std::array<double, 3> hi{};
+};
+
+/// An interval containing f(x) for every x of the closed reference cell, where f is the
+/// interpolant of the nodal coefficients coeffs[m * stride], m < basis.nodeCount (internal
+/// order). Allocates a few small vectors per call (meant for once per cell at load).
+Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride = 1);
+
+/// An axis-aligned box containing the image of the whole reference cell; `nodeXyz` holds
+/// x y z interleaved per node, internal order.
+Box3 GeometryBox(const BasisTable& basis, const double* nodeXyz);
+
+}  // namespace hpray
