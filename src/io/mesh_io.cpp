@@ -27,11 +27,12 @@ Mesh ReadMesh(const std::string& path, const ReadOptions& options) {
     if (std::filesystem::is_directory(path, ec))
         throw InputError(path, "", "is a directory, not a mesh file");
     const std::string ext = LowerExtension(path);
-    if (ext == ".vtu" || ext == ".pvtu" || ext == ".vts") return ReadVtkXml(path, options);
+    if (ext == ".vtu" || ext == ".pvtu" || ext == ".vts" || ext == ".pvts")
+        return ReadVtkXml(path, options);
     if (ext == ".vtk") return ReadVtkLegacy(path, options);
     if (ext == ".msh") return ReadGmsh(path, options);
     throw InputError(path, "", "unknown mesh format '" + ext +
-                                   "' (expected .vtu, .pvtu, .vts, .vtk, .msh or builtin:NAME)");
+                                   "' (expected .vtu, .pvtu, .vts, .pvts, .vtk, .msh or builtin:NAME)");
 }
 
 }  // namespace hpray
