@@ -121,8 +121,9 @@ inline void Collapse(const double ref[3], double& a, double& b, double& u) {
     }
 }
 
-// The level functions psi of basis.h, in node order; derivatives in (r, s, t).
-void EvalPyramidPsi(int p, const double ref[3], double* psi, double* dPsi) {
+// The level functions psi of basis.h, in node order; derivatives in (r, s, t) as three
+// separate arrays dPsi[d * stride + m] (null: values only).
+void EvalPyramidPsi(int p, const double ref[3], double* psi, double* dPsi, int stride) {
     double a, b, u;
     Collapse(ref, a, b, u);
     double g[kMaxOrder + 1], dg[kMaxOrder + 1];
@@ -133,8 +134,8 @@ void EvalPyramidPsi(int p, const double ref[3], double* psi, double* dPsi) {
         if (q == 0) {  // apex
             psi[m] = g[k];
             if (dPsi) {
-                dPsi[3 * m] = dPsi[3 * m + 1] = 0.0;
-                dPsi[3 * m + 2] = dg[k];
+                dPsi[m] = dPsi[stride + m] = 0.0;
+                dPsi[2 * stride + m] = dg[k];
             }
             ++m;
             continue;
@@ -156,38 +157,61 @@ void EvalPyramidPsi(int p, const double ref[3], double* psi, double* dPsi) {
                 if (!dPsi) continue;
                 const double ra = dla[i] * lb[j] * fg;
                 const double sb = la[i] * dlb[j] * fg;
-                dPsi[3 * m] = ra;
-                dPsi[3 * m + 1] = sb;
-                dPsi[3 * m + 2] = ra * (a - 0.5) + sb * (b - 0.5) + ll * tLevel;
+                dPsi[m] = ra;
+                dPsi[stride + m] = sb;
+                dPsi[2 * stride + m] = ra * (a - 0.5) + sb * (b - 0.5) + ll * tLevel;
             }
     }
 }
 
 void EvalPyramid(const BasisTable& basis, const double ref[3], double* values,
                  double* dRef) {
-    const int n = basis.nodeCount;
-    double psi[kMaxPyramidNodes];
-    double dPsi[3 * kMaxPyramidNodes];
-    EvalPyramidPsi(basis.order, ref, psi, dRef ? dPsi : nullptr);
-    std::fill(values, values + n, 0.0);
-    if (dRef) std::fill(dRef, dRef + 3 * n, 0.0);
-    const int p = basis.order;
-    int l = 0;
-    for (int k = 0; k <= p; ++k) {
-        const int end = basis.levelEnd[k];
-        for (; l < end; ++l) {
-            const double* row = basis.psiToNodal.data() + static_cast<std::size_t>(l) * n;
-            const double v = psi[l];
-            for (int m = 0; m < end; ++m) values[m] += row[m] * v;
-            if (!dRef) continue;
-            const double d0 = dPsi[3 * l], d1 = dPsi[3 * l + 1], d2 = dPsi[3 * l + 2];
-            for (int m = 0; m < end; ++m) {
-                dRef[3 * m] += row[m] * d0;
-                dRef[3 * m + 1] += row[m] * d1;
-                dRef[3 * m + 2] += row[m] * d2;
+    const int n = basis.nodeCount, p = basis.order;
+    // Rows: value, d/dr, d/ds, d/dt; solved in place from psi to the nodal functions.
+    double work[4 * kMaxPyramidNodes];
+    const int rows = dRef ? 4 : 1;
+    EvalPyramidPsi(p, ref, work, dRef ? work + kMaxPyramidNodes : nullptr, kMaxPyramidNodes);
+    // V^T N = psi: N_kl = psi_kl - sum_{kn > kl} scale (E (x) E)^T N_kn, from the top level
+    // down (the apex row block is zero below its own level).
+    double tmp[(kMaxOrder + 1) * (kMaxOrder + 1)];
+    for (int kl = p - 1; kl >= 0; --kl) {
+        const int ql = p - kl, nl = ql + 1;
+        const int offL = kl == 0 ? 0 : basis.levelEnd[kl - 1];
+        for (int kn = kl + 1; kn < p; ++kn) {
+            const int qn = p - kn, nn = qn + 1;
+            const int offN = basis.levelEnd[kn - 1];
+            const int pair = kn * (p + 1) + kl;
+            const double* e = basis.coupling.data() + basis.couplingOffset[pair];
+            const double scale = basis.couplingScale[pair];
+            for (int row = 0; row < rows; ++row) {
+                double* w = work + row * kMaxPyramidNodes;
+                const double* nN = w + offN;  // N at level kn, [jn][in]
+                // tmp[in][jl] = sum_jn N[jn][in] E[jn][jl]
+                for (int in = 0; in < nn; ++in)
+                    for (int jl = 0; jl < nl; ++jl) tmp[in * nl + jl] = 0.0;
+                for (int jn = 0; jn < nn; ++jn)
+                    for (int in = 0; in < nn; ++in) {
+                        const double v = nN[jn * nn + in];
+                        const double* er = e + jn * nl;
+                        double* tr = tmp + in * nl;
+                        for (int jl = 0; jl < nl; ++jl) tr[jl] += v * er[jl];
+                    }
+                // N_kl[jl][il] -= scale sum_in E[in][il] tmp[in][jl]
+                double* nL = w + offL;
+                for (int jl = 0; jl < nl; ++jl)
+                    for (int in = 0; in < nn; ++in) {
+                        const double t = scale * tmp[in * nl + jl];
+                        const double* er = e + in * nl;
+                        double* lr = nL + jl * nl;
+                        for (int il = 0; il < nl; ++il) lr[il] -= t * er[il];
+                    }
             }
         }
     }
+    std::copy(work, work + n, values);
+    if (dRef)
+        for (int m = 0; m < n; ++m)
+            for (int d = 0; d < 3; ++d) dRef[3 * m + d] = work[(d + 1) * kMaxPyramidNodes + m];
 }
 
 void EvalLagrange(const BasisTable& basis, const double ref[3], double* values,
@@ -265,6 +289,24 @@ void BuildPyramid(BasisTable& t) {
             for (int m = 0; m < below; ++m) cr[m] -= v * cl[m];
         }
     }
+    // The Kronecker factors of V's blocks, for evaluation (see basis.h).
+    t.couplingOffset.assign((p + 1) * (p + 1), -1);
+    t.couplingScale.assign((p + 1) * (p + 1), 0.0);
+    for (int kn = 1; kn < p; ++kn)
+        for (int kl = 0; kl < kn; ++kl) {
+            const int qn = p - kn, ql = p - kl, pair = kn * (p + 1) + kl;
+            long double g[kMaxOrder + 1], dg[kMaxOrder + 1];
+            Silvester<long double>(p, static_cast<long double>(kn) / p, g, dg);
+            long double w = 1.0L;
+            for (int i = 0; i < ql; ++i) w *= static_cast<long double>(qn) / ql;
+            t.couplingScale[pair] = static_cast<double>(w * g[kl]);
+            t.couplingOffset[pair] = static_cast<int>(t.coupling.size());
+            for (int in = 0; in <= qn; ++in) {
+                long double l[kMaxOrder + 1], dl[kMaxOrder + 1];
+                Lagrange1D<long double>(ql, static_cast<long double>(in) / qn, l, dl);
+                for (int il = 0; il <= ql; ++il) t.coupling.push_back(static_cast<double>(l[il]));
+            }
+        }
     // N = psi C: N_m = sum_l psi_l C[l][m]. C[l][m] != 0 only for level(m) <= level(l).
     t.psiToNodal.resize(c.size());
     for (std::size_t i = 0; i < c.size(); ++i) t.psiToNodal[i] = static_cast<double>(c[i]);

@@ -77,9 +77,16 @@ struct BasisTable {
     std::vector<std::array<double, 3>> refNodes;
 
     // Pyramid Lagrange: N_m = sum_l psiToNodal[l * n + m] psi_l; psi_l with l on level k is
-    // only combined into nodes m < levelEnd[k] (block-triangular structure).
+    // only combined into nodes m < levelEnd[k] (block-triangular structure). Evaluation
+    // instead solves V^T N = psi level by level from the apex down, using that the block
+    // of V between node level kn and function level kl < kn is
+    //   couplingScale[kn * (p+1) + kl] * (E (x) E),  E[in][il] = l^(ql)_il(in / qn),
+    // with E stored row-major at coupling[couplingOffset[kn * (p+1) + kl]].
     std::vector<double> psiToNodal;
     std::vector<int> levelEnd;
+    std::vector<double> coupling;
+    std::vector<int> couplingOffset;
+    std::vector<double> couplingScale;
 
     // Serendipity: the order-2 Lagrange table of the shape and, for every serendipity node
     // m, fullIndex[m] (its index in the full lattice); dropped[d] is a full-lattice index and
