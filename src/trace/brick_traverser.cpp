@@ -1,0 +1,1204 @@
+// Brick traversal: topology (coincident points merged, faces matched by merged corners,
+// canonical face representations), the Embree scene over boundary faces, and the exact
+// cell-to-cell walk. See brick_traverser.h for the design and trace/ray_frame.h for the
+// watertightness rule.
+#include "trace/brick_traverser.h"
+
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <sstream>
+
+#include "trace/bilinear_patch.h"
+#include "trace/face_map.h"
+#include "trace/ray_frame.h"
+#include "util/check.h"
+#include "util/error.h"
+
+namespace hpray {
+namespace {
+
+using trace::CrossTriangle;
+using trace::FaceBasis;
+using trace::RayFrame;
+using trace::ShearedPoint;
+using trace::TriangleCrossing;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Corners (lattice position in units of the order p, internal node frame of mesh/cell.h)
+// and faces (corner cycles, counter-clockwise seen from outside a positively oriented
+// cell) of each shape.
+struct ShapeTable {
+    int corners;
+    int lattice[8][3];
+    int faces;
+    int faceSize[6];
+    int face[6][4];
+};
+const ShapeTable kShapes[kNumCellShapes] = {
+    {4, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, 4, {3, 3, 3, 3},
+     {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}},
+    {8,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}},
+     6, {4, 4, 4, 4, 4, 4},
+     {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}}},
+    {6, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}}, 5, {3, 3, 4, 4, 4},
+     {{0, 2, 1}, {3, 4, 5}, {0, 1, 4, 3}, {0, 3, 5, 2}, {1, 2, 5, 4}}},
+    {5, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}}, 5, {4, 3, 3, 3, 3},
+     {{0, 2, 3, 1}, {0, 1, 4}, {1, 3, 4}, {3, 2, 4}, {2, 0, 4}}},
+};
+
+enum class FaceKind : std::uint8_t {
+    Triangle,      // planar triangle: the crossing of its plane
+    PlanarQuad,    // planar quadrilateral: two triangles of one plane
+    BilinearQuad,  // non-planar straight quadrilateral: Reshetov's closed form
+    Curved,        // high-order face: Newton on its face map
+    Degenerate     // repeated corners: never crossed
+};
+
+// One face in its canonical representation: corners ordered by position (see
+// Canonicalize). cell[0] is the cell the canonical normal (B - A) x (C - A) points out of.
+struct FaceRec {
+    std::int32_t v[4] = {-1, -1, -1, -1};
+    std::int32_t cell[2] = {-1, -1};
+    std::int32_t curved = -1;
+    FaceKind kind = FaceKind::Triangle;
+};
+
+struct CurvedRec {
+    std::int64_t nodeStart = 0;  // into curvedNodes: the tessellation lattice, j-major
+    std::uint8_t order = 1;
+    FaceBasis basis = FaceBasis::Triangle;
+    double size = 0;             // diagonal of the node box
+    double box[2][3] = {{0, 0, 0}, {0, 0, 0}};  // node box, padded
+};
+
+// A crossing of the ray with a face. side +1: along the face's canonical normal, i.e.
+// out of face.cell[0] into face.cell[1]; -1: the reverse.
+struct Crossing {
+    double t;
+    std::int32_t face;
+    std::int32_t side;
+};
+
+struct Scratch {
+    std::vector<Crossing> boundary;
+    std::vector<Crossing> cell;
+    std::vector<ShearedPoint> sheared;
+    std::vector<double> nodes;
+};
+thread_local Scratch tScratch;
+
+double Now() {
+    using Clock = std::chrono::steady_clock;
+    return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+}
+
+inline double Dist2(const double* a, const double* b) {
+    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    return dx * dx + dy * dy + dz * dz;
+}
+
+// Union-find with the smallest index as the root, so merging is independent of order.
+std::int64_t Find(std::vector<std::int64_t>& parent, std::int64_t i) {
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    return i;
+}
+void Union(std::vector<std::int64_t>& parent, std::int64_t a, std::int64_t b) {
+    a = Find(parent, a);
+    b = Find(parent, b);
+    if (a == b) return;
+    if (a < b) parent[b] = a;
+    else parent[a] = b;
+}
+
+// Merges points closer than tol (world units; 0: bitwise equal) into one id; ids are
+// numbered in order of the first point of each group, the representative position is
+// that first point's.
+void MergePoints(const std::vector<double>& points, double tol, double diag,
+                 std::vector<std::int32_t>& mergedOf, std::vector<double>& xyz) {
+    const std::int64_t n = static_cast<std::int64_t>(points.size() / 3);
+    double lo[3] = {kInf, kInf, kInf};
+    for (std::int64_t i = 0; i < n; ++i)
+        for (int d = 0; d < 3; ++d) lo[d] = std::min(lo[d], points[3 * i + d]);
+    // Grid cells much wider than tol: a point needs its neighbour cells only when it lies
+    // within tol of its cell's side, which is rare.
+    const double cellSize = diag > 0 ? std::max(16 * tol, 1e-9 * diag) : 1.0;
+    std::vector<std::array<std::int64_t, 3>> key(n);
+    for (std::int64_t i = 0; i < n; ++i)
+        for (int d = 0; d < 3; ++d)
+            key[i][d] = static_cast<std::int64_t>(std::floor((points[3 * i + d] - lo[d]) / cellSize));
+    std::vector<std::int64_t> order(n);
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
+        return key[a] != key[b] ? key[a] < key[b] : a < b;
+    });
+    std::vector<std::int64_t> parent(n);
+    std::iota(parent.begin(), parent.end(), 0);
+    const double tol2 = tol * tol;
+    auto close = [&](std::int64_t a, std::int64_t b) {
+        return tol > 0 ? Dist2(&points[3 * a], &points[3 * b]) <= tol2
+                       : (points[3 * a] == points[3 * b] && points[3 * a + 1] == points[3 * b + 1] &&
+                          points[3 * a + 2] == points[3 * b + 2]);
+    };
+    auto runOf = [&](const std::array<std::int64_t, 3>& k) {
+        auto first = std::lower_bound(order.begin(), order.end(), k,
+                                      [&](std::int64_t a, const std::array<std::int64_t, 3>& kk) {
+                                          return key[a] < kk;
+                                      });
+        auto last = first;
+        while (last != order.end() && key[*last] == k) ++last;
+        return std::make_pair(first, last);
+    };
+    for (std::int64_t r = 0; r < n;) {
+        std::int64_t e = r + 1;
+        while (e < n && key[order[e]] == key[order[r]]) ++e;
+        for (std::int64_t a = r; a < e; ++a)
+            for (std::int64_t b = a + 1; b < e; ++b)
+                if (close(order[a], order[b])) Union(parent, order[a], order[b]);
+        r = e;
+    }
+    if (tol > 0) {
+        for (std::int64_t i = 0; i < n; ++i) {
+            int lowSide[3], highSide[3];
+            bool any = false;
+            for (int d = 0; d < 3; ++d) {
+                const double x = points[3 * i + d] - lo[d] - key[i][d] * cellSize;
+                lowSide[d] = x <= tol;
+                highSide[d] = x >= cellSize - tol;
+                any = any || lowSide[d] || highSide[d];
+            }
+            if (!any) continue;
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int off[3] = {dx, dy, dz};
+                        bool ok = !(dx == 0 && dy == 0 && dz == 0);
+                        for (int d = 0; d < 3 && ok; ++d)
+                            ok = off[d] == 0 || (off[d] < 0 ? lowSide[d] : highSide[d]);
+                        if (!ok) continue;
+                        std::array<std::int64_t, 3> k = {key[i][0] + dx, key[i][1] + dy,
+                                                         key[i][2] + dz};
+                        auto [first, last] = runOf(k);
+                        for (auto it = first; it != last; ++it)
+                            if (close(i, *it)) Union(parent, i, *it);
+                    }
+        }
+    }
+    mergedOf.assign(n, -1);
+    xyz.clear();
+    std::int32_t next = 0;
+    for (std::int64_t i = 0; i < n; ++i) {
+        const std::int64_t root = Find(parent, i);
+        if (root == i) {
+            mergedOf[i] = next++;
+            for (int d = 0; d < 3; ++d) xyz.push_back(points[3 * i + d]);
+        } else {
+            mergedOf[i] = mergedOf[root];
+        }
+    }
+}
+
+// Canonical order of a face given as a corner cycle of merged ids, by corner POSITION
+// (lexicographic x, y, z; merged points have distinct positions), so that it does not
+// depend on how points are numbered: triangles ascending, quads from the smallest corner
+// towards its smaller neighbour. Returns whether the canonical cycle keeps the given
+// orientation.
+template <typename Less>
+bool Canonicalize(const std::int32_t* ids, int n, std::int32_t* out, Less less) {
+    if (n == 3) {
+        int perm[3] = {0, 1, 2};
+        for (int k = 1; k < 3; ++k)
+            for (int q = k; q > 0 && less(ids[perm[q]], ids[perm[q - 1]]); --q)
+                std::swap(perm[q], perm[q - 1]);
+        for (int k = 0; k < 3; ++k) out[k] = ids[perm[k]];
+        // Even permutations of (0 1 2) are the rotations.
+        return (perm[1] - perm[0] + 3) % 3 == 1;
+    }
+    int m = 0;
+    for (int k = 1; k < 4; ++k)
+        if (less(ids[k], ids[m])) m = k;
+    const bool forward = less(ids[(m + 1) % 4], ids[(m + 3) % 4]);
+    for (int k = 0; k < 4; ++k) out[k] = ids[forward ? (m + k) % 4 : (m + 4 - k) % 4];
+    return forward;
+}
+
+}  // namespace
+
+struct BrickTraverser::Impl {
+    Brick brick;
+    TraceOptions options;
+    TraverserStats stats;
+
+    std::vector<double> xyz;  // merged points, then private points (serendipity centres)
+    std::vector<FaceRec> faces;
+    std::vector<std::int64_t> cellFaceOffset;
+    std::vector<std::int32_t> cellFaces;
+    std::vector<CurvedRec> curved;
+    std::vector<std::int32_t> curvedNodes;
+    std::vector<std::int32_t> boundaryFaces;
+    std::vector<float> boundaryBoxes;  // 6 per boundary face: lower, upper
+    Box3 queryBox{};                   // mesh bounds, padded for the float query ray
+    double queryPad = 0;
+
+    RTCDevice device = nullptr;
+    RTCScene scene = nullptr;
+    std::atomic<std::int64_t> embreeBytes{0};
+
+    mutable std::atomic<std::int64_t> newtonFailures{0};
+    mutable std::atomic<std::int64_t> walkRepairs{0};
+    mutable std::atomic<std::int64_t> walkFailures{0};
+
+    ~Impl() {
+        if (scene) rtcReleaseScene(scene);
+        if (device) rtcReleaseDevice(device);
+    }
+
+    void Build();
+    void BuildTopology();
+    void BuildScene();
+
+    const double* P(std::int32_t id) const { return &xyz[3 * static_cast<std::size_t>(id)]; }
+
+    // Appends every crossing of the ray line with face f (any t).
+    void AppendCrossings(std::int32_t f, const RayFrame& frame, std::vector<Crossing>& out) const;
+    void AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
+                               std::vector<Crossing>& out) const;
+    // The crossing by which the ray leaves cell c after entering it by the crossing of
+    // face entryFace at (unclamped) entryT; tIn = the walk's t there (>= entryT).
+    bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
+                  const RayFrame& frame, Crossing& exit) const;
+    bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame, Crossing& exit) const;
+    void Tessellation(std::int32_t f, std::vector<std::array<std::int32_t, 3>>& tris) const;
+    bool Leaves(const Crossing& x, std::int64_t c) const {
+        return faces[x.face].cell[x.side > 0 ? 0 : 1] == c;
+    }
+};
+
+// ---------------------------------------------------------------------------------------
+// Build
+
+void BrickTraverser::Impl::Build() {
+    const double t0 = Now();
+    BuildTopology();
+    const double t1 = Now();
+    BuildScene();
+    const double t2 = Now();
+    stats.buildSeconds = t2 - t0;
+    stats.accelSeconds = t2 - t1;
+    stats.accelBytes = static_cast<std::size_t>(std::max<std::int64_t>(0, embreeBytes.load()));
+    stats.topologyBytes = xyz.capacity() * sizeof(double) + faces.capacity() * sizeof(FaceRec) +
+                          cellFaceOffset.capacity() * sizeof(std::int64_t) +
+                          cellFaces.capacity() * sizeof(std::int32_t) +
+                          curved.capacity() * sizeof(CurvedRec) +
+                          curvedNodes.capacity() * sizeof(std::int32_t) +
+                          boundaryFaces.capacity() * sizeof(std::int32_t) +
+                          boundaryBoxes.capacity() * sizeof(float);
+}
+
+void BrickTraverser::Impl::BuildTopology() {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nCells = mesh.CellCount();
+    const char* kSource = "mesh";
+    stats.cells = nCells;
+    stats.points = mesh.PointCount();
+    const auto bounds = mesh.Bounds();
+    double diag = 0;
+    if (mesh.PointCount() > 0)
+        diag = std::sqrt(Dist2(bounds[0].data(), bounds[1].data()));
+
+    // 1. Coincident points.
+    std::vector<std::int32_t> mergedOf;
+    if (mesh.PointCount() >= std::numeric_limits<std::int32_t>::max())
+        throw InputError(kSource, "", "more than 2^31 - 1 points in one brick");
+    MergePoints(mesh.points, options.mergeTolerance * diag, diag, mergedOf, xyz);
+    const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
+    stats.mergedPoints = nMerged;
+
+    // 2. Corners (merged ids) and orientation of each cell.
+    std::vector<std::int32_t> corners(8 * nCells, -1);
+    std::vector<std::int8_t> orient(nCells, 1);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nCells, 4096),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+            const int p = mesh.cellOrder[c];
+            const std::int64_t* nodes = mesh.CellNodes(c);
+            for (int k = 0; k < s.corners; ++k) {
+                const LatticeIndex ijk = {s.lattice[k][0] * p, s.lattice[k][1] * p,
+                                          s.lattice[k][2] * p};
+                const int local = InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], ijk);
+                HPRAY_CHECK(local >= 0);
+                corners[8 * c + k] = mergedOf[nodes[local]];
+            }
+            // Signed volume of the corner polyhedron (faces fanned from their first corner).
+            const double* o = &xyz[3 * std::size_t(corners[8 * c])];
+            double vol = 0;
+            for (int f = 0; f < s.faces; ++f) {
+                const double* a = &xyz[3 * std::size_t(corners[8 * c + s.face[f][0]])];
+                for (int k = 1; k + 1 < s.faceSize[f]; ++k) {
+                    const double* b = &xyz[3 * std::size_t(corners[8 * c + s.face[f][k]])];
+                    const double* d = &xyz[3 * std::size_t(corners[8 * c + s.face[f][k + 1]])];
+                    double u[3], v[3], w[3];
+                    for (int i = 0; i < 3; ++i) {
+                        u[i] = a[i] - o[i];
+                        v[i] = b[i] - o[i];
+                        w[i] = d[i] - o[i];
+                    }
+                    vol += u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+                           u[2] * (v[0] * w[1] - v[1] * w[0]);
+                }
+            }
+            orient[c] = vol < 0 ? -1 : 1;
+        }
+    });
+
+    // 3. Cells around each merged corner.
+    std::vector<std::int64_t> vcOffset(nMerged + 1, 0);
+    for (std::int64_t c = 0; c < nCells; ++c) {
+        const int nc = kShapes[int(mesh.cellShape[c])].corners;
+        for (int k = 0; k < nc; ++k) ++vcOffset[corners[8 * c + k] + 1];
+    }
+    std::partial_sum(vcOffset.begin(), vcOffset.end(), vcOffset.begin());
+    std::vector<std::int32_t> vcCells(vcOffset.back());
+    {
+        std::vector<std::int64_t> fill(vcOffset.begin(), vcOffset.end() - 1);
+        for (std::int64_t c = 0; c < nCells; ++c) {
+            const int nc = kShapes[int(mesh.cellShape[c])].corners;
+            for (int k = 0; k < nc; ++k) vcCells[fill[corners[8 * c + k]]++] = std::int32_t(c);
+        }
+    }
+
+    // 4. The neighbour across each cell face: the other cell with the same corner set.
+    auto sortedKey = [&](std::int64_t c, int f, std::int32_t* key) {
+        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const int n = s.faceSize[f];
+        for (int k = 0; k < n; ++k) key[k] = corners[8 * c + s.face[f][k]];
+        for (int k = 1; k < n; ++k)  // insertion sort of at most 4 ids
+            for (int q = k; q > 0 && key[q] < key[q - 1]; --q) std::swap(key[q], key[q - 1]);
+        return n;
+    };
+    constexpr std::int32_t kNone = -1, kDegenerate = -2;
+    std::vector<std::int32_t> nbCell(6 * nCells, kNone);
+    std::vector<std::int8_t> nbFace(6 * nCells, -1);
+    std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nCells, 1024),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        std::int32_t key[4], key2[4];
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+            for (int f = 0; f < s.faces; ++f) {
+                const int n = sortedKey(c, f, key);
+                if (std::adjacent_find(key, key + n) != key + n) {
+                    nbCell[6 * c + f] = kDegenerate;
+                    continue;
+                }
+                int matches = 0;
+                for (std::int64_t i = vcOffset[key[0]]; i < vcOffset[key[0] + 1]; ++i) {
+                    const std::int64_t c2 = vcCells[i];
+                    if (c2 == c) continue;
+                    const ShapeTable& s2 = kShapes[int(mesh.cellShape[c2])];
+                    for (int f2 = 0; f2 < s2.faces; ++f2) {
+                        if (s2.faceSize[f2] != n) continue;
+                        sortedKey(c2, f2, key2);
+                        if (!std::equal(key, key + n, key2)) continue;
+                        if (nbCell[6 * c + f] != std::int32_t(c2)) ++matches;
+                        nbCell[6 * c + f] = std::int32_t(c2);
+                        nbFace[6 * c + f] = std::int8_t(f2);
+                    }
+                }
+                if (matches > 1) {
+                    std::int64_t cur = badCell.load();
+                    while (c < cur && !badCell.compare_exchange_weak(cur, c)) {
+                    }
+                }
+            }
+        }
+    });
+    if (badCell.load() != std::numeric_limits<std::int64_t>::max()) {
+        std::ostringstream where;
+        where << "cell " << badCell.load();
+        throw InputError(kSource, where.str(), "a face is shared by more than two cells");
+    }
+
+    // 5. Face ids: a face belongs to the lower-numbered of its cells.
+    cellFaceOffset.assign(nCells + 1, 0);
+    for (std::int64_t c = 0; c < nCells; ++c)
+        cellFaceOffset[c + 1] = cellFaceOffset[c] + kShapes[int(mesh.cellShape[c])].faces;
+    cellFaces.assign(cellFaceOffset.back(), -1);
+    std::int64_t nFaces = 0;
+    for (std::int64_t c = 0; c < nCells; ++c) {
+        const int nf = kShapes[int(mesh.cellShape[c])].faces;
+        for (int f = 0; f < nf; ++f) {
+            const std::int32_t nb = nbCell[6 * c + f];
+            if (nb < 0 || c < nb) cellFaces[cellFaceOffset[c] + f] = std::int32_t(nFaces++);
+            if (nFaces >= std::numeric_limits<std::int32_t>::max())
+                throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
+        }
+    }
+    for (std::int64_t c = 0; c < nCells; ++c) {
+        const int nf = kShapes[int(mesh.cellShape[c])].faces;
+        for (int f = 0; f < nf; ++f) {
+            const std::int32_t nb = nbCell[6 * c + f];
+            if (nb >= 0 && nb < c)
+                cellFaces[cellFaceOffset[c] + f] = cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+        }
+    }
+
+    // 6. Canonical face records and their geometry.
+    faces.assign(nFaces, FaceRec{});
+    const auto byPosition = [this](std::int32_t a, std::int32_t b) {
+        const double* x = P(a);
+        const double* y = P(b);
+        return x[0] != y[0] ? x[0] < y[0] : x[1] != y[1] ? x[1] < y[1] : x[2] < y[2];
+    };
+    auto outwardCycle = [&](std::int64_t c, int f, std::int32_t* ids, int* local) {
+        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const int n = s.faceSize[f];
+        for (int k = 0; k < n; ++k) {
+            const int kk = orient[c] > 0 ? k : (k == 0 ? 0 : n - k);
+            local[k] = s.face[f][kk];
+            ids[k] = corners[8 * c + local[k]];
+        }
+        return n;
+    };
+    for (std::int64_t c = 0; c < nCells; ++c) {
+        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        for (int f = 0; f < s.faces; ++f) {
+            const std::int32_t nb = nbCell[6 * c + f];
+            if (!(nb < 0 || c < nb)) continue;
+            FaceRec& rec = faces[cellFaces[cellFaceOffset[c] + f]];
+            std::int32_t ids[4], canon[4];
+            int local[4];
+            const int n = outwardCycle(c, f, ids, local);
+            if (nb == kDegenerate) {
+                rec.kind = FaceKind::Degenerate;
+                std::copy(ids, ids + n, rec.v);
+                rec.cell[0] = std::int32_t(c);
+                continue;
+            }
+            const bool same = Canonicalize(ids, n, canon, byPosition);
+            std::copy(canon, canon + n, rec.v);
+            rec.cell[same ? 0 : 1] = std::int32_t(c);
+            if (nb >= 0) {
+                std::int32_t ids2[4], canon2[4];
+                int local2[4];
+                outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                const bool same2 = Canonicalize(ids2, n, canon2, byPosition);
+                if (same2 == same) {
+                    std::ostringstream where;
+                    where << "cells " << c << " and " << nb;
+                    throw InputError(kSource, where.str(),
+                                     "cells overlap (they lie on the same side of their shared face)");
+                }
+                rec.cell[same2 ? 0 : 1] = nb;
+            }
+            // Local corner of each canonical corner.
+            int canonLocal[4];
+            for (int k = 0; k < n; ++k)
+                for (int q = 0; q < n; ++q)
+                    if (ids[q] == canon[k]) canonLocal[k] = local[q];
+            const double* A = P(canon[0]);
+            const double* B = P(canon[1]);
+            const double* C = P(canon[2]);
+            double lo[3], hi[3];
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = hi[d] = A[d];
+                for (int k = 1; k < n; ++k) {
+                    lo[d] = std::min(lo[d], P(canon[k])[d]);
+                    hi[d] = std::max(hi[d], P(canon[k])[d]);
+                }
+            }
+            double size = std::sqrt(Dist2(lo, hi));
+            const double tol = options.straightTolerance * size;
+            // Straight? Compare every face node with the (bi)linear face of the corners.
+            const int p = mesh.cellOrder[c];
+            const CellFamily family = mesh.cellFamily[c];
+            const FaceBasis basis = n == 3 ? FaceBasis::Triangle
+                                    : family == CellFamily::Serendipity ? FaceBasis::QuadSerendipity
+                                                                        : FaceBasis::Quad;
+            bool straight = true;
+            std::vector<std::int32_t> lattice;  // merged ids on the tessellation lattice
+            if (p > 1) {
+                const int* L[4];
+                for (int k = 0; k < n; ++k) L[k] = s.lattice[canonLocal[k]];
+                const std::int64_t* nodes = mesh.CellNodes(c);
+                for (int j = 0; j <= p; ++j)
+                    for (int i = 0; i <= (n == 3 ? p - j : p); ++i) {
+                        LatticeIndex ijk;
+                        for (int d = 0; d < 3; ++d)
+                            ijk[d] = n == 3 ? (p - i - j) * L[0][d] + i * L[1][d] + j * L[2][d]
+                                            : p * L[0][d] + i * (L[1][d] - L[0][d]) +
+                                                  j * (L[3][d] - L[0][d]);
+                        const int node = InternalNodeIndex(mesh.cellShape[c], p, family, ijk);
+                        if (node < 0) {  // serendipity face centre
+                            lattice.push_back(-1);
+                            continue;
+                        }
+                        const std::int32_t id = mergedOf[nodes[node]];
+                        lattice.push_back(id);
+                        const double u = double(i) / p, v = double(j) / p;
+                        const double* X = P(id);
+                        double dev2 = 0;
+                        for (int d = 0; d < 3; ++d) {
+                            const double lin =
+                                n == 3 ? A[d] + u * (B[d] - A[d]) + v * (C[d] - A[d])
+                                       : (1 - u) * (1 - v) * A[d] + u * (1 - v) * B[d] +
+                                             u * v * C[d] + (1 - u) * v * P(canon[3])[d];
+                            dev2 += (X[d] - lin) * (X[d] - lin);
+                        }
+                        if (dev2 > tol * tol) straight = false;
+                    }
+            }
+            if (straight) {
+                if (n == 3) {
+                    rec.kind = FaceKind::Triangle;
+                } else {
+                    const double* D = P(canon[3]);
+                    double e1[3], e2[3], e3[3], nrm[3];
+                    for (int d = 0; d < 3; ++d) {
+                        e1[d] = B[d] - A[d];
+                        e2[d] = C[d] - A[d];
+                        e3[d] = D[d] - A[d];
+                    }
+                    nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
+                    nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
+                    nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+                    const double len = std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+                    const double off = std::fabs(nrm[0] * e3[0] + nrm[1] * e3[1] + nrm[2] * e3[2]);
+                    rec.kind = off <= tol * len ? FaceKind::PlanarQuad : FaceKind::BilinearQuad;
+                    if (rec.kind == FaceKind::BilinearQuad) ++stats.bilinearFaces;
+                }
+                continue;
+            }
+            // Curved: keep its lattice (serendipity: plus its centre as a private point).
+            rec.kind = FaceKind::Curved;
+            CurvedRec cr;
+            cr.order = std::uint8_t(basis == FaceBasis::QuadSerendipity ? 2 : p);
+            cr.basis = basis;
+            cr.nodeStart = static_cast<std::int64_t>(curvedNodes.size());
+            if (basis == FaceBasis::QuadSerendipity) {
+                HPRAY_CHECK_EQ(lattice.size(), std::size_t(9));
+                double values[8], centre[3] = {0, 0, 0};
+                trace::EvalFaceBasis(basis, 2, 0.5, 0.5, values, nullptr, nullptr);
+                for (int m = 0, k = 0; k < 9; ++k) {
+                    if (k == 4) continue;
+                    for (int d = 0; d < 3; ++d) centre[d] += values[m] * P(lattice[k])[d];
+                    ++m;
+                }
+                lattice[4] = std::int32_t(xyz.size() / 3);
+                xyz.insert(xyz.end(), centre, centre + 3);
+            }
+            for (std::int32_t id : lattice) HPRAY_CHECK(id >= 0);
+            curvedNodes.insert(curvedNodes.end(), lattice.begin(), lattice.end());
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = kInf;
+                hi[d] = -kInf;
+                for (std::int32_t id : lattice) {
+                    lo[d] = std::min(lo[d], P(id)[d]);
+                    hi[d] = std::max(hi[d], P(id)[d]);
+                }
+            }
+            size = std::sqrt(Dist2(lo, hi));
+            cr.size = size;
+            for (int d = 0; d < 3; ++d) {
+                const double pad = 1e-9 * size + 1e-300;
+                cr.box[0][d] = lo[d] - pad;
+                cr.box[1][d] = hi[d] + pad;
+            }
+            rec.curved = static_cast<std::int32_t>(curved.size());
+            curved.push_back(cr);
+        }
+    }
+    stats.faces = nFaces;
+    stats.curvedFaces = static_cast<std::int64_t>(curved.size());
+    for (std::int64_t f = 0; f < nFaces; ++f) {
+        const FaceRec& rec = faces[f];
+        if (rec.kind != FaceKind::Degenerate && (rec.cell[0] < 0 || rec.cell[1] < 0))
+            boundaryFaces.push_back(std::int32_t(f));
+    }
+    stats.boundaryFaces = static_cast<std::int64_t>(boundaryFaces.size());
+
+    // Mesh box for the float query ray, padded so that float rounding of the ray (about
+    // 6e-8 of the coordinates) never culls a face the exact test would hit.
+    double maxAbs = 0;
+    for (int d = 0; d < 3; ++d)
+        maxAbs = std::max({maxAbs, std::fabs(bounds[0][d]), std::fabs(bounds[1][d])});
+    queryPad = 1e-6 * (maxAbs + diag) + 1e-30;
+    for (int d = 0; d < 3; ++d) {
+        queryBox[0][d] = bounds[0][d] - queryPad;
+        queryBox[1][d] = bounds[1][d] + queryPad;
+    }
+    // Curved faces may bulge out of their node hull, but crossings are decided on the node
+    // tessellation, which the node box contains.
+    boundaryBoxes.resize(6 * boundaryFaces.size());
+    std::vector<std::array<std::int32_t, 3>> tris;
+    for (std::size_t b = 0; b < boundaryFaces.size(); ++b) {
+        Tessellation(boundaryFaces[b], tris);
+        double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
+        for (const auto& tri : tris)
+            for (std::int32_t id : tri)
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], P(id)[d]);
+                    hi[d] = std::max(hi[d], P(id)[d]);
+                }
+        for (int d = 0; d < 3; ++d) {
+            boundaryBoxes[6 * b + d] = std::nextafter(float(lo[d] - queryPad), -INFINITY);
+            boundaryBoxes[6 * b + 3 + d] = std::nextafter(float(hi[d] + queryPad), INFINITY);
+        }
+    }
+}
+
+void BrickTraverser::Impl::Tessellation(std::int32_t f,
+                                        std::vector<std::array<std::int32_t, 3>>& tris) const {
+    tris.clear();
+    const FaceRec& rec = faces[f];
+    switch (rec.kind) {
+        case FaceKind::Degenerate: return;
+        case FaceKind::Triangle: tris.push_back({rec.v[0], rec.v[1], rec.v[2]}); return;
+        case FaceKind::PlanarQuad:
+        case FaceKind::BilinearQuad:
+            tris.push_back({rec.v[0], rec.v[1], rec.v[2]});
+            tris.push_back({rec.v[0], rec.v[2], rec.v[3]});
+            return;
+        case FaceKind::Curved: break;
+    }
+    const CurvedRec& cr = curved[rec.curved];
+    const std::int32_t* ids = &curvedNodes[cr.nodeStart];
+    const int p = cr.order;
+    if (cr.basis == FaceBasis::Triangle) {
+        auto idx = [p](int i, int j) { return j * (p + 1) - j * (j - 1) / 2 + i; };
+        for (int j = 0; j < p; ++j)
+            for (int i = 0; i < p - j; ++i) {
+                tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j)], ids[idx(i, j + 1)]});
+                if (i + j + 2 <= p)
+                    tris.push_back({ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
+            }
+    } else {
+        auto idx = [p](int i, int j) { return j * (p + 1) + i; };
+        for (int j = 0; j < p; ++j)
+            for (int i = 0; i < p; ++i) {
+                tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)]});
+                tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
+            }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Embree: boundary faces as user geometry whose intersector records every exact crossing.
+
+namespace {
+
+struct QueryContext {
+    RTCIntersectContext base;  // first member: Embree passes &base back to the callbacks
+    const void* impl;  // the BrickTraverser::Impl
+    const RayFrame* frame;
+    std::vector<Crossing>* hits;
+};
+
+}  // namespace
+
+void BrickTraverser::Impl::BuildScene() {
+    device = rtcNewDevice(nullptr);
+    if (!device) throw InternalError("Embree device creation failed");
+    rtcSetDeviceMemoryMonitorFunction(
+        device,
+        [](void* user, ssize_t bytes, bool) {
+            static_cast<std::atomic<std::int64_t>*>(user)->fetch_add(bytes);
+            return true;
+        },
+        &embreeBytes);
+    scene = rtcNewScene(device);
+    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(boundaryFaces.size()));
+    rtcSetGeometryUserData(geom, this);
+    rtcSetGeometryBoundsFunction(
+        geom,
+        [](const RTCBoundsFunctionArguments* args) {
+            const auto* self = static_cast<const Impl*>(args->geometryUserPtr);
+            const float* b = &self->boundaryBoxes[6 * std::size_t(args->primID)];
+            args->bounds_o->lower_x = b[0];
+            args->bounds_o->lower_y = b[1];
+            args->bounds_o->lower_z = b[2];
+            args->bounds_o->upper_x = b[3];
+            args->bounds_o->upper_y = b[4];
+            args->bounds_o->upper_z = b[5];
+        },
+        nullptr);
+    rtcSetGeometryIntersectFunction(geom, [](const RTCIntersectFunctionNArguments* args) {
+        if (!args->valid[0]) return;
+        const auto* ctx = reinterpret_cast<const QueryContext*>(args->context);
+        const auto* self = static_cast<const Impl*>(ctx->impl);
+        self->AppendCrossings(self->boundaryFaces[args->primID], *ctx->frame, *ctx->hits);
+    });
+    rtcSetGeometryOccludedFunction(geom, [](const RTCOccludedFunctionNArguments*) {});
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene);
+    const RTCError err = rtcGetDeviceError(device);
+    if (err != RTC_ERROR_NONE) {
+        std::ostringstream os;
+        os << "Embree scene build failed (error " << int(err) << ")";
+        throw InternalError(os.str());
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Crossings
+
+void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame,
+                                           std::vector<Crossing>& out) const {
+    const FaceRec& rec = faces[f];
+    TriangleCrossing x;
+    switch (rec.kind) {
+        case FaceKind::Degenerate: return;
+        case FaceKind::Triangle: {
+            const ShearedPoint a = frame.Transform(P(rec.v[0]));
+            const ShearedPoint b = frame.Transform(P(rec.v[1]));
+            const ShearedPoint c = frame.Transform(P(rec.v[2]));
+            if (CrossTriangle(a, b, c, x)) out.push_back({x.t, f, x.side});
+            return;
+        }
+        case FaceKind::PlanarQuad: {
+            const ShearedPoint a = frame.Transform(P(rec.v[0]));
+            const ShearedPoint b = frame.Transform(P(rec.v[1]));
+            const ShearedPoint c = frame.Transform(P(rec.v[2]));
+            const ShearedPoint d = frame.Transform(P(rec.v[3]));
+            if (CrossTriangle(a, b, c, x)) out.push_back({x.t, f, x.side});
+            if (CrossTriangle(a, c, d, x)) out.push_back({x.t, f, x.side});
+            return;
+        }
+        case FaceKind::BilinearQuad: {
+            const ShearedPoint a = frame.Transform(P(rec.v[0]));
+            const ShearedPoint b = frame.Transform(P(rec.v[1]));
+            const ShearedPoint c = frame.Transform(P(rec.v[2]));
+            const ShearedPoint d = frame.Transform(P(rec.v[3]));
+            // Tessellated hits decide the count and the sides; (u, v) of each hit on the
+            // patch: triangle ABC covers u >= v, ACD covers v >= u.
+            double hu[2], hv[2], ht[2];
+            int hs[2];
+            int nh = 0;
+            if (CrossTriangle(a, b, c, x)) {
+                hu[nh] = x.bary[1] + x.bary[2];
+                hv[nh] = x.bary[2];
+                ht[nh] = x.t;
+                hs[nh++] = x.side;
+            }
+            if (CrossTriangle(a, c, d, x)) {
+                hu[nh] = x.bary[1];
+                hv[nh] = x.bary[1] + x.bary[2];
+                ht[nh] = x.t;
+                hs[nh++] = x.side;
+            }
+            if (nh == 0) return;
+            trace::PatchRoot roots[2];
+            const int nr = trace::IntersectBilinearPatch(frame.org, frame.dir, P(rec.v[0]),
+                                                         P(rec.v[1]), P(rec.v[2]), P(rec.v[3]),
+                                                         roots);
+            if (nh == 1) {
+                // The tessellation and the patch share their boundary, so a line crossing
+                // the tessellation once crosses the patch an odd number of times: once. Take
+                // the root inside the patch (u, v in [0, 1]); near the patch boundary, where
+                // rounding can put it just outside, the one least outside, and between
+                // equals the one nearest the tessellated hit.
+                int best = -1;
+                double bestOut = kInf, bestD = kInf;
+                for (int r = 0; r < nr; ++r) {
+                    const double u = roots[r].u, v = roots[r].v;
+                    const double outside = std::max({0.0, -u, u - 1, -v, v - 1});
+                    const double du = u - hu[0], dv = v - hv[0];
+                    const double dd = du * du + dv * dv;
+                    if (outside < bestOut - 1e-12 ||
+                        (outside <= bestOut + 1e-12 && dd < bestD)) {
+                        bestOut = outside;
+                        bestD = dd;
+                        best = r;
+                    }
+                }
+                const double t = best >= 0 && bestOut <= 1e-6 ? roots[best].t : ht[0];
+                out.push_back({t, f, hs[0]});
+            } else {
+                if (ht[1] < ht[0]) {
+                    std::swap(ht[0], ht[1]);
+                    std::swap(hs[0], hs[1]);
+                }
+                // Both tessellation triangles crossed (the ray grazes the fold of the
+                // face): the patch is crossed twice or not at all. Use its roots only if
+                // both lie on the patch; otherwise the grazing pass stays tessellated.
+                auto onPatch = [](const trace::PatchRoot& r) {
+                    return std::max({-r.u, r.u - 1, -r.v, r.v - 1}) <= 1e-6;
+                };
+                if (nr == 2 && onPatch(roots[0]) && onPatch(roots[1])) {
+                    const bool swap = roots[1].t < roots[0].t;
+                    ht[0] = roots[swap ? 1 : 0].t;
+                    ht[1] = roots[swap ? 0 : 1].t;
+                }
+                out.push_back({ht[0], f, hs[0]});
+                out.push_back({ht[1], f, hs[1]});
+            }
+            return;
+        }
+        case FaceKind::Curved: AppendCurvedCrossings(f, frame, out); return;
+    }
+}
+
+void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
+                                                 std::vector<Crossing>& out) const {
+    const CurvedRec& cr = curved[faces[f].curved];
+    // Quick rejection against the (padded) node box, which holds the tessellation.
+    {
+        double lo = -kInf, hi = kInf;
+        for (int d = 0; d < 3; ++d) {
+            const double o = frame.org[d], dd = frame.dir[d];
+            if (dd == 0) {
+                if (o < cr.box[0][d] || o > cr.box[1][d]) return;
+                continue;
+            }
+            double t0 = (cr.box[0][d] - o) / dd, t1 = (cr.box[1][d] - o) / dd;
+            if (t0 > t1) std::swap(t0, t1);
+            lo = std::max(lo, t0);
+            hi = std::min(hi, t1);
+        }
+        if (lo > hi + 1e-9 * cr.size) return;
+    }
+    Scratch& s = tScratch;
+    const int p = cr.order;
+    const bool tri = cr.basis == FaceBasis::Triangle;
+    const int nLattice = tri ? (p + 1) * (p + 2) / 2 : (p + 1) * (p + 1);
+    const std::int32_t* ids = &curvedNodes[cr.nodeStart];
+    s.sheared.resize(nLattice);
+    for (int k = 0; k < nLattice; ++k) s.sheared[k] = frame.Transform(P(ids[k]));
+    bool nodesLoaded = false;
+    const int nBasis = trace::FaceNodeCount(cr.basis, p);
+    double N[trace::kMaxFaceNodes], Nu[trace::kMaxFaceNodes], Nv[trace::kMaxFaceNodes];
+
+    auto crossSub = [&](int ia, int ib, int ic, const double* pa, const double* pb,
+                        const double* pc) {
+        TriangleCrossing x;
+        if (!CrossTriangle(s.sheared[ia], s.sheared[ib], s.sheared[ic], x)) return;
+        if (!nodesLoaded) {  // basis node coordinates (serendipity: lattice minus centre)
+            s.nodes.resize(3 * nBasis);
+            for (int k = 0, m = 0; k < nLattice; ++k) {
+                if (cr.basis == FaceBasis::QuadSerendipity && k == 4) continue;
+                for (int d = 0; d < 3; ++d) s.nodes[3 * m + d] = P(ids[k])[d];
+                ++m;
+            }
+            nodesLoaded = true;
+        }
+        const double u0 = x.bary[0] * pa[0] + x.bary[1] * pb[0] + x.bary[2] * pc[0];
+        const double v0 = x.bary[0] * pa[1] + x.bary[1] * pb[1] + x.bary[2] * pc[1];
+        double u = u0, v = v0, t = x.t;
+        // Newton on face(u, v) - (origin + t dir) = 0 from the tessellated hit.
+        const double tol = options.mappingTolerance * cr.size;
+        bool converged = false;
+        for (int it = 0; it < options.maxNewtonIterations; ++it) {
+            trace::EvalFaceBasis(cr.basis, p, u, v, N, Nu, Nv);
+            double F[3] = {0, 0, 0}, Fu[3] = {0, 0, 0}, Fv[3] = {0, 0, 0};
+            for (int m = 0; m < nBasis; ++m)
+                for (int d = 0; d < 3; ++d) {
+                    F[d] += N[m] * s.nodes[3 * m + d];
+                    Fu[d] += Nu[m] * s.nodes[3 * m + d];
+                    Fv[d] += Nv[m] * s.nodes[3 * m + d];
+                }
+            double r[3];
+            for (int d = 0; d < 3; ++d) r[d] = F[d] - frame.org[d] - t * frame.dir[d];
+            const double res = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+            const double m2[3] = {-frame.dir[0], -frame.dir[1], -frame.dir[2]};
+            auto det3 = [](const double* a, const double* b, const double* c) {
+                return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                       a[2] * (b[0] * c[1] - b[1] * c[0]);
+            };
+            const double det = det3(Fu, Fv, m2);
+            if (det == 0 || !std::isfinite(det)) break;
+            const double rhs[3] = {-r[0], -r[1], -r[2]};
+            u += det3(rhs, Fv, m2) / det;
+            v += det3(Fu, rhs, m2) / det;
+            t += det3(Fu, Fv, rhs) / det;
+            if (res <= tol) {  // converged; the step just taken polishes the last digits
+                converged = true;
+                break;
+            }
+        }
+        // A root far from the tessellated hit would be another crossing of the face.
+        if (converged && std::isfinite(t) && std::hypot(u - u0, v - v0) <= 2.0 / p) {
+            out.push_back({t, f, x.side});
+        } else {
+            newtonFailures.fetch_add(1, std::memory_order_relaxed);
+            out.push_back({x.t, f, x.side});
+        }
+    };
+
+    if (tri) {
+        auto idx = [p](int i, int j) { return j * (p + 1) - j * (j - 1) / 2 + i; };
+        for (int j = 0; j < p; ++j)
+            for (int i = 0; i < p - j; ++i) {
+                const double a[2] = {double(i) / p, double(j) / p};
+                const double b[2] = {double(i + 1) / p, double(j) / p};
+                const double c[2] = {double(i) / p, double(j + 1) / p};
+                crossSub(idx(i, j), idx(i + 1, j), idx(i, j + 1), a, b, c);
+                if (i + j + 2 <= p) {
+                    const double d[2] = {double(i + 1) / p, double(j + 1) / p};
+                    crossSub(idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1), b, d, c);
+                }
+            }
+    } else {
+        auto idx = [p](int i, int j) { return j * (p + 1) + i; };
+        for (int j = 0; j < p; ++j)
+            for (int i = 0; i < p; ++i) {
+                const double a[2] = {double(i) / p, double(j) / p};
+                const double b[2] = {double(i + 1) / p, double(j) / p};
+                const double c[2] = {double(i + 1) / p, double(j + 1) / p};
+                const double d[2] = {double(i) / p, double(j + 1) / p};
+                crossSub(idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), a, b, c);
+                crossSub(idx(i, j), idx(i + 1, j + 1), idx(i, j + 1), a, c, d);
+            }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// The walk
+
+bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, double entryT,
+                                    double tIn, const RayFrame& frame, Crossing& exit) const {
+    const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
+    const int nf = static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
+    if (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
+        faces[cf[0]].kind == FaceKind::Triangle && faces[cf[1]].kind == FaceKind::Triangle &&
+        faces[cf[2]].kind == FaceKind::Triangle && faces[cf[3]].kind == FaceKind::Triangle) {
+        // A planar tet seen along the (perturbed) ray covers the ray with exactly one
+        // entering and one leaving face (exact predicates on the projected corners), so
+        // the first leaving face is the exit.
+        TriangleCrossing x;
+        for (int k = 0; k < 4; ++k) {
+            const std::int32_t f = cf[k];
+            if (f == entryFace) continue;
+            const FaceRec& rec = faces[f];
+            if (!CrossTriangle(frame.Transform(P(rec.v[0])), frame.Transform(P(rec.v[1])),
+                               frame.Transform(P(rec.v[2])), x))
+                continue;
+            const Crossing cand{x.t, f, x.side};
+            if (Leaves(cand, c)) {
+                exit = cand;
+                return true;
+            }
+        }
+    } else {
+        // General cells (bilinear faces can be crossed twice, curved cells left and
+        // re-entered): all crossings of the cell's faces along the whole line, sorted by t,
+        // paired entering -> leaving in order (a leaving crossing that rounding put before
+        // every open entering one waits for the next entering one). The pairing is a
+        // bijection computed identically on every visit, so a walk can neither get stuck
+        // nor loop: each crossing has one predecessor and one successor.
+        std::vector<Crossing>& xs = tScratch.cell;
+        xs.clear();
+        for (int k = 0; k < nf; ++k) AppendCrossings(cf[k], frame, xs);
+        std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
+            if (a.t != b.t) return a.t < b.t;
+            if (a.face != b.face) return a.face < b.face;
+            return a.side < b.side;
+        });
+        // Match in order; openIn / openOut are FIFO queues of unmatched indices.
+        int openIn[64], openOut[64];
+        int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
+        int mine = -1;
+        for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
+            const Crossing& x = xs[i];
+            if (Leaves(x, c)) {
+                if (headIn < nIn) {
+                    if (openIn[headIn++] == mine) {
+                        exit = x;
+                        return true;
+                    }
+                } else {
+                    openOut[nOut++] = i;
+                }
+            } else {
+                const bool isMine = x.face == entryFace && x.t == entryT;
+                if (isMine) mine = i;
+                if (headOut < nOut) {
+                    const int j = openOut[headOut++];
+                    if (isMine) {
+                        exit = xs[j];
+                        return true;
+                    }
+                } else {
+                    openIn[nIn++] = i;
+                }
+            }
+        }
+    }
+    if (TolerantExit(c, tIn, frame, exit)) {
+        walkRepairs.fetch_add(1, std::memory_order_relaxed);
+        return true;
+    }
+    return false;
+}
+
+// Exit search when the exact one found none: this happens only where two cells represent
+// a shared edge differently (a straight face next to a curved face whose edge nodes are
+// within straightTolerance of the straight edge). Takes the leaving tessellation
+// triangle the ray misses by the least, if it misses by a relative 1e-6 at most.
+bool BrickTraverser::Impl::TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
+                                        Crossing& exit) const {
+    std::vector<std::array<std::int32_t, 3>> tris;
+    double bestScore = -1e-6;
+    bool found = false;
+    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k) {
+        const std::int32_t f = cellFaces[k];
+        Tessellation(f, tris);
+        for (const auto& tri : tris) {
+            const ShearedPoint a = frame.Transform(P(tri[0]));
+            const ShearedPoint b = frame.Transform(P(tri[1]));
+            const ShearedPoint d = frame.Transform(P(tri[2]));
+            double w[3] = {b.x * d.y - b.y * d.x, d.x * a.y - d.y * a.x, a.x * b.y - a.y * b.x};
+            const double sum = w[0] + w[1] + w[2];
+            if (sum == 0 || !std::isfinite(sum)) continue;
+            const Crossing cand{0, f, sum > 0 ? 1 : -1};
+            if (!Leaves(cand, c)) continue;
+            const double score = std::min({w[0], w[1], w[2]}) / sum;
+            if (score <= bestScore) continue;
+            const double t = (w[0] * a.z + w[1] * b.z + w[2] * d.z) / sum;
+            bestScore = score;
+            exit = {std::max(t, tIn), f, cand.side};
+            found = true;
+        }
+    }
+    return found;
+}
+
+BrickTraverser::BrickTraverser(const Brick& brick, const TraceOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+    HPRAY_CHECK(brick.mesh != nullptr);
+    impl_->brick = brick;
+    impl_->options = options;
+    impl_->Build();
+}
+
+BrickTraverser::~BrickTraverser() = default;
+
+const TraverserStats& BrickTraverser::Stats() const { return impl_->stats; }
+
+const Brick& BrickTraverser::GetBrick() const { return impl_->brick; }
+
+TraceCounters BrickTraverser::Counters() const {
+    TraceCounters c;
+    c.newtonFailures = impl_->newtonFailures.load();
+    c.walkRepairs = impl_->walkRepairs.load();
+    c.walkFailures = impl_->walkFailures.load();
+    return c;
+}
+
+void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
+                           std::vector<Segment>& out) const {
+    out.clear();
+    const Impl& im = *impl_;
+    double tLo = tMin, tHi = tMax;
+    if (!(tLo <= tHi) || !ClipRayToBox(ray, im.brick.box, tLo, tHi)) return;
+    if (im.boundaryFaces.empty()) return;
+    double q0 = -kInf, q1 = tHi;
+    if (!ClipRayToBox(ray, im.queryBox, q0, q1)) return;
+    const RayFrame frame(ray);
+
+    // 1. Every crossing of the mesh boundary up to tHi.
+    std::vector<Crossing>& hits = tScratch.boundary;
+    hits.clear();
+    QueryContext ctx;
+    rtcInitIntersectContext(&ctx.base);
+    ctx.impl = &im;
+    ctx.frame = &frame;
+    ctx.hits = &hits;
+    RTCRayHit rh;
+    const double s0 = q0 - im.queryPad;
+    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
+    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
+    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
+    rh.ray.dir_x = float(ray.dir[0]);
+    rh.ray.dir_y = float(ray.dir[1]);
+    rh.ray.dir_z = float(ray.dir[2]);
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = float((q1 - q0) + 2 * im.queryPad) * (1 + 1e-6f);
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(im.scene, &ctx.base, &rh);
+    if (hits.empty()) return;
+    std::sort(hits.begin(), hits.end(), [](const Crossing& a, const Crossing& b) {
+        if (a.t != b.t) return a.t < b.t;
+        if (a.face != b.face) return a.face < b.face;
+        return a.side < b.side;
+    });
+    hits.erase(std::unique(hits.begin(), hits.end(),
+                           [](const Crossing& a, const Crossing& b) {
+                               return a.t == b.t && a.face == b.face && a.side == b.side;
+                           }),
+               hits.end());
+    auto entered = [&](const Crossing& x) { return im.faces[x.face].cell[x.side > 0 ? 1 : 0]; };
+    // With strictly alternating entries and exits, the k-th walk leaves at the k-th exit,
+    // so walks that end before tLo can be skipped unwalked.
+    bool alternating = hits.size() % 2 == 0;
+    for (std::size_t i = 0; i < hits.size() && alternating; ++i)
+        alternating = (entered(hits[i]) >= 0) == (i % 2 == 0);
+
+    // 2. Walk from each entry through neighbouring cells until the ray leaves the mesh.
+    double tCur = -kInf;
+    constexpr int kMaxZeroSteps = 4096;
+    for (std::size_t i = 0; i < hits.size(); ++i) {
+        const Crossing& entry = hits[i];
+        std::int64_t c = entered(entry);
+        if (c < 0) continue;
+        if (alternating && hits[i + 1].t <= tLo) {
+            tCur = std::max(tCur, hits[i + 1].t);
+            continue;
+        }
+        double tIn = std::max(entry.t, tCur);
+        if (tIn >= tHi) return;
+        std::int32_t entryFace = entry.face;
+        double entryT = entry.t;
+        int zeroSteps = 0;
+        while (true) {
+            Crossing ex;
+            if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex)) {
+                im.walkFailures.fetch_add(1, std::memory_order_relaxed);
+                break;
+            }
+            const double tOut = std::max(ex.t, tIn);
+            const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
+            if (a < b) out.push_back({c, a, b});
+            tCur = tOut;
+            if (tOut >= tHi) return;
+            const std::int64_t next = im.faces[ex.face].cell[ex.side > 0 ? 1 : 0];
+            if (next < 0) break;
+            if (tOut == tIn) {
+                if (++zeroSteps > kMaxZeroSteps) {
+                    im.walkFailures.fetch_add(1, std::memory_order_relaxed);
+                    break;
+                }
+            } else {
+                zeroSteps = 0;
+            }
+            c = next;
+            entryFace = ex.face;
+            entryT = ex.t;
+            tIn = tOut;
+        }
+    }
+}
+
+}  // namespace hpray

@@ -1,0 +1,108 @@
+// Ray traversal of one brick: for a ray clipped to the brick's box and to [tMin, tMax], the
+// ordered segments (cell, tEnter, tExit) where it is inside cells — exact and watertight.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "mesh/mesh.h"
+#include "trace/ray.h"
+
+namespace hpray {
+
+/// One brick: a mesh (a whole mesh, or the cells of one k-d leaf, ghosts included) and the
+/// axis-aligned box it owns. Rays are cut at the box. The mesh is borrowed: it must
+/// outlive every traverser built from it and must not change meanwhile.
+struct Brick {
+    const Mesh* mesh = nullptr;
+    Box3 box{};
+
+    /// The whole mesh as one brick: box = the mesh bounds.
+    static Brick WholeMesh(const Mesh& mesh) { return Brick{&mesh, mesh.Bounds()}; }
+};
+
+/// Tolerances of the traversal (dimensionless; "size" = diagonal of the face's or mesh's
+/// bounding box in world units).
+struct TraceOptions {
+    /// Points within mergeTolerance * (mesh bounds diagonal) of each other are one point
+    /// for face matching, so meshes that store private copies of shared nodes (deal.II)
+    /// are traversed like node-shared ones. 0: bitwise equal positions only.
+    double mergeTolerance = 1e-10;
+    /// A face whose nodes all lie within straightTolerance * size of the (bi)linear
+    /// interpolation of its corners is straight; a straight quadrilateral whose corners
+    /// are coplanar to this tolerance is planar.
+    double straightTolerance = 1e-12;
+    /// Newton on a curved face stops once |face(u, v) - ray(t)| <= mappingTolerance * size.
+    double mappingTolerance = 1e-12;
+    int maxNewtonIterations = 30;
+};
+
+/// Build figures of a traverser.
+struct TraverserStats {
+    double buildSeconds = 0;   ///< whole build, wall clock (topology + acceleration)
+    double accelSeconds = 0;   ///< the Embree scene alone (`timing_s.accel` part)
+    std::size_t topologyBytes = 0;  ///< faces, adjacency, merged points, curved face data
+    std::size_t accelBytes = 0;     ///< bytes Embree allocated for the scene
+    std::int64_t cells = 0;
+    std::int64_t points = 0;
+    std::int64_t mergedPoints = 0;  ///< distinct positions after merging coincident points
+    std::int64_t faces = 0;
+    std::int64_t boundaryFaces = 0;  ///< faces with one cell (what the Embree scene holds)
+    std::int64_t bilinearFaces = 0;  ///< non-planar straight quadrilaterals
+    std::int64_t curvedFaces = 0;
+
+    std::size_t Bytes() const { return topologyBytes + accelBytes; }
+    double BytesPerCell() const { return cells ? double(Bytes()) / double(cells) : 0.0; }
+};
+
+/// Counts of numerically hard events met by queries so far (all threads).
+struct TraceCounters {
+    std::int64_t newtonFailures = 0;  ///< curved crossings left at the tessellated t
+    std::int64_t walkRepairs = 0;     ///< cells left through a tolerant exit search
+    std::int64_t walkFailures = 0;    ///< walks abandoned (rest found by the next entry)
+};
+
+/// Ray caster of one brick. Built once (adjacency over faces matched by merged corner
+/// positions, and an Embree scene over the boundary faces), then queried from any number
+/// of threads.
+///
+/// Design (chosen by measurement, see benchmarks/bench_trace.cpp): Embree finds where a
+/// ray enters the mesh (boundary faces only, as user geometry whose intersector is the
+/// exact test below), and the ray then walks from cell to neighbouring cell through the
+/// shared faces. On cube-tets-60 (1.08M tets) a BVH over all faces collecting every hit,
+/// or over cell boxes, costs several times more per segment than the walk, and a BVH over
+/// all faces holds several times the memory.
+///
+/// Each face is intersected from ONE canonical representation (corners ordered by merged
+/// point id) whichever cell asks, so the two cells of a face get bitwise the same t.
+/// Planar faces: exact plane crossing. Non-planar bilinear quadrilaterals: Reshetov's
+/// closed form. Curved faces: Newton on the face map started at the hit on its node
+/// tessellation. Whether and how often a face is crossed is decided on its (canonical)
+/// tessellation by the watertight rule of trace/ray_frame.h; only t is refined.
+class BrickTraverser {
+public:
+    /// Builds the traverser. Throws InputError for meshes it cannot traverse (a face shared
+    /// by more than two cells, overlapping cells, more than 2^31 - 1 faces).
+    explicit BrickTraverser(const Brick& brick, const TraceOptions& options = {});
+    ~BrickTraverser();
+    BrickTraverser(const BrickTraverser&) = delete;
+    BrickTraverser& operator=(const BrickTraverser&) = delete;
+
+    /// Fills `out` (cleared first; caller-owned, reused without reallocation once large
+    /// enough) with the segments of `ray` inside cells, clipped to the brick box and to
+    /// [tMin, tMax], sorted by t, each of positive length. While the ray stays inside the
+    /// mesh a segment's tExit equals the next tEnter bitwise. Thread-safe.
+    void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out) const;
+
+    const TraverserStats& Stats() const;
+    TraceCounters Counters() const;
+    const Brick& GetBrick() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hpray

@@ -1,0 +1,693 @@
+// Tests of BrickTraverser against analytic chords: random and adversarial rays through the
+// unit cube cut into every cell shape, non-convex domains, clipping, unshared points,
+// inverted cells, threads, and curved quadratic cells that represent a paraboloid exactly.
+#include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+
+#include "mesh/builtin.h"
+#include "trace/brick_traverser.h"
+#include "trace_test_meshes.h"
+
+namespace hpray {
+namespace {
+
+using testing::BoxChord;
+using testing::CubeCut;
+using testing::GridMesh;
+using testing::MakeRay;
+using testing::MakeRayDir;
+using testing::Vec3;
+
+const Box3 kUnitBox = {{{0, 0, 0}, {1, 1, 1}}};
+
+// Segments must be sorted, of positive length, and never overlap; returns the maximal
+// runs of exactly touching segments as intervals.
+std::vector<std::array<double, 2>> Runs(const std::vector<Segment>& segs,
+                                        const std::string& what) {
+    std::vector<std::array<double, 2>> runs;
+    for (std::size_t i = 0; i < segs.size(); ++i) {
+        EXPECT_LT(segs[i].tEnter, segs[i].tExit) << what << " segment " << i;
+        if (i > 0) {
+            EXPECT_LE(segs[i - 1].tExit, segs[i].tEnter) << what << " overlap at " << i;
+        }
+        if (!runs.empty() && runs.back()[1] == segs[i].tEnter) runs.back()[1] = segs[i].tExit;
+        else runs.push_back({segs[i].tEnter, segs[i].tExit});
+    }
+    return runs;
+}
+
+double Sum(const std::vector<Segment>& segs) {
+    double s = 0;
+    for (const auto& g : segs) s += g.tExit - g.tEnter;
+    return s;
+}
+
+// Does the straight cell c contain X (corners' barycentrics for tets, bounding box else)?
+bool CellContains(const Mesh& mesh, std::int64_t c, const double X[3], double tol) {
+    const int nv = VertexCount(mesh.cellShape[c]);
+    const int p = mesh.cellOrder[c];
+    auto corner = [&](int k) {
+        const auto lat = VertexLattice(mesh.cellShape[c], p)[k];
+        const int node = InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], lat);
+        return &mesh.points[3 * mesh.CellNodes(c)[node]];
+    };
+    if (mesh.cellShape[c] == CellShape::Tet) {
+        const double *a = corner(0), *b = corner(1), *cc = corner(2), *d = corner(3);
+        auto det = [](const double* o, const double* p1, const double* p2, const double* p3) {
+            double u[3], v[3], w[3];
+            for (int i = 0; i < 3; ++i) {
+                u[i] = p1[i] - o[i];
+                v[i] = p2[i] - o[i];
+                w[i] = p3[i] - o[i];
+            }
+            return u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+                   u[2] * (v[0] * w[1] - v[1] * w[0]);
+        };
+        const double vol = det(a, b, cc, d);
+        const double l[4] = {det(X, b, cc, d) / vol, det(a, X, cc, d) / vol,
+                             det(a, b, X, d) / vol, det(a, b, cc, X) / vol};
+        for (double x : l)
+            if (x < -tol) return false;
+        return true;
+    }
+    for (int d = 0; d < 3; ++d) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (int k = 0; k < nv; ++k) {
+            lo = std::min(lo, corner(k)[d]);
+            hi = std::max(hi, corner(k)[d]);
+        }
+        if (X[d] < lo - tol || X[d] > hi + tol) return false;
+    }
+    return true;
+}
+
+// Checks one ray through a mesh of the unit cube: one run equal to the box chord (or,
+// for rays lying in the boundary, either the chord or nothing), every segment inside its
+// cell.
+void CheckCubeRay(const Mesh& mesh, const BrickTraverser& tr, const Ray& ray,
+                  const std::string& what, std::vector<Segment>& segs,
+                  bool checkCells = true) {
+    tr.Trace(ray, -INFINITY, INFINITY, segs);
+    const auto runs = Runs(segs, what);
+    double t0, t1;
+    const bool hit = BoxChord(ray, kUnitBox, t0, t1);
+    const double chord = hit ? t1 - t0 : 0;
+    // Rays in the boundary planes: the closed box and the open box disagree.
+    const Box3 inner = {{{1e-9, 1e-9, 1e-9}, {1 - 1e-9, 1 - 1e-9, 1 - 1e-9}}};
+    double s0, s1;
+    const double innerChord = BoxChord(ray, inner, s0, s1) ? s1 - s0 : 0;
+    const bool grazing = std::fabs(innerChord - chord) > 1e-6;
+    const double sum = Sum(segs);
+    const double tol = 1e-12 * std::max(1.0, chord);
+    if (grazing) {
+        EXPECT_TRUE(std::fabs(sum) <= tol || std::fabs(sum - chord) <= tol)
+            << what << ": sum " << sum << " chord " << chord;
+    } else {
+        EXPECT_NEAR(sum, chord, tol) << what;
+        if (chord > 1e-9) {
+            ASSERT_EQ(runs.size(), 1u) << what;
+            EXPECT_NEAR(runs[0][0], t0, tol) << what;
+            EXPECT_NEAR(runs[0][1], t1, tol) << what;
+        }
+    }
+    for (const auto& g : segs) {
+        if (!checkCells) break;
+        const double tm = 0.5 * (g.tEnter + g.tExit);
+        const double X[3] = {ray.origin[0] + tm * ray.dir[0], ray.origin[1] + tm * ray.dir[1],
+                             ray.origin[2] + tm * ray.dir[2]};
+        EXPECT_TRUE(CellContains(mesh, g.cell, X, 1e-7)) << what << " cell " << g.cell;
+    }
+}
+
+struct CubeCase {
+    std::string name;
+    int randomRays;
+};
+
+Mesh MakeCubeMesh(const std::string& name) {
+    if (name == "builtin-tets") return MakeBuiltin("builtin:cube-tets-8");
+    if (name == "tets-jitter")
+        return GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Tets5; });
+    if (name == "hex-jitter") return GridMesh(7, 0.25, [](int, int, int) { return CubeCut::Hex; });
+    if (name == "wedge-jitter")
+        return GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Wedges; });
+    if (name == "pyramid-tet-jitter")
+        return GridMesh(5, 0.2, [](int, int, int) { return CubeCut::PyramidsTetsX; });
+    if (name == "hex-straight") return GridMesh(5, 0.0, [](int, int, int) { return CubeCut::Hex; });
+    // Mixed: columns of hexes, pyramids, wedges and pyramids split into tets along z.
+    return GridMesh(6, 0.2, [](int a, int b, int) {
+        switch ((a + 2 * b) % 4) {
+            case 0: return CubeCut::Hex;
+            case 1: return CubeCut::Pyramids;
+            case 2: return CubeCut::Wedges;
+            default: return CubeCut::PyramidsTetsZ;
+        }
+    });
+}
+
+class CubeMeshTest : public ::testing::TestWithParam<CubeCase> {};
+
+TEST_P(CubeMeshTest, RandomRaysGiveTheBoxChord) {
+    const Mesh mesh = MakeCubeMesh(GetParam().name);
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    std::mt19937_64 rng(42);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::normal_distribution<double> gauss;
+    std::vector<Segment> segs;
+    for (int i = 0; i < GetParam().randomRays; ++i) {
+        Vec3 from, to;
+        double len = 0;
+        for (int d = 0; d < 3; ++d) {
+            from[d] = gauss(rng);
+            len += from[d] * from[d];
+        }
+        // Origins outside (radius 3) and, one in four, inside the cube.
+        const bool inside = i % 4 == 0;
+        for (int d = 0; d < 3; ++d) {
+            from[d] = inside ? uni(rng) : 0.5 + 3 * from[d] / std::sqrt(len);
+            to[d] = -0.2 + 1.4 * uni(rng);
+        }
+        CheckCubeRay(mesh, tr, MakeRay(from, to), GetParam().name + " ray " + std::to_string(i),
+                     segs);
+        if (::testing::Test::HasFailure()) return;
+    }
+    const TraceCounters counters = tr.Counters();
+    EXPECT_EQ(counters.walkFailures, 0);
+}
+
+TEST_P(CubeMeshTest, AdversarialRaysThroughVerticesEdgesAndFaces) {
+    const Mesh mesh = MakeCubeMesh(GetParam().name);
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Segment> segs;
+    auto corner = [&](std::int64_t c, int k) {
+        const auto lat = VertexLattice(mesh.cellShape[c], mesh.cellOrder[c])[k];
+        const int node =
+            InternalNodeIndex(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c], lat);
+        const double* x = &mesh.points[3 * mesh.CellNodes(c)[node]];
+        return Vec3{x[0], x[1], x[2]};
+    };
+    auto randomDir = [&]() {
+        return Vec3{uni(rng) - 0.5, uni(rng) - 0.5, uni(rng) - 0.5};
+    };
+    for (int i = 0; i < 6000; ++i) {
+        const std::int64_t c = std::int64_t(uni(rng) * mesh.CellCount());
+        const int nv = VertexCount(mesh.cellShape[c]);
+        const int ka = int(uni(rng) * nv), kb = (ka + 1 + int(uni(rng) * (nv - 1))) % nv;
+        int kc = int(uni(rng) * nv);
+        while (kc == ka || kc == kb) kc = (kc + 1) % nv;
+        const Vec3 A = corner(c, ka), B = corner(c, kb), C = corner(c, kc);
+        Vec3 through, dir;
+        std::string kind;
+        switch (i % 4) {
+            case 0:  // through a vertex
+                through = A;
+                dir = randomDir();
+                kind = "vertex";
+                break;
+            case 1:  // along the line of two corners (edges and face diagonals)
+                through = A;
+                for (int d = 0; d < 3; ++d) dir[d] = B[d] - A[d];
+                kind = "edge";
+                break;
+            case 2: {  // inside the plane of three corners (faces)
+                const double s = uni(rng), r = uni(rng) * (1 - s);
+                for (int d = 0; d < 3; ++d) {
+                    through[d] = A[d] + s * (B[d] - A[d]) + r * (C[d] - A[d]);
+                    dir[d] = (B[d] - A[d]) + (2 * uni(rng) - 1) * (C[d] - A[d]);
+                }
+                kind = "face";
+                break;
+            }
+            default: {  // through a point of an edge
+                const double s = uni(rng);
+                for (int d = 0; d < 3; ++d) through[d] = A[d] + s * (B[d] - A[d]);
+                dir = randomDir();
+                kind = "edge point";
+            }
+        }
+        // A ray lying along an edge of non-planar (bilinear) faces lies in those faces: its
+        // crossings with them are ill-conditioned in t, so only the chord is checked, not
+        // which of the cells around the edge each piece is given to.
+        const bool planarFaces = tr.Stats().bilinearFaces == 0;
+        CheckCubeRay(mesh, tr, MakeRayDir(through, dir),
+                     GetParam().name + " " + kind + " ray " + std::to_string(i), segs,
+                     planarFaces || kind != "edge");
+        if (::testing::Test::HasFailure()) return;
+    }
+    // Rays inside the boundary planes and along boundary edges, and axis-parallel rays
+    // along grid lines and planes (edges and faces of unjittered meshes).
+    for (int i = 0; i < 2000; ++i) {
+        const int axis = i % 3, other = (axis + 1) % 3, third = (axis + 2) % 3;
+        Vec3 through{uni(rng), uni(rng), uni(rng)}, dir{0, 0, 0};
+        const double grid[] = {0, 0.125, 0.25, 0.5, 0.75, 1};
+        const int mode = (i / 3) % 4;
+        if (mode == 0) {  // boundary plane, in-plane direction
+            through[axis] = uni(rng) < 0.5 ? 0 : 1;
+            dir[other] = uni(rng) - 0.5;
+            dir[third] = uni(rng) - 0.5;
+        } else if (mode == 1) {  // boundary edge
+            through[axis] = uni(rng) < 0.5 ? 0 : 1;
+            through[other] = uni(rng) < 0.5 ? 0 : 1;
+            dir[third] = 1;
+        } else if (mode == 2) {  // grid line parallel to an axis
+            through[other] = grid[i % 6];
+            through[third] = grid[(i / 6) % 6];
+            dir[axis] = i % 2 ? 1 : -1;
+        } else {  // grid plane, diagonal in-plane direction
+            through[axis] = grid[i % 6];
+            dir[other] = 1;
+            dir[third] = uni(rng) < 0.5 ? 1 : -1;
+        }
+        CheckCubeRay(mesh, tr, MakeRayDir(through, dir),
+                     GetParam().name + " boundary/grid ray " + std::to_string(i), segs);
+        if (::testing::Test::HasFailure()) return;
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(Shapes, CubeMeshTest,
+                         ::testing::Values(CubeCase{"builtin-tets", 100000},
+                                           CubeCase{"tets-jitter", 20000},
+                                           CubeCase{"hex-jitter", 20000},
+                                           CubeCase{"wedge-jitter", 20000},
+                                           CubeCase{"pyramid-tet-jitter", 20000},
+                                           CubeCase{"mixed", 20000},
+                                           CubeCase{"hex-straight", 5000}),
+                         [](const auto& info) {
+                             std::string s = info.param.name;
+                             std::replace(s.begin(), s.end(), '-', '_');
+                             return s;
+                         });
+
+TEST(BrickTraverser, FaceCountsOfCubeTets) {
+    for (int n : {1, 3}) {
+        const Mesh mesh = MakeBuiltin("builtin:cube-tets-" + std::to_string(n));
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        const auto& s = tr.Stats();
+        EXPECT_EQ(s.cells, 5 * n * n * n);
+        EXPECT_EQ(s.boundaryFaces, 12 * n * n);  // 6 sides, n^2 squares, 2 triangles
+        EXPECT_EQ(s.faces, (4 * 5 * n * n * n + 12 * n * n) / 2);
+        EXPECT_EQ(s.mergedPoints, (n + 1) * (n + 1) * (n + 1));
+        EXPECT_EQ(s.curvedFaces, 0);
+        EXPECT_GT(s.Bytes(), 0u);
+    }
+}
+
+TEST(BrickTraverser, FiveTetsAndFiveTimes40CubedTetsGiveTheSameChords) {
+    const Mesh coarse = MakeBuiltin("builtin:cube-tets-1");
+    const Mesh fine = MakeBuiltin("builtin:cube-tets-40");
+    const BrickTraverser a(Brick::WholeMesh(coarse)), b(Brick::WholeMesh(fine));
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> uni(-0.3, 1.3);
+    std::vector<Segment> sa, sb;
+    for (int i = 0; i < 2000; ++i) {
+        const Ray ray = MakeRay({uni(rng) * 4 - 2, uni(rng) * 4 - 2, -2.5},
+                                {uni(rng), uni(rng), uni(rng)});
+        a.Trace(ray, -INFINITY, INFINITY, sa);
+        b.Trace(ray, -INFINITY, INFINITY, sb);
+        double t0, t1;
+        const double chord = BoxChord(ray, kUnitBox, t0, t1) ? t1 - t0 : 0;
+        EXPECT_NEAR(Sum(sa), chord, 1e-12 * std::max(1.0, chord)) << i;
+        EXPECT_NEAR(Sum(sb), Sum(sa), 1e-12 * std::max(1.0, chord)) << i;
+        EXPECT_LE(Runs(sb, "fine").size(), 1u);
+    }
+}
+
+// The union of the kept cubes' chords, as merged intervals.
+std::vector<std::array<double, 2>> CubeUnionIntervals(const Ray& ray, int n,
+                                                      const std::function<bool(int, int, int)>& keep) {
+    std::vector<std::array<double, 2>> iv;
+    for (int c = 0; c < n; ++c)
+        for (int b = 0; b < n; ++b)
+            for (int a = 0; a < n; ++a) {
+                if (!keep(a, b, c)) continue;
+                const Box3 box = {{{double(a) / n, double(b) / n, double(c) / n},
+                                   {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}}};
+                double t0, t1;
+                if (BoxChord(ray, box, t0, t1) && t1 > t0) iv.push_back({t0, t1});
+            }
+    std::sort(iv.begin(), iv.end());
+    std::vector<std::array<double, 2>> merged;
+    for (const auto& x : iv) {
+        if (!merged.empty() && x[0] <= merged.back()[1] + 1e-12)
+            merged.back()[1] = std::max(merged.back()[1], x[1]);
+        else merged.push_back(x);
+    }
+    return merged;
+}
+
+TEST(BrickTraverser, NonConvexDisconnectedMeshWithCavity) {
+    const int n = 4;
+    // An L-shaped prism (cubes with a, b >= 2 removed), a closed cavity at (1,1,1), and a
+    // disconnected bar (the slab a = 2 removed for b < 2 cuts off a = 3).
+    const auto keep = [](int a, int b, int c) {
+        if (a >= 2 && b >= 2) return false;
+        if (a == 1 && b == 1 && c == 1) return false;
+        if (a == 2) return false;
+        return true;
+    };
+    for (CubeCut cut : {CubeCut::Hex, CubeCut::Tets5}) {
+        const Mesh mesh = GridMesh(n, 0.0, [cut](int, int, int) { return cut; }, keep);
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        std::mt19937_64 rng(5);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> segs;
+        int multi = 0;
+        for (int i = 0; i < 5000; ++i) {
+            const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, uni(rng) * 3 - 1},
+                                    {uni(rng), uni(rng), uni(rng)});
+            tr.Trace(ray, -INFINITY, INFINITY, segs);
+            const auto runs = Runs(segs, "non-convex");
+            const auto truth = CubeUnionIntervals(ray, n, keep);
+            // Intervals shorter than rounding can vanish; compare the others.
+            std::vector<std::array<double, 2>> expect;
+            for (const auto& x : truth)
+                if (x[1] - x[0] > 1e-9) expect.push_back(x);
+            std::vector<std::array<double, 2>> got;
+            for (const auto& x : runs)
+                if (x[1] - x[0] > 1e-9) got.push_back(x);
+            ASSERT_EQ(got.size(), expect.size()) << i;
+            for (std::size_t k = 0; k < got.size(); ++k) {
+                EXPECT_NEAR(got[k][0], expect[k][0], 1e-12) << i;
+                EXPECT_NEAR(got[k][1], expect[k][1], 1e-12) << i;
+            }
+            multi += expect.size() > 1;
+        }
+        EXPECT_GT(multi, 500);
+    }
+}
+
+TEST(BrickTraverser, ClipsToSubBoxAndRange) {
+    const Mesh mesh = GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Wedges; });
+    const Box3 sub = {{{0.2, 0.1, 0.3}, {0.7, 0.9, 0.6}}};
+    const BrickTraverser tr(Brick{&mesh, sub});
+    const BrickTraverser whole(Brick::WholeMesh(mesh));
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Segment> segs, all;
+    for (int i = 0; i < 5000; ++i) {
+        const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                                {uni(rng), uni(rng), uni(rng)});
+        const double tMin = 1.0 + uni(rng), tMax = tMin + 1.5 * uni(rng);
+        tr.Trace(ray, tMin, tMax, segs);
+        double t0, t1;
+        double expect = 0;
+        if (BoxChord(ray, sub, t0, t1)) expect = std::max(0.0, std::min(t1, tMax) - std::max(t0, tMin));
+        EXPECT_NEAR(Sum(segs), expect, 1e-12) << i;
+        EXPECT_LE(Runs(segs, "clip").size(), 1u) << i;
+        // The clipped segments are the whole-mesh segments cut at the clip range.
+        whole.Trace(ray, -INFINITY, INFINITY, all);
+        std::vector<Segment> cut;
+        const double a = std::max(t0, tMin), b = std::min(t1, tMax);
+        for (const auto& g : all) {
+            const double x = std::max(g.tEnter, a), y = std::min(g.tExit, b);
+            if (x < y) cut.push_back({g.cell, x, y});
+        }
+        ASSERT_EQ(cut.size(), segs.size()) << i;
+        for (std::size_t k = 0; k < cut.size(); ++k) {
+            EXPECT_EQ(cut[k].cell, segs[k].cell) << i;
+            EXPECT_EQ(cut[k].tEnter, segs[k].tEnter) << i;
+            EXPECT_EQ(cut[k].tExit, segs[k].tExit) << i;
+        }
+    }
+}
+
+// Every cell gets private copies of its nodes, as deal.II writes them; optionally the
+// copies are moved by `noise` (much less than the merge tolerance).
+Mesh Unshare(const Mesh& in, double noise) {
+    Mesh out;
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> uni(-1, 1);
+    for (std::int64_t c = 0; c < in.CellCount(); ++c) {
+        std::vector<std::int64_t> nodes;
+        for (int k = 0; k < in.CellNodeCount(c); ++k) {
+            const std::int64_t p = in.CellNodes(c)[k];
+            for (int d = 0; d < 3; ++d) out.points.push_back(in.points[3 * p + d] + noise * uni(rng));
+            nodes.push_back(out.PointCount() - 1);
+        }
+        out.AddCell(in.cellShape[c], in.cellOrder[c], in.cellFamily[c], nodes.data(),
+                    int(nodes.size()));
+    }
+    return out;
+}
+
+TEST(BrickTraverser, UnsharedPointsAreMergedByPosition) {
+    const Mesh shared = MakeCubeMesh("mixed");
+    for (double noise : {0.0, 1e-14}) {
+        const Mesh unshared = Unshare(shared, noise);
+        const BrickTraverser a(Brick::WholeMesh(shared)), b(Brick::WholeMesh(unshared));
+        EXPECT_EQ(b.Stats().mergedPoints, a.Stats().mergedPoints);
+        EXPECT_EQ(b.Stats().boundaryFaces, a.Stats().boundaryFaces);
+        std::mt19937_64 rng(21);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> sa, sb;
+        for (int i = 0; i < 3000; ++i) {
+            const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                                    {uni(rng), uni(rng), uni(rng)});
+            a.Trace(ray, -INFINITY, INFINITY, sa);
+            b.Trace(ray, -INFINITY, INFINITY, sb);
+            // Faces are canonical by position, so bitwise equal positions give bitwise
+            // equal segments; copies moved by 1e-14 give the same chords (which cell a
+            // ray grazing a non-planar face is in may change with the split diagonal).
+            if (noise == 0) {
+                ASSERT_EQ(sa.size(), sb.size()) << i;
+                for (std::size_t k = 0; k < sa.size(); ++k) {
+                    EXPECT_EQ(sa[k].cell, sb[k].cell) << i;
+                    EXPECT_EQ(sa[k].tEnter, sb[k].tEnter) << i;
+                    EXPECT_EQ(sa[k].tExit, sb[k].tExit) << i;
+                }
+            }
+            EXPECT_NEAR(Sum(sa), Sum(sb), 1e-12) << "noise " << noise << " ray " << i;
+            EXPECT_EQ(Runs(sb, "unshared").size(), Runs(sa, "shared").size());
+        }
+    }
+}
+
+TEST(BrickTraverser, InvertedCellsAreTraversedLikePositiveOnes) {
+    const Mesh mesh = MakeBuiltin("builtin:cube-tets-4");
+    Mesh flipped = mesh;
+    for (std::int64_t c = 0; c < flipped.CellCount(); c += 2)
+        std::swap(flipped.connectivity[flipped.cellOffsets[c] + 1],
+                  flipped.connectivity[flipped.cellOffsets[c] + 2]);
+    const BrickTraverser a(Brick::WholeMesh(mesh)), b(Brick::WholeMesh(flipped));
+    std::mt19937_64 rng(4);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Segment> sa, sb;
+    for (int i = 0; i < 2000; ++i) {
+        const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                                {uni(rng), uni(rng), uni(rng)});
+        a.Trace(ray, -INFINITY, INFINITY, sa);
+        b.Trace(ray, -INFINITY, INFINITY, sb);
+        ASSERT_EQ(sa.size(), sb.size()) << i;
+        for (std::size_t k = 0; k < sa.size(); ++k) EXPECT_EQ(sa[k].cell, sb[k].cell) << i;
+        EXPECT_NEAR(Sum(sa), Sum(sb), 1e-13);
+    }
+}
+
+TEST(BrickTraverser, ConcurrentQueriesMatchSerialOnes) {
+    const Mesh mesh = MakeCubeMesh("mixed");
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    const int n = 4000;
+    std::vector<Ray> rays(n);
+    std::mt19937_64 rng(8);
+    std::uniform_real_distribution<double> uni(0, 1);
+    for (auto& r : rays)
+        r = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5}, {uni(rng), uni(rng), uni(rng)});
+    std::vector<std::vector<Segment>> serial(n), parallel(n);
+    for (int i = 0; i < n; ++i) tr.Trace(rays[i], 0, INFINITY, serial[i]);
+    tbb::parallel_for(0, n, [&](int i) { tr.Trace(rays[i], 0, INFINITY, parallel[i]); });
+    for (int i = 0; i < n; ++i) {
+        ASSERT_EQ(serial[i].size(), parallel[i].size());
+        for (std::size_t k = 0; k < serial[i].size(); ++k) {
+            EXPECT_EQ(serial[i][k].cell, parallel[i][k].cell);
+            EXPECT_EQ(serial[i][k].tEnter, parallel[i][k].tEnter);
+        }
+    }
+}
+
+TEST(BrickTraverser, StraightHighOrderCellsHaveStraightFaces) {
+    // Straight quadratic tets on [-1,1]^3, and order-2 hexes with displaced vertices
+    // (bilinear faces carrying order-2 nodes).
+    for (const char* spec : {"builtin:ball-p2?n=3", "builtin:nk-quartic?order=2"}) {
+        const Mesh mesh = MakeBuiltin(spec);
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        EXPECT_EQ(tr.Stats().curvedFaces, 0) << spec;
+        const auto box = mesh.Bounds();
+        std::mt19937_64 rng(2);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> segs;
+        for (int i = 0; i < 3000; ++i) {
+            Vec3 from, to;
+            for (int d = 0; d < 3; ++d) {
+                const double w = box[1][d] - box[0][d];
+                from[d] = box[0][d] + w * (3 * uni(rng) - 1);
+                to[d] = box[0][d] + w * uni(rng);
+            }
+            const Ray ray = MakeRay(from, to);
+            tr.Trace(ray, -INFINITY, INFINITY, segs);
+            double t0, t1;
+            const double chord = BoxChord(ray, box, t0, t1) ? t1 - t0 : 0;
+            EXPECT_NEAR(Sum(segs), chord, 1e-12 * std::max(1.0, chord)) << spec << " " << i;
+            EXPECT_LE(Runs(segs, spec).size(), 1u);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Curved cells: the map (x, y, z) -> (x, y, s (z - z0) + x^2 + y^2) is quadratic, so
+// quadratic cells with mapped nodes represent its image exactly: the region between two
+// paraboloids, g = z - x^2 - y^2 in [gLo, gHi], over a square.
+
+struct ParaboloidSlab {
+    double xy[2];    // |x|, |y| range: [xy0, xy1]
+    double g[2];     // [gLo, gHi]
+};
+
+// The analytic intervals of the ray inside the slab: breakpoints are the square's slab
+// planes and the roots of g(t) = gLo and g(t) = gHi; between breakpoints, test the middle.
+std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const ParaboloidSlab& s) {
+    std::vector<double> br;
+    double t0 = -INFINITY, t1 = INFINITY;
+    const Box3 square = {{{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}}};
+    if (!ClipRayToBox(ray, square, t0, t1)) return {};
+    br.push_back(t0);
+    br.push_back(t1);
+    const double *o = ray.origin, *d = ray.dir;
+    const double a = -(d[0] * d[0] + d[1] * d[1]);
+    const double b = d[2] - 2 * (o[0] * d[0] + o[1] * d[1]);
+    for (double level : {s.g[0], s.g[1]}) {
+        const double c = o[2] - o[0] * o[0] - o[1] * o[1] - level;
+        if (a == 0) {
+            if (b != 0) br.push_back(-c / b);
+            continue;
+        }
+        const double disc = b * b - 4 * a * c;
+        if (disc < 0) continue;
+        const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+        br.push_back(q / a);
+        if (q != 0) br.push_back(c / q);
+    }
+    std::sort(br.begin(), br.end());
+    std::vector<std::array<double, 2>> out;
+    for (std::size_t k = 0; k + 1 < br.size(); ++k) {
+        const double lo = std::max(br[k], t0), hi = std::min(br[k + 1], t1);
+        if (!(lo < hi)) continue;
+        const double tm = 0.5 * (lo + hi);
+        const double x = o[0] + tm * d[0], y = o[1] + tm * d[1], z = o[2] + tm * d[2];
+        const double g = z - x * x - y * y;
+        if (g < s.g[0] || g > s.g[1]) continue;
+        if (!out.empty() && out.back()[1] == lo) out.back()[1] = hi;
+        else out.push_back({lo, hi});
+    }
+    return out;
+}
+
+// Rays that cross or miss a paraboloid nearly tangentially are excluded: there the node
+// tessellation (which decides crossings) and the true surface can disagree by a chord as
+// long as the tessellation's deviation allows (documented in brick_traverser.h).
+bool WellAway(const Ray& ray, const ParaboloidSlab& s) {
+    const double *o = ray.origin, *d = ray.dir;
+    const double a = d[0] * d[0] + d[1] * d[1];
+    if (a < 1e-6) return true;
+    const double b = d[2] - 2 * (o[0] * d[0] + o[1] * d[1]);
+    for (double level : {s.g[0], s.g[1]}) {
+        const double c = o[2] - o[0] * o[0] - o[1] * o[1] - level;
+        // g(t) - level = -a t^2 + b t + c peaks at b^2 / (4a) + c.
+        const double peak = b * b / (4 * a) + c;
+        if (std::fabs(peak) < 0.05) return false;
+    }
+    return true;
+}
+
+void CheckParaboloid(const Mesh& mesh, const ParaboloidSlab& slab, int rays,
+                     const std::string& what) {
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    EXPECT_GT(tr.Stats().curvedFaces, 0) << what;
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Segment> segs;
+    int tested = 0, multi = 0, exactCount = 0;
+    const double lo = slab.xy[0], w = slab.xy[1] - slab.xy[0];
+    for (int i = 0; tested < rays; ++i) {
+        Vec3 from, to;
+        for (int d = 0; d < 2; ++d) {
+            from[d] = lo + w * (3 * uni(rng) - 1);
+            to[d] = lo + w * (1.2 * uni(rng) - 0.1);
+        }
+        from[2] = -3 + 7 * uni(rng);
+        to[2] = -1 + 3 * uni(rng);
+        Ray ray = MakeRay(from, to);
+        if (i % 10 == 0) ray = MakeRayDir(to, {0.05 * (uni(rng) - 0.5), 0, -1}, 5);
+        if (!WellAway(ray, slab)) continue;
+        ++tested;
+        tr.Trace(ray, -INFINITY, INFINITY, segs);
+        const std::string rayText = " ray " + std::to_string(i) + " origin " +
+                                    ::testing::PrintToString(std::vector<double>(ray.origin, ray.origin + 3)) +
+                                    " dir " +
+                                    ::testing::PrintToString(std::vector<double>(ray.dir, ray.dir + 3));
+        const auto runs = Runs(segs, what);
+        const auto expect = SlabIntervals(ray, slab);
+        multi += expect.size() > 1;
+        // Exact (1e-10) unless the ray passes within the tessellation's deviation of a
+        // curved edge, where crossings decided on the node tessellation can pick the
+        // neighbouring face (see brick_traverser.h): then the chord error is bounded by
+        // the ray's path through the gap between tessellation and surface.
+        bool exact = runs.size() == expect.size();
+        for (std::size_t k = 0; exact && k < runs.size(); ++k)
+            exact = std::fabs(runs[k][0] - expect[k][0]) <= 1e-10 &&
+                    std::fabs(runs[k][1] - expect[k][1]) <= 1e-10;
+        double sumExpect = 0;
+        for (const auto& x : expect) sumExpect += x[1] - x[0];
+        EXPECT_NEAR(Sum(segs), sumExpect, 0.1) << what << rayText;
+        exactCount += exact;
+        if (::testing::Test::HasFailure()) return;
+    }
+    EXPECT_GE(exactCount, 0.9 * rays) << what;
+    std::printf("%s: %d of %d rays exact to 1e-10\n", what.c_str(), exactCount, rays);
+    EXPECT_GT(multi, 0) << what;
+    EXPECT_EQ(tr.Counters().walkFailures, 0);
+}
+
+TEST(BrickTraverser, QuadraticTetsReproduceParaboloidChords) {
+    // Straight quadratic tets on [-1,1]^3 mapped by z -> (z - 1) / 2 + x^2 + y^2: the slab
+    // x^2 + y^2 - 1 <= z <= x^2 + y^2 over the square [-1,1]^2.
+    Mesh mesh = MakeBuiltin("builtin:ball-p2?n=3");
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        double* x = &mesh.points[3 * i];
+        x[2] = 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1];
+    }
+    CheckParaboloid(mesh, ParaboloidSlab{{-1, 1}, {-1, 0}}, 3000, "p2 tets");
+}
+
+TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
+    // Order-2 hexes on a 3^3 grid of [0,1]^3, nodes mapped by z -> z + x^2 + y^2.
+    const int n = 3, p = 2, g = n * p + 1;
+    Mesh mesh;
+    for (int k = 0; k < g; ++k)
+        for (int j = 0; j < g; ++j)
+            for (int i = 0; i < g; ++i) {
+                const double x = double(i) / (g - 1), y = double(j) / (g - 1), z = double(k) / (g - 1);
+                mesh.points.insert(mesh.points.end(), {x, y, z + x * x + y * y});
+            }
+    for (int c = 0; c < n; ++c)
+        for (int b = 0; b < n; ++b)
+            for (int a = 0; a < n; ++a) {
+                std::vector<std::int64_t> nodes;
+                for (int k = 0; k <= p; ++k)
+                    for (int j = 0; j <= p; ++j)
+                        for (int i = 0; i <= p; ++i)
+                            nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
+                mesh.AddCell(CellShape::Hex, p, CellFamily::Lagrange, nodes.data(), int(nodes.size()));
+            }
+    CheckParaboloid(mesh, ParaboloidSlab{{0, 1}, {0, 1}}, 3000, "q2 hexes");
+}
+
+}  // namespace
+}  // namespace hpray
