@@ -1,7 +1,55 @@
-// Image compositing across bricks and ranks.
+// Distributed image compositing: tree-aware binary swap, direct send, gather reference.
 #pragma once
 
+#include <mpi.h>
+
+#include <cstdint>
+
+#include "composite_tree.h"
+#include "io/image.h"
+#include "over.h"
+
 namespace hpray::compositor {
-/// The compositor's version of the image layout it expects (bumped on layout changes).
-int LayoutVersion();
+
+/// How partial images are combined.
+enum class Method {
+    /// Binary swap along the tree over ranks (PlanTreeSwap), active pixels only, then a
+    /// gather of the final pieces to rank 0. The default.
+    TreeSwap,
+    /// Every rank sends range k of its image to rank k (PlanDirectSend), then the gather.
+    /// Same bytes as TreeSwap, P - 1 messages per rank; kept for measurements.
+    DirectSend,
+    /// The reference: every rank sends its whole uncompressed image to rank 0, which
+    /// composites them one by one in visibility order. Slow and simple on purpose.
+    GatherReference,
+};
+
+/// What one Composite call did; every field is the same on every rank except the
+/// *Local ones.
+struct CompositeStats {
+    int rounds = 0;                      ///< exchange rounds (tree height for TreeSwap)
+    int bytesPerPixel = kBytesPerPixel;  ///< wire bytes per non-empty pixel (no headers)
+    std::uint64_t bytesSentMax = 0;      ///< max over ranks of bytes sent in the rounds
+    std::uint64_t bytesSentTotal = 0;    ///< sum over ranks of bytes sent in the rounds
+    std::uint64_t bytesGather = 0;       ///< bytes sent to rank 0 by the final gather
+    std::uint64_t bytesSentLocal = 0;    ///< this rank's bytes sent in the rounds
+    double swapSeconds = 0.0;            ///< max over ranks, wall time of the rounds
+    double gatherSeconds = 0.0;          ///< max over ranks, wall time of the gather
+};
+
+/// Composites the partial images of all ranks of `comm` into rank 0's `image`.
+///
+/// Collective over `comm` (P ranks), called from the thread that initialised MPI. On
+/// entry every rank's `image` is its full-frame partial image (same width and height on
+/// all ranks): the rendering of its region of space, the leaf of `tree` it owns. Regions
+/// are disjoint, so the result is exact: rank images combined with Over (over.h) in the
+/// tree's visibility order for `view`. On return rank 0 holds the composited image; the
+/// other ranks' images hold scratch data. `tree` and `view` must be identical on all
+/// ranks and `tree` valid for P ranks: a rank that finds otherwise (or mismatched image
+/// sizes) makes every rank throw InternalError together, before any exchange. A failure
+/// during the exchange ends the job through mpi::Abort, so no rank waits forever.
+CompositeStats Composite(Image& image, const CompositeTree& tree,
+                         const CompositeView& view, MPI_Comm comm,
+                         Method method = Method::TreeSwap);
+
 }  // namespace hpray::compositor
