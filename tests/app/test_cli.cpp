@@ -2,7 +2,11 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <random>
+#include <vector>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -87,5 +91,115 @@ TEST(Cli, UnfinishedSubcommandsSaySo) {
 }
 
 TEST(Cli, HelpExitsZero) { EXPECT_EQ(RunHpray("--help").code, 0); }
+
+}  // namespace
+
+namespace {
+
+std::string WritePoints(const std::string& name, const std::vector<std::array<double, 3>>& pts) {
+    const auto dir = std::filesystem::temp_directory_path() / "hpray_test_cli";
+    std::filesystem::create_directories(dir);
+    const auto path = dir / name;
+    std::ofstream out(path);
+    out << "x,y,z\n";
+    out.precision(17);
+    for (const auto& p : pts) out << p[0] << "," << p[1] << "," << p[2] << "\n";
+    return path.string();
+}
+
+std::vector<std::array<double, 3>> RandomPoints(int n, double lo, double hi, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(lo, hi);
+    std::vector<std::array<double, 3>> pts(n);
+    for (auto& p : pts) p = {u(rng), u(rng), u(rng)};
+    return pts;
+}
+
+TEST(CliProbe, BallP2ReproducesTheQuadraticExactly) {
+    auto pts = RandomPoints(300, -1.0, 1.0, 7);
+    pts.push_back({2.0, 0.0, 0.0});  // outside
+    pts.push_back({1.0, 1.0, 1.0});  // a corner vertex
+    pts.push_back({0.0, 0.0, 0.0});  // an interior vertex shared by many cells
+    const std::string csv = WritePoints("ball.csv", pts);
+    RunResult r = RunHpray("probe builtin:ball-p2 --points " + csv + " --gradient --json -q");
+    ASSERT_EQ(r.code, 0) << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    ASSERT_EQ(j.size(), pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+        const auto& e = j[i];
+        const double x = pts[i][0], y = pts[i][1], z = pts[i][2];
+        if (i == 300) {
+            EXPECT_TRUE(e["cell"].is_null());
+            EXPECT_TRUE(e["ref"].is_null());
+            EXPECT_TRUE(e["values"].empty());
+            continue;
+        }
+        ASSERT_FALSE(e["cell"].is_null()) << i;
+        const double u = e["values"]["u"].get<double>();
+        EXPECT_NEAR(u, x * x + y * y + z * z, 1e-13) << i;
+        const auto& g = e["gradients"]["u"];
+        EXPECT_NEAR(g[0].get<double>(), 2 * x, 1e-12) << i;
+        EXPECT_NEAR(g[1].get<double>(), 2 * y, 1e-12) << i;
+        EXPECT_NEAR(g[2].get<double>(), 2 * z, 1e-12) << i;
+    }
+}
+
+TEST(CliProbe, CubeTetsReproducesTheLinearField) {
+    auto pts = RandomPoints(300, 0.0, 1.0, 11);
+    pts.push_back({0.25, 0.5, 0.75});  // on grid planes
+    pts.push_back({1.0 + 1e-9, 0.5, 0.5});  // just outside
+    const std::string csv = WritePoints("cube.csv", pts);
+    RunResult r = RunHpray("probe builtin:cube-tets-4 --points " + csv + " --json -q");
+    ASSERT_EQ(r.code, 0) << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    ASSERT_EQ(j.size(), pts.size());
+    for (std::size_t i = 0; i + 1 < pts.size(); ++i) {
+        ASSERT_FALSE(j[i]["cell"].is_null()) << i;
+        const double expect = pts[i][0] + 2 * pts[i][1] + 3 * pts[i][2];
+        EXPECT_NEAR(j[i]["values"]["u"].get<double>(), expect, 1e-14) << i;
+        // Affine tets: the reference point lies in the unit simplex.
+        const auto& ref = j[i]["ref"];
+        const double r0 = ref[0].get<double>(), r1 = ref[1].get<double>(), r2 = ref[2].get<double>();
+        EXPECT_GE(std::min({r0, r1, r2}), -1e-12);
+        EXPECT_LE(r0 + r1 + r2, 1 + 1e-12);
+    }
+    EXPECT_TRUE(j.back()["cell"].is_null());
+}
+
+// deal.II step-65: the exact solution is known (u = r^2 inside r < 0.5, 0.1 r^2 + 0.225
+// outside); the file's Q3 solution on curved cells, read with the legacy hex order, must
+// interpolate it to the discretisation error (~1e-6), which also checks ordering and the
+// inversion of curved cells on real data.
+TEST(CliProbe, DealiiStep65MatchesTheExactSolution) {
+    const std::string mesh = std::string(HPRAY_SHARED_DATA) + "/dealii_step65_hex_q3.vtu";
+    if (!std::filesystem::exists(mesh)) GTEST_SKIP() << "no shared data";
+    auto pts = RandomPoints(400, -0.999, 0.999, 3);
+    const std::string csv = WritePoints("step65.csv", pts);
+    RunResult r = RunHpray("probe " + mesh + " --points " + csv + " --fields solution --json -q");
+    ASSERT_EQ(r.code, 0) << r.out.substr(0, 2000);
+    const auto j = nlohmann::json::parse(r.out);
+    double maxErr = 0;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+        ASSERT_FALSE(j[i]["cell"].is_null()) << i;
+        const double r2 = pts[i][0] * pts[i][0] + pts[i][1] * pts[i][1] + pts[i][2] * pts[i][2];
+        const double exact = r2 < 0.25 ? r2 : 0.1 * r2 + 0.225;
+        maxErr = std::max(maxErr, std::abs(j[i]["values"]["solution"].get<double>() - exact));
+    }
+    EXPECT_LT(maxErr, 2e-6);
+}
+
+TEST(CliProbe, BadPointsFileIsInputError) {
+    const auto dir = std::filesystem::temp_directory_path() / "hpray_test_cli";
+    std::filesystem::create_directories(dir);
+    std::ofstream(dir / "bad.csv") << "x,y,z\n0,0,0\n1,2\n";
+    RunResult r = RunHpray("probe builtin:cube-tets-1 --points " + (dir / "bad.csv").string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.out.find("bad.csv: line 3"), std::string::npos) << r.out;
+    std::ofstream(dir / "nan.csv") << "0,0,nan\n";
+    r = RunHpray("probe builtin:cube-tets-1 --points " + (dir / "nan.csv").string());
+    EXPECT_EQ(r.code, 2);
+    r = RunHpray("probe builtin:cube-tets-1 --points " + (dir / "nan.csv").string() + " --fields nope");
+    EXPECT_EQ(r.code, 2);
+}
 
 }  // namespace

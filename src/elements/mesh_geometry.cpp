@@ -1,0 +1,136 @@
+// Whole-mesh geometry cache and the point locator (see mesh_geometry.h).
+#include "elements/mesh_geometry.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace hpray {
+
+MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
+    MeshGeometry g;
+    const std::int64_t n = mesh.CellCount();
+    g.offsets = mesh.cellOffsets;
+    g.nodeXyz.resize(3 * mesh.connectivity.size());
+    g.cells.resize(n);
+    g.boxes.resize(n);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 256),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            const BasisTable& basis =
+                GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
+            double* xyz = g.nodeXyz.data() + 3 * g.offsets[c];
+            const std::int64_t* nodes = mesh.CellNodes(c);
+            for (int m = 0; m < basis.nodeCount; ++m)
+                for (int d = 0; d < 3; ++d) xyz[3 * m + d] = mesh.points[3 * nodes[m] + d];
+            g.cells[c] = MakeCellGeometry(basis, xyz);
+            g.boxes[c] = GeometryBox(basis, xyz);
+        }
+    });
+    const double inf = std::numeric_limits<double>::infinity();
+    g.bounds.lo = {inf, inf, inf};
+    g.bounds.hi = {-inf, -inf, -inf};
+    for (std::int64_t c = 0; c < n; ++c) {
+        g.affineCells += g.cells[c].affine;
+        for (int d = 0; d < 3; ++d) {
+            g.bounds.lo[d] = std::min(g.bounds.lo[d], g.boxes[c].lo[d]);
+            g.bounds.hi[d] = std::max(g.bounds.hi[d], g.boxes[c].hi[d]);
+        }
+    }
+    return g;
+}
+
+void GatherCellValues(const Mesh& mesh, const Field& field, int component, std::int64_t c,
+                      std::vector<double>& out) {
+    const int count = mesh.CellNodeCount(c);
+    out.resize(count);
+    const std::int64_t* nodes = mesh.CellNodes(c);
+    const ScalarSelector sel{&field, component};
+    for (int m = 0; m < count; ++m) out[m] = ScalarValue(sel, nodes[m]);
+}
+
+PointLocator::PointLocator(const Mesh& mesh, const MeshGeometry& geometry)
+    : geometry_(geometry) {
+    const std::int64_t n = mesh.CellCount();
+    if (n == 0) {
+        start_.assign(2, 0);
+        return;
+    }
+    // About two cells per grid cell along each axis, proportional to the extent.
+    std::array<double, 3> ext;
+    for (int d = 0; d < 3; ++d) {
+        lo_[d] = geometry.bounds.lo[d];
+        ext[d] = std::max(geometry.bounds.hi[d] - geometry.bounds.lo[d], 1e-300);
+    }
+    const double volume = ext[0] * ext[1] * ext[2];
+    const double h = std::cbrt(volume / std::max<double>(1.0, n / 2.0));
+    for (int d = 0; d < 3; ++d) {
+        dims_[d] = static_cast<int>(std::clamp(std::ceil(ext[d] / h), 1.0, 512.0));
+        cellSize_[d] = ext[d] / dims_[d];
+    }
+    const std::int64_t gridCells = std::int64_t(dims_[0]) * dims_[1] * dims_[2];
+    auto range = [&](const Box3& b, std::array<int, 3>& i0, std::array<int, 3>& i1) {
+        for (int d = 0; d < 3; ++d) {
+            i0[d] = std::clamp(static_cast<int>(std::floor((b.lo[d] - lo_[d]) / cellSize_[d])), 0,
+                               dims_[d] - 1);
+            i1[d] = std::clamp(static_cast<int>(std::floor((b.hi[d] - lo_[d]) / cellSize_[d])), 0,
+                               dims_[d] - 1);
+        }
+    };
+    std::vector<std::int64_t> counts(gridCells + 1, 0);
+    std::array<int, 3> i0, i1;
+    for (int pass = 0; pass < 2; ++pass) {
+        if (pass == 1) {
+            start_.assign(gridCells + 1, 0);
+            for (std::int64_t k = 0; k < gridCells; ++k) start_[k + 1] = start_[k] + counts[k];
+            items_.resize(start_.back());
+            std::fill(counts.begin(), counts.end(), 0);
+        }
+        for (std::int64_t c = 0; c < n; ++c) {
+            range(geometry.boxes[c], i0, i1);
+            for (int z = i0[2]; z <= i1[2]; ++z)
+                for (int y = i0[1]; y <= i1[1]; ++y)
+                    for (int x = i0[0]; x <= i1[0]; ++x) {
+                        const std::int64_t k = x + std::int64_t(dims_[0]) * (y + std::int64_t(dims_[1]) * z);
+                        if (pass == 1) items_[start_[k] + counts[k]] = c;
+                        ++counts[k];
+                    }
+        }
+    }
+}
+
+PointLocator::Hit PointLocator::Locate(const double world[3], EvalWorkspace& ws,
+                                       const InversionOptions& options) const {
+    Hit hit;
+    if (items_.empty()) return hit;
+    std::array<int, 3> idx;
+    for (int d = 0; d < 3; ++d) {
+        if (world[d] < geometry_.bounds.lo[d] || world[d] > geometry_.bounds.hi[d]) return hit;
+        idx[d] = std::clamp(static_cast<int>(std::floor((world[d] - lo_[d]) / cellSize_[d])), 0,
+                            dims_[d] - 1);
+    }
+    const std::int64_t k = idx[0] + std::int64_t(dims_[0]) * (idx[1] + std::int64_t(dims_[1]) * idx[2]);
+    double best = std::numeric_limits<double>::infinity();
+    for (std::int64_t i = start_[k]; i < start_[k + 1]; ++i) {
+        const std::int64_t c = items_[i];
+        const Box3& b = geometry_.boxes[c];
+        bool inBox = true;
+        for (int d = 0; d < 3; ++d) inBox &= world[d] >= b.lo[d] && world[d] <= b.hi[d];
+        if (!inBox) continue;
+        const InversionResult r = RefFromWorld(geometry_.cells[c], world, ws, options);
+        ++hit.inversions;
+        if (r.status == InversionStatus::NotConverged || r.status == InversionStatus::Singular)
+            ++hit.failures;
+        if (!r.inside) continue;
+        if (r.outsideDistance < best || (r.outsideDistance == best && c < hit.cell)) {
+            best = r.outsideDistance;
+            hit.cell = c;
+            hit.ref = r.ref;
+        }
+    }
+    return hit;
+}
+
+}  // namespace hpray
