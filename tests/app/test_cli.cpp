@@ -203,3 +203,66 @@ TEST(CliProbe, BadPointsFileIsInputError) {
 }
 
 }  // namespace
+
+namespace {
+
+// `hpray info` on every mesh of the shared data, against the counts of its README.
+struct SharedMesh {
+    const char* file;
+    long long points;
+    long long tet, hex, wedge, pyramid;
+    int order;
+    std::vector<std::string> fields;
+};
+
+TEST(CliInfo, EverySharedMeshMatchesItsDocumentedCounts) {
+    const std::vector<SharedMesh> meshes = {
+        {"gmsh_boolean_tet_p4.vtu", 16460, 1170, 0, 0, 0, 4, {"analytic", "region"}},
+        {"mfem_escher_tet_p3.vtu", 103825, 21504, 0, 0, 0, 3, {"analytic", "u", "attribute"}},
+        {"mfem_toroid_wedge_p3.vtu", 6552, 0, 0, 384, 0, 3, {"analytic", "u", "attribute"}},
+        {"mfem_toroid_hex_p3.vtu", 12168, 0, 384, 0, 0, 3, {"analytic", "u", "attribute"}},
+        {"mfem_spiral_hex_p9.vtu", 6859, 0, 8, 0, 0, 9, {"analytic", "u", "attribute"}},
+        {"mfem_fichera_mixed_p3.vtu", 1946, 40, 24, 48, 0, 3, {"analytic", "u", "attribute"}},
+        {"mfem_escher_quadtet_p2.vtu", 117, 42, 0, 0, 0, 2, {"analytic", "material"}},
+        {"dealii_step65_hex_q3.vtu", 425984, 0, 6656, 0, 0, 3, {"solution", "material_ids"}},
+        {"dealii_step44_hex_q2.vtu", 13824, 0, 512, 0, 0, 2,
+         {"displacement", "pressure", "dilatation"}},
+        {"mfem_beam_hex_elasticity_p3.vtu", 16393, 0, 512, 0, 0, 3,
+         {"displacement", "displacement_magnitude", "attribute"}},
+        {"mfem_fichera_mixed16_linear.vtu", 31841, 50400, 4096, 24576, 11664, 1,
+         {"u", "analytic", "attribute"}},
+        {"mfem_gmsh_t16_tets_1M.vtu", 212956, 1251511, 0, 0, 0, 1, {"u", "analytic", "attribute"}},
+        {"gmsh_hybrid_pyr_p3.msh", 19609, 1779, 324, 0, 36, 3, {"analytic"}},
+        {"gmsh_pripyrtet_p2.msh", 805, 12, 0, 135, 15, 2, {"analytic"}},
+    };
+    for (const SharedMesh& m : meshes) {
+        const std::string path = std::string(HPRAY_SHARED_DATA) + "/" + m.file;
+        if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
+        const auto j = InfoJson(path);
+        EXPECT_EQ(j["points"], m.points) << m.file;
+        EXPECT_EQ(j["cells_by_type"]["tet"], m.tet) << m.file;
+        EXPECT_EQ(j["cells_by_type"]["hex"], m.hex) << m.file;
+        EXPECT_EQ(j["cells_by_type"]["wedge"], m.wedge) << m.file;
+        EXPECT_EQ(j["cells_by_type"]["pyramid"], m.pyramid) << m.file;
+        EXPECT_EQ(j["cells"], m.tet + m.hex + m.wedge + m.pyramid) << m.file;
+        EXPECT_EQ(j["orders"].size(), 1u) << m.file;
+        EXPECT_EQ(j["orders"][std::to_string(m.order)], m.tet + m.hex + m.wedge + m.pyramid)
+            << m.file;
+        for (const std::string& f : m.fields) EXPECT_TRUE(j["fields"].contains(f)) << m.file << " " << f;
+        EXPECT_EQ(j["fields"].size(), m.fields.size()) << m.file;
+        // Bounds are finite and ordered.
+        for (int d = 0; d < 3; ++d)
+            EXPECT_LT(j["bounds"][0][d].get<double>(), j["bounds"][1][d].get<double>()) << m.file;
+    }
+}
+
+TEST(CliInfo, VectorFieldsReportComponents) {
+    const std::string path = std::string(HPRAY_SHARED_DATA) + "/dealii_step44_hex_q2.vtu";
+    if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
+    const auto j = InfoJson(path);
+    EXPECT_EQ(j["fields"]["displacement"]["components"], 3);
+    EXPECT_EQ(j["fields"]["displacement"]["component_ranges"].size(), 3u);
+    EXPECT_EQ(j["fields"]["pressure"]["components"], 1);
+}
+
+}  // namespace
