@@ -9,8 +9,11 @@
 
 namespace hpray::compositor {
 
-std::size_t EncodeActive(const Image& image, PixelRange range, std::vector<double>& out) {
+std::size_t EncodeActive(const Image& image, PixelRange range, WireBuffer& out) {
     HPRAY_CHECK_LE(range.end, image.PixelCount());
+    // The worst case (runs of one pixel) needs 13 doubles per two pixels; reserving the
+    // bound costs no memory traffic, as untouched pages of a large block stay unmapped.
+    out.reserve(out.size() + range.Size() * kChannels + range.Size() + 2);
     std::size_t active = 0;
     std::size_t i = range.begin;
     while (i < range.end) {

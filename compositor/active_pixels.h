@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 #include "io/image.h"
@@ -24,12 +25,36 @@ inline PixelRange Intersect(const PixelRange& x, const PixelRange& y) {
     return out;
 }
 
+/// An allocator that default-initialises, so that growing a message buffer does not
+/// write zeros that are overwritten at once (a full pass over up to S bytes per message).
+template <typename T>
+struct DefaultInitAllocator : std::allocator<T> {
+    template <typename U>
+    struct rebind {
+        using other = DefaultInitAllocator<U>;
+    };
+    DefaultInitAllocator() = default;
+    template <typename U>
+    DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+    template <typename U>
+    void construct(U* p) noexcept {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <typename U, typename... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+/// A compositor message: doubles in the wire format of EncodeActive.
+using WireBuffer = std::vector<double, DefaultInitAllocator<double>>;
+
 /// Appends to `out` the non-empty pixels (IsEmpty false) of `image` in `range`, as runs:
 /// for each maximal run of non-empty pixels, [offset of its first pixel from
 /// range.begin, pixel count, then kChannels doubles per pixel in Pixel member order].
 /// Empty pixels cost nothing; a run costs 2 doubles of header. Returns the number of
 /// non-empty pixels. `range` must lie inside the image.
-std::size_t EncodeActive(const Image& image, PixelRange range, std::vector<double>& out);
+std::size_t EncodeActive(const Image& image, PixelRange range, WireBuffer& out);
 
 /// How DecodeActive combines an incoming pixel `in` with the image's pixel `cur`.
 enum class DecodeMode {

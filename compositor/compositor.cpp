@@ -89,7 +89,7 @@ void CheckAgreement(const Image& image, const CompositeTree& tree,
         throw InternalError("Composite: ranks disagree on the tree, view or method");
 }
 
-int CountOf(const std::vector<double>& buffer) {
+int CountOf(const WireBuffer& buffer) {
     HPRAY_CHECK_MSG(buffer.size() <= static_cast<std::size_t>(INT_MAX),
                     "compositor message of " << buffer.size() << " doubles is too large");
     return static_cast<int>(buffer.size());
@@ -108,7 +108,7 @@ struct Incoming {
     int source = -1;
     int child = -1;
     PixelRange range;
-    std::vector<double> data;
+    WireBuffer data;
     bool received = false;
 };
 
@@ -130,7 +130,7 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
 
     // Sends first (non-blocking), so that no pair of ranks can wait on each other.
     std::uint64_t bytesSent = 0;
-    std::vector<std::vector<double>> outgoing;
+    std::vector<WireBuffer> outgoing;
     std::vector<MPI_Request> requests;
     outgoing.reserve(step.result.size());
     requests.reserve(step.result.size());
@@ -210,7 +210,7 @@ std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image,
     const int size = plan.ranks;
     if (size == 1) return 0;
     if (me != 0) {
-        std::vector<double> buffer;
+        WireBuffer buffer;
         EncodeActive(image, plan.finalRange[me], buffer);
         MPI_Send(buffer.data(), CountOf(buffer), MPI_DOUBLE, 0, kGatherTag, comm);
         return buffer.size() * sizeof(double);
@@ -218,7 +218,7 @@ std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image,
     const PixelRange mine = plan.finalRange[0];
     ClearRange(image, {0, mine.begin});
     ClearRange(image, {mine.end, plan.pixels});
-    std::vector<double> buffer;
+    WireBuffer buffer;
     for (int k = 1; k < size; ++k) {
         MPI_Status status;
         MPI_Probe(MPI_ANY_SOURCE, kGatherTag, comm, &status);

@@ -45,9 +45,10 @@ struct CompositePlan {
 /// children evenly; going down, each rank's piece below a node is its piece above the
 /// node grown over the gaps left by the other child's ranks (boundaries as near equal
 /// cuts as the gaps allow). So at every step a rank's new piece lies inside its old one:
-/// it sends |old| - |new| pixels, and over all rounds exactly S - |final| = S (1 - 1/P) (to a pixel of rounding) for
-/// every tree shape, balanced or not, with the tree's height as the number of rounds. A
-/// balanced tree over P = 2^k ranks gives classic binary swap (halves at every round).
+/// it sends |old| - |new| pixels, and over all rounds exactly S - |final| = S (1 - 1/P)
+/// (to a pixel of rounding) for every tree shape, balanced or not, with the tree's height
+/// as the number of rounds. A balanced tree over P = 2^k ranks gives classic binary swap
+/// (halves at every round).
 CompositePlan PlanTreeSwap(const CompositeTree& tree, int ranks, std::size_t pixels);
 
 /// Direct send: one step in which rank k receives range k of P equal ranges from every

@@ -198,7 +198,7 @@ TEST(ActivePixels, RoundTripCostsOnlyActivePixelsAndRunHeaders) {
             count += active[p];
             runs += active[p] && (p == range.begin || !active[p - 1]);
         }
-        std::vector<double> message;
+        WireBuffer message;
         EXPECT_EQ(EncodeActive(image, range, message), count);
         EXPECT_EQ(message.size(), 2 * runs + kChannels * count) << seed;
 
@@ -221,7 +221,7 @@ TEST(ActivePixels, DecodeModesCompositeInFrontOrBehind) {
     for (std::size_t p = 0; p < half.size(); ++p) half[p] = p % 2 == 0;
     const Image base = SparseImage(all, width, rng);
     const Image incoming = SparseImage(half, width, rng);
-    std::vector<double> message;
+    WireBuffer message;
     EncodeActive(incoming, {0, incoming.PixelCount()}, message);
     Image over = base, under = base;
     DecodeActive(message.data(), message.size(), {0, base.PixelCount()}, DecodeMode::Over,
@@ -238,7 +238,7 @@ TEST(ActivePixels, DecodeModesCompositeInFrontOrBehind) {
 TEST(ActivePixels, EmptyImageSendsNothingAndClearRangeEmpties) {
     Image image;
     image.Resize(8, 8);
-    std::vector<double> message;
+    WireBuffer message;
     EXPECT_EQ(EncodeActive(image, {0, 64}, message), 0u);
     EXPECT_TRUE(message.empty());
     std::mt19937 rng(5);
