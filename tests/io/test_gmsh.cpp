@@ -581,6 +581,40 @@ TEST(GmshReader, HybridPyrP3) {
     EXPECT_LT(worst, 1e-9);
 }
 
+// Files as gmsh writes them when partitioned (scripts/gen_gmsh_fixtures.py): counts from
+// gmsh's API, straight-sided quadratic tetrahedra of a box, the analytic field.
+void CheckPartitioned(const std::string& name) {
+    SCOPED_TRACE(name);
+    const json info = LoadJson(HPRAY_TEST_DATA "/gmsh_partitioned.json");
+    const Mesh m = ReadGmsh(std::string(HPRAY_TEST_DATA) + "/" + name, {});
+    EXPECT_EQ(m.PointCount(), info.at("nodes").get<std::int64_t>());
+    EXPECT_EQ(m.CellCount(), info.at("elements_by_type").at("11").get<std::int64_t>());
+    for (std::int64_t c = 0; c < m.CellCount(); ++c) {
+        EXPECT_EQ(m.cellShape[c], CellShape::Tet);
+        EXPECT_EQ(m.cellOrder[c], 2);
+    }
+    const std::vector<double> first =
+        info.at("first_node").at("xyz").get<std::vector<double>>();
+    bool found = false;
+    for (std::int64_t i = 0; i < m.PointCount(); ++i)
+        found =
+            found || (m.points[3 * i] == first[0] && m.points[3 * i + 1] == first[1] &&
+                      m.points[3 * i + 2] == first[2]);
+    EXPECT_TRUE(found);
+    ExpectAnalytic(m);
+    const double worst = WorstAffineDeviation(m, [&](std::int64_t i) {
+        return Vec3{m.points[3 * i], m.points[3 * i + 1], m.points[3 * i + 2]};
+    });
+    EXPECT_LT(worst, 1e-12);
+}
+
+TEST(GmshReader, PartitionedBinaryWrittenByGmsh) {
+    CheckPartitioned("gmsh_partitioned_binary.msh");
+}
+TEST(GmshReader, PartitionedAsciiWrittenByGmsh) {
+    CheckPartitioned("gmsh_partitioned_ascii.msh");
+}
+
 TEST(GmshReader, FieldSelection) {
     const std::string path = std::string(HPRAY_SHARED_DATA) + "/gmsh_pripyrtet_p2.msh";
     ReadOptions none;
@@ -1002,6 +1036,31 @@ TEST(GmshReader, MalformedBinary) {
     const std::size_t one = endian.find("4.1 1 8\n") + 8;
     endian[one] = 2;
     ExpectInputError("binary_endian.msh", endian, "endianness", "byte");
+}
+
+// Truncated and corrupted files: each read either succeeds or throws InputError.
+TEST(GmshReader, FuzzedInputNeverCrashes) {
+    const std::string ascii = MakeAllTypes(false).content.substr(0, 60000);
+    const std::string binary = MakeAllTypes(true).content;
+    std::uint64_t state = 12345;
+    auto next = [&state] {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return state >> 33;
+    };
+    int errors = 0;
+    for (int i = 0; i < 120; ++i) {
+        std::string s = (i % 2 ? binary : ascii);
+        if (i % 3 == 0) s.resize(next() % s.size());
+        for (int k = 0; k < 1 + i % 4; ++k)
+            s[next() % s.size()] = static_cast<char>(next());
+        const std::string path = WriteTemp("fuzz.msh", s);
+        try {
+            ReadGmsh(path, {});
+        } catch (const InputError&) {
+            ++errors;
+        }
+    }
+    EXPECT_GT(errors, 30);
 }
 
 }  // namespace

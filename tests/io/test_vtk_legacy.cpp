@@ -623,5 +623,32 @@ TEST(VtkLegacy, MalformedBinary) {
                      "CELL_TYPES has 15 entries for 16 cells", "byte");
 }
 
+// Truncated and corrupted files: each read either succeeds or throws InputError.
+TEST(VtkLegacy, FuzzedInputNeverCrashes) {
+    const std::string ascii =
+        ReadFile(std::string(HPRAY_TEST_DATA) + "/legacy_ascii_51.vtk");
+    const std::string binary =
+        ReadFile(std::string(HPRAY_TEST_DATA) + "/legacy_binary_42.vtk");
+    std::uint64_t state = 777;
+    auto next = [&state] {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return state >> 33;
+    };
+    int errors = 0;
+    for (int i = 0; i < 300; ++i) {
+        std::string s = (i % 2 ? binary : ascii);
+        if (i % 3 == 0) s.resize(next() % s.size());
+        for (int k = 0; k < 1 + i % 4; ++k)
+            s[next() % s.size()] = static_cast<char>(next());
+        const std::string path = WriteTemp("fuzz.vtk", s);
+        try {
+            ReadVtkLegacy(path, {});
+        } catch (const InputError&) {
+            ++errors;
+        }
+    }
+    EXPECT_GT(errors, 50);
+}
+
 }  // namespace
 }  // namespace hpray
