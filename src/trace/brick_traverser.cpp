@@ -249,7 +249,7 @@ struct BrickTraverser::Impl {
     std::vector<std::int32_t> curvedNodes;
     std::vector<std::int32_t> boundaryFaces;
     std::vector<float> boundaryBoxes;  // 6 per boundary face: lower, upper
-    Box3 queryBox{};                   // mesh bounds, padded for the float query ray
+    AxisBox queryBox{};                   // mesh bounds, padded for the float query ray
     double queryPad = 0;
 
     RTCDevice device = nullptr;

@@ -28,14 +28,14 @@ static_assert(std::is_trivially_copyable_v<Segment>);
 static_assert(std::is_trivially_copyable_v<Ray>);
 
 /// An axis-aligned box {{xmin, ymin, zmin}, {xmax, ymax, zmax}} in world units.
-using Box3 = std::array<std::array<double, 3>, 2>;
+using AxisBox = std::array<std::array<double, 3>, 2>;
 
 /// Clips the ray to the closed box (slab method). Returns false when the ray misses it or
 /// the clipped range is empty; otherwise narrows [tLow, tHigh] to the part inside. Each
 /// box plane's t is computed as (plane - origin) / dir from that plane's value alone, so
 /// two boxes sharing a plane (neighbouring bricks) cut a ray at bitwise the same t.
 /// A ray parallel to a slab is inside it iff its origin is in the closed slab.
-inline bool ClipRayToBox(const Ray& ray, const Box3& box, double& tLow, double& tHigh) {
+inline bool ClipRayToBox(const Ray& ray, const AxisBox& box, double& tLow, double& tHigh) {
     for (int a = 0; a < 3; ++a) {
         const double o = ray.origin[a], d = ray.dir[a];
         if (d == 0) {

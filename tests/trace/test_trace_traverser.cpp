@@ -24,7 +24,7 @@ using testing::MakeRay;
 using testing::MakeRayDir;
 using testing::Vec3;
 
-const Box3 kUnitBox = {{{0, 0, 0}, {1, 1, 1}}};
+const AxisBox kUnitBox = {{{0, 0, 0}, {1, 1, 1}}};
 
 // Segments must be sorted, of positive length, and never overlap; returns the maximal
 // runs of exactly touching segments as intervals.
@@ -99,7 +99,7 @@ void CheckCubeRay(const Mesh& mesh, const BrickTraverser& tr, const Ray& ray,
     const bool hit = BoxChord(ray, kUnitBox, t0, t1);
     const double chord = hit ? t1 - t0 : 0;
     // Rays in the boundary planes: the closed box and the open box disagree.
-    const Box3 inner = {{{1e-9, 1e-9, 1e-9}, {1 - 1e-9, 1 - 1e-9, 1 - 1e-9}}};
+    const AxisBox inner = {{{1e-9, 1e-9, 1e-9}, {1 - 1e-9, 1 - 1e-9, 1 - 1e-9}}};
     double s0, s1;
     const double innerChord = BoxChord(ray, inner, s0, s1) ? s1 - s0 : 0;
     const bool grazing = std::fabs(innerChord - chord) > 1e-6;
@@ -328,7 +328,7 @@ std::vector<std::array<double, 2>> CubeUnionIntervals(const Ray& ray, int n,
         for (int b = 0; b < n; ++b)
             for (int a = 0; a < n; ++a) {
                 if (!keep(a, b, c)) continue;
-                const Box3 box = {{{double(a) / n, double(b) / n, double(c) / n},
+                const AxisBox box = {{{double(a) / n, double(b) / n, double(c) / n},
                                    {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}}};
                 double t0, t1;
                 if (BoxChord(ray, box, t0, t1) && t1 > t0) iv.push_back({t0, t1});
@@ -386,7 +386,7 @@ TEST(BrickTraverser, NonConvexDisconnectedMeshWithCavity) {
 
 TEST(BrickTraverser, ClipsToSubBoxAndRange) {
     const Mesh mesh = GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Wedges; });
-    const Box3 sub = {{{0.2, 0.1, 0.3}, {0.7, 0.9, 0.6}}};
+    const AxisBox sub = {{{0.2, 0.1, 0.3}, {0.7, 0.9, 0.6}}};
     const BrickTraverser tr(Brick{&mesh, sub});
     const BrickTraverser whole(Brick::WholeMesh(mesh));
     std::mt19937_64 rng(13);
@@ -555,7 +555,7 @@ struct ParaboloidSlab {
 std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const ParaboloidSlab& s) {
     std::vector<double> br;
     double t0 = -INFINITY, t1 = INFINITY;
-    const Box3 square = {{{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}}};
+    const AxisBox square = {{{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}}};
     if (!ClipRayToBox(ray, square, t0, t1)) return {};
     br.push_back(t0);
     br.push_back(t1);

@@ -124,7 +124,7 @@ inline Mesh GridMesh(int n, double jitter, std::function<CubeCut(int, int, int)>
 }
 
 /// Chord of a ray through a closed box: [t0, t1] or false.
-inline bool BoxChord(const Ray& ray, const Box3& box, double& t0, double& t1) {
+inline bool BoxChord(const Ray& ray, const AxisBox& box, double& t0, double& t1) {
     t0 = -INFINITY;
     t1 = INFINITY;
     return ClipRayToBox(ray, box, t0, t1);
