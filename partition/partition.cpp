@@ -1,10 +1,751 @@
-// k-d decomposition (its issue has not landed: the entry point reports so).
+// PartitionMesh: stream the input into spill files, build the k-d tree over cost-weighted
+// centroids, distribute cells (with ghost copies) to bricks, write pieces, index and
+// manifest atomically.
+//
+// Memory: with B = the memory limit, the point cache of the scan holds B/4, stream
+// buffers and spill buffers a few MiB, the tree builder collects at most B/8 of
+// centroids per level, and one brick is assembled at a time; a brick that would need
+// more than B is an input error (ask for more bricks). Everything else lives in
+// DIR/.spill-PID-N/ (removed at the end, and by the next run if this one dies).
 #include "partition.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+
+#include "cost_model.h"
+#include "elements/basis.h"
+#include "elements/bounds.h"
+#include "io/output_file.h"
+#include "io/vtu_writer.h"
+#include "kd_tree.h"
+#include "spill.h"
+#include "util/check.h"
 #include "util/error.h"
+#include "util/log.h"
+#include "vtu_stream.h"
 
 namespace hpray::partition {
-void PartitionMesh(const std::string&, const PartitionOptions&) {
-    throw NotImplementedError("'hpray partition'");
+namespace fs = std::filesystem;
+namespace {
+
+constexpr const char* kManifest = "manifest.json";
+constexpr const char* kIndex = "bricks.pvtu";
+constexpr const char* kLock = ".hpray-partition.lock";
+/// Test-only: the process _exits after writing this many bricks (simulates a crash).
+constexpr const char* kTestExitEnv = "HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS";
+/// Bricks distributed per pass over the cell spill (bounds open files).
+constexpr int kBricksPerPass = 256;
+
+/// Fixed part of a spilled cell; followed by nodeCount int64 global point indices and the
+/// cell field values (doubles).
+struct CellRecord {
+    std::uint8_t shape = 0, order = 1, family = 0, ghost = 0;
+    std::int32_t nodeCount = 0;
+    double lo[3], hi[3];
+    double centroid[3];
+    double cost = 0;
+};
+static_assert(sizeof(CellRecord) == 88, "spill record layout");
+
+std::string BrickName(int b) {
+    char name[32];
+    std::snprintf(name, sizeof name, "brick-%04d.vtu", b);
+    return name;
 }
+
+/// An exclusive advisory lock on DIR/.hpray-partition.lock, released on destruction (and
+/// by the kernel if the process dies).
+class DirLock {
+public:
+    explicit DirLock(const std::string& dir) {
+        const std::string path = (fs::path(dir) / kLock).string();
+        fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+        if (fd_ < 0)
+            throw InputError(path, "", std::string("cannot create the lock file: ") +
+                                           std::strerror(errno));
+        if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+            ::close(fd_);
+            throw InputError(dir, "", "another 'hpray partition' is writing this folder");
+        }
+    }
+    ~DirLock() {
+        if (fd_ >= 0) ::close(fd_);
+    }
+    DirLock(const DirLock&) = delete;
+    DirLock& operator=(const DirLock&) = delete;
+
+private:
+    int fd_ = -1;
+};
+
+/// Removes a folder tree on destruction unless released.
+class ScopedDir {
+public:
+    explicit ScopedDir(std::string path) : path_(std::move(path)) {}
+    ~ScopedDir() {
+        std::error_code ec;
+        if (!path_.empty()) fs::remove_all(path_, ec);
+    }
+    ScopedDir(const ScopedDir&) = delete;
+    ScopedDir& operator=(const ScopedDir&) = delete;
+    const std::string& Path() const { return path_; }
+
+private:
+    std::string path_;
+};
+
+bool IsOurOutput(const std::string& name) {
+    auto starts = [&](const char* p) { return name.rfind(p, 0) == 0; };
+    auto ends = [&](const char* s) {
+        const std::size_t n = std::strlen(s);
+        return name.size() >= n && name.compare(name.size() - n, n, s) == 0;
+    };
+    return (starts("brick-") && (ends(".vtu") || ends(".vtu.tmp"))) || name == kIndex ||
+           name == std::string(kIndex) + ".tmp" || name == kManifest ||
+           name == std::string(kManifest) + ".tmp";
+}
+
+/// Removes what earlier runs left: the manifest first (so no reader trusts the rest),
+/// then bricks, index, temporaries and spill folders.
+void RemovePreviousRun(const std::string& dir, const std::string& keepSpill) {
+    std::error_code ec;
+    fs::remove(fs::path(dir) / kManifest, ec);
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+        const std::string name = entry.path().filename().string();
+        if (IsOurOutput(name)) {
+            fs::remove(entry.path(), ec);
+        } else if (name.rfind(".spill-", 0) == 0 && entry.path().string() != keepSpill) {
+            fs::remove_all(entry.path(), ec);
+        }
+    }
+}
+
+/// Scan: spills points (xyz + point fields) and cells (record + nodes + cell fields),
+/// and the centroid/cost stream for the tree builder.
+class ScanSink : public MeshSink {
+public:
+    ScanSink(const std::string& spill, std::size_t memoryLimit)
+        : spill_(spill), memoryLimit_(memoryLimit) {}
+
+    void Fields(const std::vector<StreamField>& pf, const std::vector<StreamField>& cf) override {
+        pointFields = pf;
+        cellFields = cf;
+        pointStride = 3;
+        for (const StreamField& f : pf) pointStride += f.components;
+        cellValues = 0;
+        for (const StreamField& f : cf) cellValues += f.components;
+        const std::size_t buf = std::size_t(1) << 20;
+        points_ = std::make_unique<SpillWriter>(PointsPath(), buf);
+        cells_ = std::make_unique<SpillWriter>(CellsPath(), buf);
+        centroids_ = std::make_unique<SpillWriter>(CentroidsPath(), buf);
+        cache_ = std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
+        for (int d = 0; d < 3; ++d) {
+            root.lo[d] = std::numeric_limits<double>::infinity();
+            root.hi[d] = -std::numeric_limits<double>::infinity();
+        }
+    }
+
+    void Points(std::int64_t count, const double* xyz, const double* values) override {
+        const int comps = pointStride - 3;
+        std::vector<double> record(pointStride);
+        for (std::int64_t i = 0; i < count; ++i) {
+            std::copy(xyz + 3 * i, xyz + 3 * i + 3, record.begin());
+            std::copy(values + i * comps, values + (i + 1) * comps, record.begin() + 3);
+            points_->Write(record.data(), record.size() * sizeof(double));
+        }
+        points_->Flush();
+        cache_->Invalidate();
+        points += count;
+    }
+
+    void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
+              int nodeCount, const double* values) override {
+        xyz_.resize(3 * static_cast<std::size_t>(nodeCount));
+        for (int k = 0; k < nodeCount; ++k) {
+            HPRAY_CHECK_LT(nodes[k], points);
+            const double* p = cache_->Get(nodes[k]);
+            std::copy(p, p + 3, xyz_.begin() + 3 * k);
+        }
+        CellRecord r;
+        r.shape = static_cast<std::uint8_t>(shape);
+        r.order = static_cast<std::uint8_t>(order);
+        r.family = static_cast<std::uint8_t>(family);
+        r.nodeCount = nodeCount;
+        double sum[3] = {0, 0, 0};
+        for (int d = 0; d < 3; ++d) {
+            r.lo[d] = std::numeric_limits<double>::infinity();
+            r.hi[d] = -r.lo[d];
+        }
+        for (int k = 0; k < nodeCount; ++k)
+            for (int d = 0; d < 3; ++d) {
+                const double v = xyz_[3 * k + d];
+                sum[d] += v;
+                r.lo[d] = std::min(r.lo[d], v);
+                r.hi[d] = std::max(r.hi[d], v);
+            }
+        for (int d = 0; d < 3; ++d)
+            r.centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
+        if (order > 1 || family != CellFamily::Lagrange) {
+            // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
+            const Box3 g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
+            for (int d = 0; d < 3; ++d) {
+                r.lo[d] = std::min(r.lo[d], g.lo[d]);
+                r.hi[d] = std::max(r.hi[d], g.hi[d]);
+            }
+        }
+        r.cost = Cost(shape, order, family);
+        for (int d = 0; d < 3; ++d) {
+            root.lo[d] = std::min(root.lo[d], r.lo[d]);
+            root.hi[d] = std::max(root.hi[d], r.hi[d]);
+        }
+        cells_->Write(&r, sizeof r);
+        cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+        cells_->Write(values, sizeof(double) * cellValues);
+        const WeightedPoint w{{r.centroid[0], r.centroid[1], r.centroid[2]}, r.cost};
+        centroids_->Write(&w, sizeof w);
+        ++cells;
+        totalCost += r.cost;
+    }
+
+    void Close() {
+        if (points_) points_->Close();
+        if (cells_) cells_->Close();
+        if (centroids_) centroids_->Close();
+        cache_.reset();
+    }
+
+    std::string PointsPath() const { return spill_ + "/points.bin"; }
+    std::string CellsPath() const { return spill_ + "/cells.bin"; }
+    std::string CentroidsPath() const { return spill_ + "/centroids.bin"; }
+
+    std::vector<StreamField> pointFields, cellFields;
+    int pointStride = 3;
+    int cellValues = 0;
+    std::int64_t points = 0, cells = 0;
+    double totalCost = 0;
+    Box root;
+
+private:
+    double Cost(CellShape shape, int order, CellFamily family) {
+        const int key = (static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order;
+        auto it = costs_.find(key);
+        if (it == costs_.end()) it = costs_.emplace(key, CellRenderCost(shape, order, family)).first;
+        return it->second;
+    }
+
+    std::string spill_;
+    std::size_t memoryLimit_;
+    std::unique_ptr<SpillWriter> points_, cells_, centroids_;
+    std::unique_ptr<RecordCache> cache_;
+    std::vector<double> xyz_;
+    std::map<int, double> costs_;
+};
+
+/// Per-brick tallies of the distribution pass.
+struct BrickTally {
+    std::int64_t cells = 0, ghosts = 0, nodes = 0;
+    double cost = 0, ghostCost = 0;
+    std::uint64_t spillBytes = 0;
+};
+
+/// Guaranteed ranges of the fields over all cells of a brick mesh.
+nlohmann::json BrickRanges(const Mesh& mesh) {
+    nlohmann::json ranges = nlohmann::json::object();
+    const double inf = std::numeric_limits<double>::infinity();
+    std::vector<double> coeffs;
+    auto add = [&](const std::string& name, const Interval& i) {
+        if (!ranges.contains(name)) {
+            ranges[name] = {i.lo, i.hi};
+        } else {
+            ranges[name][0] = std::min(ranges[name][0].get<double>(), i.lo);
+            ranges[name][1] = std::max(ranges[name][1].get<double>(), i.hi);
+        }
+    };
+    auto magnitude = [inf](const std::vector<Interval>& comps) {
+        double lo2 = 0, hi2 = 0;
+        for (const Interval& c : comps) {
+            const double far = std::max(std::abs(c.lo), std::abs(c.hi));
+            const double near = (c.lo <= 0 && c.hi >= 0) ? 0.0 : std::min(std::abs(c.lo), std::abs(c.hi));
+            hi2 += far * far;
+            lo2 += near * near;
+        }
+        // Outward rounding of the square roots.
+        return Interval{std::nextafter(std::sqrt(lo2), 0.0) * (1 - 4e-16),
+                        std::nextafter(std::sqrt(hi2), inf) * (1 + 4e-16)};
+    };
+    for (const Field& f : mesh.pointFields) {
+        Interval all{inf, -inf};
+        std::vector<Interval> comps(f.components, all), cell(f.components);
+        for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+            const std::int64_t* nodes = mesh.CellNodes(c);
+            const int n = mesh.CellNodeCount(c);
+            const bool linear = mesh.cellOrder[c] == 1 && mesh.cellFamily[c] == CellFamily::Lagrange;
+            coeffs.resize(n);
+            for (int k = 0; k < f.components; ++k) {
+                for (int m = 0; m < n; ++m) coeffs[m] = f.values[nodes[m] * f.components + k];
+                if (linear) {
+                    const auto [lo, hi] = std::minmax_element(coeffs.begin(), coeffs.end());
+                    cell[k] = Interval{*lo, *hi};
+                } else {
+                    cell[k] = FieldBounds(
+                        GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]),
+                        coeffs.data());
+                }
+                comps[k].lo = std::min(comps[k].lo, cell[k].lo);
+                comps[k].hi = std::max(comps[k].hi, cell[k].hi);
+            }
+            if (f.components > 1) {
+                const Interval m = magnitude(cell);
+                all.lo = std::min(all.lo, m.lo);
+                all.hi = std::max(all.hi, m.hi);
+            }
+        }
+        if (mesh.CellCount() == 0) continue;
+        if (f.components == 1) {
+            add(f.name, comps[0]);
+        } else {
+            add(f.name, all);
+            for (int k = 0; k < f.components; ++k)
+                add(f.name + "[" + std::to_string(k) + "]", comps[k]);
+        }
+    }
+    for (const Field& f : mesh.cellFields) {
+        if (mesh.CellCount() == 0) continue;
+        for (int k = 0; k < f.components; ++k) {
+            const auto r = f.Range(k);
+            add(f.components == 1 ? f.name : f.name + "[" + std::to_string(k) + "]",
+                Interval{r[0], r[1]});
+        }
+        if (f.components > 1) {
+            const auto r = f.Range(-1);
+            add(f.name, Interval{r[0], r[1]});
+        }
+    }
+    return ranges;
+}
+
+nlohmann::json TreeJson(const std::vector<KdNode>& nodes, int n) {
+    const KdNode& node = nodes[n];
+    if (node.axis < 0) return {{"brick", node.brick}};
+    return {{"axis", node.axis},
+            {"split", node.split},
+            {"low", TreeJson(nodes, node.low)},
+            {"high", TreeJson(nodes, node.high)}};
+}
+
+nlohmann::json BoxJson(const Box& b) {
+    return {{b.lo[0], b.lo[1], b.lo[2]}, {b.hi[0], b.hi[1], b.hi[2]}};
+}
+
+std::string XmlEscape(const std::string& s) {
+    std::string out;
+    for (char c : s) {
+        switch (c) {
+            case '&': out += "&amp;"; break;
+            case '<': out += "&lt;"; break;
+            case '>': out += "&gt;"; break;
+            case '"': out += "&quot;"; break;
+            default: out += c;
+        }
+    }
+    return out;
+}
+
+/// Writes `text` to path atomically.
+void WriteTextAtomically(const std::string& path, const std::string& text) {
+    const std::string tmp = detail::BeginOutputFile(path);
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        out << text;
+        out.flush();
+        if (!out) {
+            detail::AbandonOutputFile(tmp);
+            throw InputError(path, "", "cannot write the file");
+        }
+    }
+    detail::CommitOutputFile(tmp, path);
+}
+
+std::string PvtuText(const std::vector<StreamField>& pf, const std::vector<StreamField>& cf,
+                     int bricks) {
+    std::ostringstream x;
+    auto array = [&](const char* type, const std::string& name, int comps) {
+        x << "      <PDataArray type=\"" << type << "\" Name=\"" << XmlEscape(name) << "\"";
+        if (comps != 1) x << " NumberOfComponents=\"" << comps << "\"";
+        x << "/>\n";
+    };
+    x << "<?xml version=\"1.0\"?>\n"
+      << "<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\" byte_order=\"LittleEndian\" "
+         "header_type=\"UInt64\">\n"
+      << "  <PUnstructuredGrid GhostLevel=\"1\">\n    <PPointData>\n";
+    for (const StreamField& f : pf) array("Float64", f.name, f.components);
+    x << "    </PPointData>\n    <PCellData>\n";
+    for (const StreamField& f : cf) array("Float64", f.name, f.components);
+    array("Float64", "HigherOrderDegrees", 3);
+    array("UInt8", "vtkGhostType", 1);
+    x << "    </PCellData>\n    <PPoints>\n";
+    array("Float64", "Points", 3);
+    x << "    </PPoints>\n";
+    for (int b = 0; b < bricks; ++b) x << "    <Piece Source=\"" << BrickName(b) << "\"/>\n";
+    x << "  </PUnstructuredGrid>\n</VTKFile>\n";
+    return x.str();
+}
+
+}  // namespace
+
+std::size_t DefaultMemoryLimit() {
+    const long pages = ::sysconf(_SC_PHYS_PAGES);
+    const long size = ::sysconf(_SC_PAGE_SIZE);
+    if (pages <= 0 || size <= 0) return std::size_t(1) << 30;
+    return static_cast<std::size_t>(pages) * static_cast<std::size_t>(size) / 4;
+}
+
+std::size_t ParseMemorySize(const std::string& text) {
+    auto bad = [&](const std::string& why) -> std::size_t {
+        throw InputError("command line", "--memory-limit",
+                         "'" + text + "' " + why +
+                             " (expected a size such as 512M, 4G or 1.5G; at least 4M)");
+    };
+    std::size_t i = 0;
+    while (i < text.size() && (std::isdigit(static_cast<unsigned char>(text[i])) || text[i] == '.'))
+        ++i;
+    if (i == 0) return bad("is not a size");
+    const std::string number = text.substr(0, i);
+    if (std::count(number.begin(), number.end(), '.') > 1) return bad("is not a size");
+    char* end = nullptr;
+    const double value = std::strtod(number.c_str(), &end);
+    if (end != number.c_str() + number.size() || !std::isfinite(value)) return bad("is not a size");
+    std::string unit = text.substr(i);
+    for (char& c : unit) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    double scale = 1;
+    if (unit.empty() || unit == "B") {
+        scale = 1;
+    } else {
+        static const std::string kUnits = "KMGT";
+        const auto u = kUnits.find(unit[0]);
+        const std::string rest = unit.substr(1);
+        if (u == std::string::npos || !(rest.empty() || rest == "B" || rest == "IB"))
+            return bad("has an unknown unit");
+        scale = std::pow(1024.0, static_cast<double>(u + 1));
+    }
+    const double bytes = value * scale;
+    if (bytes < 4.0 * 1024 * 1024) return bad("is too small");
+    if (bytes > 1e18) return bad("is too large");
+    return static_cast<std::size_t>(bytes);
+}
+
+PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOptions& options) {
+    const auto start = std::chrono::steady_clock::now();
+    if (options.bricks < 1)
+        throw InputError("command line", "--bricks",
+                         std::to_string(options.bricks) + " is not a positive number of bricks");
+    if (options.outDir.empty()) throw InputError("command line", "--out", "is empty");
+    const std::size_t budget =
+        options.memoryLimitBytes ? options.memoryLimitBytes : DefaultMemoryLimit();
+    const std::string dir = options.outDir;
+    {
+        std::error_code ec;
+        fs::create_directories(dir, ec);
+        if (ec || !fs::is_directory(dir))
+            throw InputError(dir, "", "cannot create the output folder" +
+                                          (ec ? ": " + ec.message() : std::string()));
+    }
+    DirLock lock(dir);
+    static int serial = 0;
+    ScopedDir spill((fs::path(dir) / (".spill-" + std::to_string(::getpid()) + "-" +
+                                      std::to_string(serial++)))
+                        .string());
+    fs::create_directories(spill.Path());
+
+    // 1. Scan: stream the input into spill files.
+    ReadOptions readOptions;
+    if (options.fields)
+        readOptions.fields = std::set<std::string>(options.fields->begin(), options.fields->end());
+    ScanSink scan(spill.Path(), budget);
+    const std::size_t streamBuffer = std::clamp<std::size_t>(budget / 64, 64 << 10, 4 << 20);
+    const StreamStats stats = StreamMesh(meshPath, readOptions, streamBuffer, scan);
+    scan.Close();
+    if (stats.wholeMeshBytes > budget)
+        log::Warn(meshPath + ": this format is read whole (" +
+                  std::to_string(stats.wholeMeshBytes >> 20) +
+                  " MiB), more than --memory-limit; convert it to an appended .vtu to stream it");
+    if (scan.cells == 0) throw InputError(meshPath, "", "has no 3-D cells to partition");
+    if (options.bricks > scan.cells)
+        throw InputError("command line", "--bricks",
+                         std::to_string(options.bricks) + " bricks for " +
+                             std::to_string(scan.cells) + " cells: at most one brick per cell");
+    // The input and arguments are good: now remove what earlier runs left (the manifest
+    // first; we hold the lock, so the owners of other spill folders are gone).
+    RemovePreviousRun(dir, spill.Path());
+    log::Info("partition: scanned " + std::to_string(scan.cells) + " cells, " +
+              std::to_string(scan.points) + " points");
+
+    // 2. The k-d tree over the centroids.
+    const std::string centroidsPath = scan.CentroidsPath();
+    const CentroidPass pass = [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
+        SpillReader reader(centroidsPath, std::size_t(1) << 20);
+        constexpr std::size_t kBlock = 4096;
+        std::vector<WeightedPoint> block(kBlock);
+        std::size_t n = 0;
+        while (reader.Read(&block[n], sizeof(WeightedPoint)))
+            if (++n == kBlock) {
+                visit(block.data(), n);
+                n = 0;
+            }
+        if (n > 0) visit(block.data(), n);
+    };
+    const std::size_t collectLimit = std::clamp<std::size_t>(
+        budget / 8 / (2 * sizeof(double)) / static_cast<std::size_t>(options.bricks), 256,
+        std::size_t(1) << 20);
+    const std::vector<KdNode> tree = BuildKdTree(scan.root, options.bricks, pass, collectLimit);
+
+    // 3. Distribute cells to brick spills (owner + ghost copies).
+    const int nBricks = options.bricks;
+    std::vector<BrickTally> tally(nBricks);
+    const std::size_t recordTail = sizeof(double) * scan.cellValues;
+    for (int first = 0; first < nBricks; first += kBricksPerPass) {
+        const int last = std::min(nBricks, first + kBricksPerPass);
+        const std::size_t buffer = std::clamp<std::size_t>(
+            budget / 8 / static_cast<std::size_t>(last - first), 16 << 10, 1 << 20);
+        std::vector<std::unique_ptr<SpillWriter>> writers;
+        for (int b = first; b < last; ++b)
+            writers.push_back(std::make_unique<SpillWriter>(
+                spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
+        SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
+        CellRecord r;
+        std::vector<int> hits;
+        std::vector<char> rest;
+        while (reader.Read(&r, sizeof r)) {
+            const std::size_t restBytes = sizeof(std::int64_t) * r.nodeCount + recordTail;
+            rest.resize(restBytes);
+            if (!reader.Read(rest.data(), restBytes))
+                throw InternalError("cell spill ends inside a record");
+            const int owner = OwnerBrick(tree, r.centroid);
+            hits.clear();
+            OverlappedBricks(tree, r.lo, r.hi, hits);
+            HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
+            for (int b : hits) {
+                if (b < first || b >= last) continue;
+                r.ghost = b == owner ? 0 : 1;
+                SpillWriter& w = *writers[b - first];
+                w.Write(&r, sizeof r);
+                w.Write(rest.data(), restBytes);
+                BrickTally& t = tally[b];
+                ++t.cells;
+                t.nodes += r.nodeCount;
+                if (r.ghost) {
+                    ++t.ghosts;
+                    t.ghostCost += r.cost;
+                } else {
+                    t.cost += r.cost;
+                }
+            }
+        }
+        for (int b = first; b < last; ++b) {
+            writers[b - first]->Close();
+            tally[b].spillBytes = writers[b - first]->Bytes();
+        }
+    }
+    {
+        std::error_code ec;
+        fs::remove(scan.CellsPath(), ec);
+        fs::remove(centroidsPath, ec);
+    }
+
+    // 4. Check every brick fits the memory limit before writing anything.
+    const std::size_t pointBytes = sizeof(double) * scan.pointStride;
+    auto brickBytes = [&](const BrickTally& t) {
+        // Peak of the assembly: two copies of the connectivity (sorted ids, then the VTK
+        // copy of the writer), per-cell arrays (offsets twice, kinds, ghost, degrees,
+        // field values twice) and point records for at most min(nodes, points) points.
+        const auto points =
+            static_cast<std::uint64_t>(std::min<std::int64_t>(t.nodes, scan.points));
+        return static_cast<std::uint64_t>(t.nodes) * 16 + points * pointBytes +
+               static_cast<std::uint64_t>(t.cells) * (16 + 5 + 24 + 2 * recordTail);
+    };
+    for (int b = 0; b < nBricks; ++b)
+        if (brickBytes(tally[b]) > budget)
+            throw InputError("command line", "--memory-limit",
+                             "brick " + std::to_string(b) + " needs about " +
+                                 std::to_string(brickBytes(tally[b]) >> 20) +
+                                 " MiB to assemble, more than the limit of " +
+                                 std::to_string(budget >> 20) +
+                                 " MiB: ask for more bricks or a larger limit");
+
+    // 5. Brick files, one at a time.
+    int exitAfter = -1;
+    if (const char* env = std::getenv(kTestExitEnv)) exitAfter = std::atoi(env);
+    nlohmann::json bricksJson = nlohmann::json::array();
+    std::uint64_t bytesWritten = 0;
+    std::int64_t storedCells = 0;
+    {
+        RecordCache pointsCache(scan.PointsPath(), scan.pointStride, std::size_t(4) << 20);
+        for (int b = 0; b < nBricks; ++b) {
+            Mesh mesh;
+            const BrickTally& t = tally[b];
+            mesh.cellOffsets.reserve(t.cells + 1);
+            mesh.connectivity.reserve(t.nodes);
+            mesh.cellShape.reserve(t.cells);
+            mesh.cellOrder.reserve(t.cells);
+            mesh.cellFamily.reserve(t.cells);
+            mesh.ghost.reserve(t.cells);
+            std::vector<double> cellValues;
+            cellValues.reserve(static_cast<std::size_t>(t.cells) * scan.cellValues);
+            {
+                const std::string path = spill.Path() + "/brick-" + std::to_string(b) + ".bin";
+                SpillReader reader(path, std::size_t(1) << 20);
+                CellRecord r;
+                std::vector<std::int64_t> nodes;
+                std::vector<double> values(scan.cellValues);
+                while (reader.Read(&r, sizeof r)) {
+                    nodes.resize(r.nodeCount);
+                    if (!reader.Read(nodes.data(), sizeof(std::int64_t) * r.nodeCount) ||
+                        !reader.Read(values.data(), recordTail))
+                        throw InternalError("brick spill ends inside a record");
+                    mesh.AddCell(static_cast<CellShape>(r.shape), r.order,
+                                 static_cast<CellFamily>(r.family), nodes.data(), r.nodeCount);
+                    mesh.ghost.push_back(r.ghost);
+                    cellValues.insert(cellValues.end(), values.begin(), values.end());
+                }
+                std::error_code ec;
+                fs::remove(path, ec);
+            }
+            // Renumber points: sorted unique global ids become local 0..n-1.
+            std::vector<std::int64_t> ids(mesh.connectivity);
+            std::sort(ids.begin(), ids.end());
+            ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+            ids.shrink_to_fit();
+            for (std::int64_t& p : mesh.connectivity)
+                p = std::lower_bound(ids.begin(), ids.end(), p) - ids.begin();
+            const std::size_t nPoints = ids.size();
+            mesh.points.resize(3 * nPoints);
+            for (const StreamField& f : scan.pointFields) {
+                Field field;
+                field.name = f.name;
+                field.association = Association::Point;
+                field.components = f.components;
+                field.values.resize(nPoints * f.components);
+                mesh.pointFields.push_back(std::move(field));
+            }
+            for (std::size_t i = 0; i < nPoints; ++i) {
+                const double* rec = pointsCache.Get(ids[i]);
+                std::copy(rec, rec + 3, mesh.points.begin() + 3 * i);
+                int offset = 3;
+                for (Field& field : mesh.pointFields) {
+                    std::copy(rec + offset, rec + offset + field.components,
+                              field.values.begin() + i * field.components);
+                    offset += field.components;
+                }
+            }
+            std::vector<std::int64_t>().swap(ids);
+            {
+                int offset = 0;
+                const std::size_t nCells = static_cast<std::size_t>(mesh.CellCount());
+                for (const StreamField& f : scan.cellFields) {
+                    Field field;
+                    field.name = f.name;
+                    field.association = Association::Cell;
+                    field.components = f.components;
+                    field.values.resize(nCells * f.components);
+                    for (std::size_t c = 0; c < nCells; ++c)
+                        for (int k = 0; k < f.components; ++k)
+                            field.values[c * f.components + k] =
+                                cellValues[c * scan.cellValues + offset + k];
+                    offset += f.components;
+                    mesh.cellFields.push_back(std::move(field));
+                }
+                std::vector<double>().swap(cellValues);
+            }
+            const nlohmann::json ranges = BrickRanges(mesh);
+            const std::string file = BrickName(b);
+            const std::string path = (fs::path(dir) / file).string();
+            WriteVtu(path, mesh);
+            const std::uint64_t bytes = fs::file_size(path);
+            bytesWritten += bytes;
+            storedCells += mesh.CellCount();
+            const KdNode* leaf = nullptr;
+            for (const KdNode& n : tree)
+                if (n.axis < 0 && n.brick == b) leaf = &n;
+            HPRAY_CHECK(leaf != nullptr);
+            bricksJson.push_back({{"file", file},
+                                  {"box", BoxJson(leaf->box)},
+                                  {"cells", mesh.CellCount()},
+                                  {"ghosts", t.ghosts},
+                                  {"points", static_cast<std::int64_t>(nPoints)},
+                                  {"cost", t.cost},
+                                  {"cost_with_ghosts", t.cost + t.ghostCost},
+                                  {"ranges", ranges},
+                                  {"sha256", FileSha256(path)},
+                                  {"bytes", bytes}});
+            if (exitAfter >= 0 && b + 1 >= exitAfter) {
+                std::fflush(nullptr);
+                ::_exit(75);  // test hook: die like a killed process, spills left behind
+            }
+        }
+    }
+
+    // 6. Index, then the manifest last.
+    const std::string index = (fs::path(dir) / kIndex).string();
+    const std::string indexText = PvtuText(scan.pointFields, scan.cellFields, nBricks);
+    WriteTextAtomically(index, indexText);
+    bytesWritten += indexText.size();
+
+    double maxCost = 0, sumCost = 0;
+    for (const BrickTally& t : tally) {
+        maxCost = std::max(maxCost, t.cost);
+        sumCost += t.cost;
+    }
+    const double balance = sumCost > 0 ? maxCost / (sumCost / nBricks) : 1.0;
+    nlohmann::json fields = nlohmann::json::object();
+    for (const StreamField& f : scan.pointFields)
+        fields[f.name] = {{"association", "point"}, {"components", f.components}};
+    for (const StreamField& f : scan.cellFields)
+        fields[f.name] = {{"association", "cell"}, {"components", f.components}};
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    nlohmann::json manifest;
+    manifest["format"] = "hpray-partition";
+    manifest["version"] = 1;
+    manifest["source"] = meshPath;
+    manifest["root_box"] = BoxJson(scan.root);
+    manifest["fields"] = fields;
+    manifest["bricks"] = bricksJson;
+    manifest["tree"] = TreeJson(tree, 0);
+    manifest["cost_model"] = "estimated render cost, 1 = one linear tet (partition/cost_model.h)";
+    manifest["stats"] = {{"input_cells", scan.cells},
+                         {"input_points", scan.points},
+                         {"skipped_cells", stats.skippedCells},
+                         {"stored_cells", storedCells},
+                         {"balance", balance},
+                         {"streamed", stats.streamed},
+                         {"memory_limit_bytes", budget},
+                         {"seconds", seconds}};
+    const std::string manifestText = manifest.dump(1) + "\n";
+    WriteTextAtomically((fs::path(dir) / kManifest).string(), manifestText);
+    bytesWritten += manifestText.size();
+
+    PartitionReport report;
+    report.inputCells = scan.cells;
+    report.inputPoints = scan.points;
+    report.storedCells = storedCells;
+    report.bytesWritten = bytesWritten;
+    report.balance = balance;
+    report.seconds = seconds;
+    report.streamed = stats.streamed;
+    return report;
+}
+
 }  // namespace hpray::partition

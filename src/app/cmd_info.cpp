@@ -8,6 +8,7 @@
 
 #include "app/commands.h"
 #include "io/mesh_io.h"
+#include "partition.h"
 #include "util/log.h"
 
 namespace hpray::app {
@@ -86,6 +87,14 @@ void PrintText(const std::string& name, const nlohmann::json& j, double seconds)
 }  // namespace
 
 int RunInfo(const InfoArgs& args) {
+    if (partition::IsPartitionDirectory(args.mesh)) {  // a partition: summary of its bricks
+        const nlohmann::json j = partition::SummarizePartition(args.mesh);
+        if (args.json)
+            std::cout << j.dump(2) << std::endl;
+        else
+            std::cout << partition::FormatPartitionSummary(j) << std::flush;
+        return j["checksums_ok"].get<bool>() ? 0 : 2;
+    }
     const auto start = std::chrono::steady_clock::now();
     const Mesh mesh = ReadMesh(args.mesh);
     const double seconds =

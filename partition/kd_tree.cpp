@@ -1,0 +1,288 @@
+// BuildKdTree: level-synchronous weighted-median splits by histogram refinement and exact
+// selection over streamed centroids; tree queries.
+#include "kd_tree.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "util/check.h"
+
+namespace hpray::partition {
+namespace {
+
+constexpr int kBins = 1024;
+constexpr int kMaxRounds = 40;
+
+/// The search for one node's split plane.
+struct Search {
+    int node = -1;
+    int axis = 0;
+    int lowLeaves = 0, leaves = 0;
+    double total = 0;       ///< node cost (known after the first pass)
+    double target = 0;      ///< wanted cost of the low side
+    double a = 0, b = 0;    ///< current interval [a, b) of the axis coordinate
+    double below = 0;       ///< cost of the node's cells with x < a
+    bool collect = false;   ///< next pass collects the centroids in [a, b)
+    bool first = true;      ///< the first pass also measures the total
+    bool done = false;
+    double split = 0;
+    int rounds = 0;
+    std::vector<double> binCost;
+    std::vector<std::int64_t> binCount;
+    std::vector<std::pair<double, double>> collected;  ///< (x, cost)
+
+    double Edge(int k) const {
+        if (k == kBins) return b;
+        return a + (b - a) * (static_cast<double>(k) / kBins);
+    }
+};
+
+/// Chooses the best split among candidates: low cost at s is `lowCost`.
+struct Best {
+    double split = 0;
+    double error = std::numeric_limits<double>::infinity();
+    void Offer(double s, double lowCost, double target) {
+        const double e = std::abs(lowCost - target);
+        if (e < error) {
+            error = e;
+            split = s;
+        }
+    }
+};
+
+}  // namespace
+
+int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]) {
+    int n = 0;
+    while (nodes[n].axis >= 0) n = x[nodes[n].axis] < nodes[n].split ? nodes[n].low : nodes[n].high;
+    return nodes[n].brick;
+}
+
+void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3], const double hi[3],
+                      std::vector<int>& bricks) {
+    int stack[128];
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const KdNode& node = nodes[stack[--top]];
+        if (node.axis < 0) {
+            bricks.push_back(node.brick);
+            continue;
+        }
+        HPRAY_CHECK_LT(top, 126);
+        if (hi[node.axis] >= node.split) stack[top++] = node.high;
+        if (lo[node.axis] <= node.split) stack[top++] = node.low;
+    }
+}
+
+std::vector<int> OrderedBricks(const std::vector<KdNode>& nodes,
+                               const std::function<bool(const KdNode&)>& lowFirst) {
+    std::vector<int> order;
+    std::vector<int> stack{0};
+    while (!stack.empty()) {
+        const KdNode& node = nodes[stack.back()];
+        stack.pop_back();
+        if (node.axis < 0) {
+            order.push_back(node.brick);
+            continue;
+        }
+        if (lowFirst(node)) {
+            stack.push_back(node.high);
+            stack.push_back(node.low);
+        } else {
+            stack.push_back(node.low);
+            stack.push_back(node.high);
+        }
+    }
+    return order;
+}
+
+std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
+                                std::size_t collectLimit) {
+    HPRAY_CHECK_GE(leaves, 1);
+    std::vector<KdNode> nodes(1);
+    nodes[0].box = root;
+    std::vector<int> leafCount{leaves};
+    // Exclusive upper ends of each node's region per axis: the root's region is closed,
+    // so its end is the next double above the box.
+    std::vector<std::array<double, 3>> ends(1);
+    for (int d = 0; d < 3; ++d)
+        ends[0][d] = std::nextafter(root.hi[d], std::numeric_limits<double>::infinity());
+
+    std::vector<int> level{0};
+    while (true) {
+        std::vector<Search> searches;
+        std::vector<int> searchOf(nodes.size(), -1);
+        for (int n : level) {
+            if (leafCount[n] < 2) continue;
+            Search s;
+            s.node = n;
+            s.leaves = leafCount[n];
+            s.lowLeaves = leafCount[n] / 2;
+            const Box& box = nodes[n].box;
+            int axis = 0;
+            for (int d = 1; d < 3; ++d)
+                if (box.hi[d] - box.lo[d] > box.hi[axis] - box.lo[axis]) axis = d;
+            s.axis = axis;
+            s.a = box.lo[axis];
+            s.b = ends[n][axis];
+            searchOf[n] = static_cast<int>(searches.size());
+            searches.push_back(std::move(s));
+        }
+        if (searches.empty()) break;
+
+        // Passes until every search of this level has its plane.
+        for (int round = 0;; ++round) {
+            bool pending = false;
+            for (Search& s : searches) {
+                if (s.done) continue;
+                pending = true;
+                if (!s.collect) {
+                    s.binCost.assign(kBins, 0.0);
+                    s.binCount.assign(kBins, 0);
+                } else {
+                    s.collected.clear();
+                }
+            }
+            if (!pending) break;
+            HPRAY_CHECK_LT(round, kMaxRounds + 2);
+            pass([&](const WeightedPoint* pts, std::size_t count) {
+                for (std::size_t i = 0; i < count; ++i) {
+                    const WeightedPoint& p = pts[i];
+                    int n = 0;
+                    while (nodes[n].axis >= 0)
+                        n = p.x[nodes[n].axis] < nodes[n].split ? nodes[n].low : nodes[n].high;
+                    const int si = searchOf[n];
+                    if (si < 0) continue;
+                    Search& s = searches[si];
+                    if (s.done) continue;
+                    const double x = p.x[s.axis];
+                    if (s.first) s.total += p.cost;
+                    if (x < s.a) {
+                        if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+                        continue;
+                    }
+                    if (x >= s.b) continue;
+                    if (s.collect) {
+                        s.collected.emplace_back(x, p.cost);
+                        continue;
+                    }
+                    int k = static_cast<int>((x - s.a) / (s.b - s.a) * kBins);
+                    k = std::clamp(k, 0, kBins - 1);
+                    while (k > 0 && x < s.Edge(k)) --k;
+                    while (k < kBins - 1 && x >= s.Edge(k + 1)) ++k;
+                    s.binCost[k] += p.cost;
+                    ++s.binCount[k];
+                }
+            });
+            for (Search& s : searches) {
+                if (s.done) continue;
+                const double lo = nodes[s.node].box.lo[s.axis];
+                const double hi = nodes[s.node].box.hi[s.axis];
+                auto finish = [&](double split) {
+                    s.split = std::clamp(split, lo, hi);
+                    s.done = true;
+                };
+                if (s.first) {
+                    s.first = false;
+                    s.target = s.total * s.lowLeaves / s.leaves;
+                    if (!(s.total > 0)) {  // no cells: halve the box
+                        finish(lo + 0.5 * (hi - lo));
+                        continue;
+                    }
+                }
+                if (s.collect) {
+                    // Exact: candidates between consecutive distinct coordinates.
+                    std::sort(s.collected.begin(), s.collected.end());
+                    Best best;
+                    best.Offer(s.a, s.below, s.target);
+                    double cum = s.below;
+                    for (std::size_t i = 0; i < s.collected.size(); ++i) {
+                        cum += s.collected[i].second;
+                        const double x = s.collected[i].first;
+                        if (i + 1 < s.collected.size() && s.collected[i + 1].first == x) continue;
+                        const double next =
+                            i + 1 < s.collected.size() ? s.collected[i + 1].first : s.b;
+                        double mid = x + 0.5 * (next - x);
+                        if (!(mid > x && mid <= next)) mid = next;
+                        best.Offer(mid, cum, s.target);
+                    }
+                    finish(best.split);
+                    std::vector<std::pair<double, double>>().swap(s.collected);
+                    continue;
+                }
+                // Histogram: the bin where the cumulative cost crosses the target.
+                double cum = s.below;
+                int k = 0;
+                for (; k < kBins - 1; ++k) {
+                    if (cum + s.binCost[k] >= s.target) break;
+                    cum += s.binCost[k];
+                }
+                const double e0 = s.Edge(k), e1 = s.Edge(k + 1);
+                ++s.rounds;
+                if (s.binCount[k] <= static_cast<std::int64_t>(collectLimit)) {
+                    s.a = e0;
+                    s.b = e1;
+                    s.below = cum;
+                    s.collect = true;
+                } else if ((e0 == s.a && e1 == s.b) || s.rounds >= kMaxRounds) {
+                    // The interval no longer narrows (many equal coordinates): best edge.
+                    Best best;
+                    best.Offer(e0, cum, s.target);
+                    best.Offer(e1, cum + s.binCost[k], s.target);
+                    finish(best.split);
+                } else {
+                    s.a = e0;
+                    s.b = e1;
+                    s.below = cum;
+                }
+            }
+        }
+
+        // Create the children of this level.
+        std::vector<int> next;
+        for (const Search& s : searches) {
+            const int n = s.node;
+            const int low = static_cast<int>(nodes.size());
+            const int high = low + 1;
+            KdNode lowNode, highNode;
+            lowNode.box = nodes[n].box;
+            lowNode.box.hi[s.axis] = s.split;
+            highNode.box = nodes[n].box;
+            highNode.box.lo[s.axis] = s.split;
+            std::array<double, 3> lowEnd = ends[n], highEnd = ends[n];
+            lowEnd[s.axis] = s.split;
+            nodes[n].axis = s.axis;
+            nodes[n].split = s.split;
+            nodes[n].low = low;
+            nodes[n].high = high;
+            nodes.push_back(lowNode);
+            nodes.push_back(highNode);
+            ends.push_back(lowEnd);
+            ends.push_back(highEnd);
+            leafCount.push_back(s.lowLeaves);
+            leafCount.push_back(s.leaves - s.lowLeaves);
+            next.push_back(low);
+            next.push_back(high);
+        }
+        level = std::move(next);
+    }
+    // Brick numbers: leaves in depth-first order, low side first.
+    int brick = 0;
+    std::vector<int> stack{0};
+    while (!stack.empty()) {
+        const int n = stack.back();
+        stack.pop_back();
+        if (nodes[n].axis < 0) {
+            nodes[n].brick = brick++;
+            continue;
+        }
+        stack.push_back(nodes[n].high);
+        stack.push_back(nodes[n].low);
+    }
+    HPRAY_CHECK_EQ(brick, leaves);
+    return nodes;
+}
+
+}  // namespace hpray::partition

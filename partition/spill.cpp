@@ -1,0 +1,173 @@
+// Buffered spill-file writers and readers, and the LRU record cache over a spill file.
+#include "spill.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "util/check.h"
+#include "util/error.h"
+
+namespace hpray::partition {
+namespace {
+
+[[noreturn]] void IoFail(const std::string& path, const char* what) {
+    throw InputError(path, "", std::string(what) + ": " + std::strerror(errno));
+}
+
+}  // namespace
+
+SpillWriter::SpillWriter(const std::string& path, std::size_t bufferBytes)
+    : path_(path), capacity_(std::max<std::size_t>(bufferBytes, 4096)) {
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd_ < 0) IoFail(path, "cannot create the spill file");
+    buffer_.reserve(capacity_);
+}
+
+SpillWriter::~SpillWriter() {
+    try {
+        Close();
+    } catch (...) {
+        // Destructors must not throw; Close() reports errors when called explicitly.
+    }
+}
+
+void SpillWriter::Write(const void* data, std::size_t bytes) {
+    const char* p = static_cast<const char*>(data);
+    while (bytes > 0) {
+        if (buffer_.size() == capacity_) Flush();
+        const std::size_t n = std::min(bytes, capacity_ - buffer_.size());
+        buffer_.insert(buffer_.end(), p, p + n);
+        p += n;
+        bytes -= n;
+    }
+}
+
+void SpillWriter::Flush() {
+    HPRAY_CHECK(fd_ >= 0);
+    const char* p = buffer_.data();
+    std::size_t left = buffer_.size();
+    while (left > 0) {
+        const ssize_t n = ::write(fd_, p, left);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) IoFail(path_, "cannot write the spill file");
+        p += n;
+        left -= static_cast<std::size_t>(n);
+    }
+    written_ += buffer_.size();
+    buffer_.clear();
+}
+
+void SpillWriter::Close() {
+    if (fd_ < 0) return;
+    Flush();
+    ::close(fd_);
+    fd_ = -1;
+    std::vector<char>().swap(buffer_);
+}
+
+SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes)
+    : path_(path), buffer_(std::max<std::size_t>(bufferBytes, 4096)) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) IoFail(path, "cannot open the spill file");
+}
+
+SpillReader::~SpillReader() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+bool SpillReader::Fill(std::size_t need) {
+    if (end_ - begin_ >= need) return true;
+    if (need > buffer_.size()) buffer_.resize(need);
+    std::memmove(buffer_.data(), buffer_.data() + begin_, end_ - begin_);
+    end_ -= begin_;
+    begin_ = 0;
+    while (end_ < need && !eof_) {
+        const ssize_t n = ::read(fd_, buffer_.data() + end_, buffer_.size() - end_);
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) IoFail(path_, "cannot read the spill file");
+        if (n == 0) eof_ = true;
+        end_ += static_cast<std::size_t>(n);
+    }
+    if (end_ >= need) return true;
+    if (end_ == 0) return false;
+    throw InternalError("spill file " + path_ + " ends inside a record");
+}
+
+const char* SpillReader::Take(std::size_t bytes) {
+    if (!Fill(bytes)) return nullptr;
+    const char* p = buffer_.data() + begin_;
+    begin_ += bytes;
+    return p;
+}
+
+bool SpillReader::Read(void* dst, std::size_t bytes) {
+    const char* p = Take(bytes);
+    if (!p) return false;
+    std::memcpy(dst, p, bytes);
+    return true;
+}
+
+RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheBytes)
+    : path_(path), stride_(stride) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) IoFail(path, "cannot open the spill file");
+    // Blocks of about 64 KiB; at least 16 of them.
+    const std::size_t recordBytes = sizeof(double) * static_cast<std::size_t>(stride);
+    recordsPerBlock_ = std::max<std::int64_t>(1, 65536 / static_cast<std::int64_t>(recordBytes));
+    maxBlocks_ = std::max<std::size_t>(16, cacheBytes / (recordsPerBlock_ * recordBytes + 96));
+}
+
+RecordCache::~RecordCache() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void RecordCache::Invalidate() {
+    blocks_.clear();
+    lru_.clear();
+    last_ = nullptr;
+    lastBlock_ = -1;
+}
+
+const double* RecordCache::Get(std::int64_t index) {
+    const std::int64_t b = index / recordsPerBlock_;
+    const std::int64_t within = index - b * recordsPerBlock_;
+    if (b == lastBlock_ && last_) return last_->data.data() + within * stride_;
+    auto it = blocks_.find(b);
+    if (it == blocks_.end()) {
+        ++misses_;
+        if (blocks_.size() >= maxBlocks_) {
+            const std::int64_t victim = lru_.back();
+            lru_.pop_back();
+            blocks_.erase(victim);
+        }
+        Block block;
+        block.data.resize(static_cast<std::size_t>(recordsPerBlock_) * stride_);
+        const std::size_t want = block.data.size() * sizeof(double);
+        const off_t offset = static_cast<off_t>(b * recordsPerBlock_ * stride_ * 8);
+        std::size_t got = 0;
+        while (got < want) {
+            const ssize_t n = ::pread(fd_, reinterpret_cast<char*>(block.data.data()) + got,
+                                      want - got, offset + static_cast<off_t>(got));
+            if (n < 0 && errno == EINTR) continue;
+            if (n < 0) IoFail(path_, "cannot read the spill file");
+            if (n == 0) break;
+            got += static_cast<std::size_t>(n);
+        }
+        HPRAY_CHECK_MSG(got >= static_cast<std::size_t>(within + 1) * stride_ * 8,
+                        "record " << index << " is beyond the end of " << path_);
+        lru_.push_front(b);
+        block.lru = lru_.begin();
+        it = blocks_.emplace(b, std::move(block)).first;
+    } else {
+        lru_.splice(lru_.begin(), lru_, it->second.lru);
+    }
+    lastBlock_ = b;
+    last_ = &it->second;
+    return it->second.data.data() + within * stride_;
+}
+
+}  // namespace hpray::partition

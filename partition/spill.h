@@ -1,0 +1,92 @@
+// Spill files of the out-of-core partitioner: buffered sequential writers and readers, and
+// a bounded LRU cache for random access to fixed-size point records.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <list>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+namespace hpray::partition {
+
+/// Appends bytes to a file through a buffer of `bufferBytes`. Closed (flushed) by Close()
+/// or the destructor. Throws InputError(path) on write errors (disk full).
+class SpillWriter {
+public:
+    SpillWriter(const std::string& path, std::size_t bufferBytes);
+    ~SpillWriter();
+    SpillWriter(const SpillWriter&) = delete;
+    SpillWriter& operator=(const SpillWriter&) = delete;
+
+    void Write(const void* data, std::size_t bytes);
+    void Flush();
+    void Close();
+    std::uint64_t Bytes() const { return written_ + buffer_.size(); }
+    const std::string& Path() const { return path_; }
+
+private:
+    std::string path_;
+    int fd_ = -1;
+    std::vector<char> buffer_;
+    std::size_t capacity_ = 0;
+    std::uint64_t written_ = 0;
+};
+
+/// Reads a file sequentially through a buffer of `bufferBytes`.
+class SpillReader {
+public:
+    SpillReader(const std::string& path, std::size_t bufferBytes);
+    ~SpillReader();
+    SpillReader(const SpillReader&) = delete;
+    SpillReader& operator=(const SpillReader&) = delete;
+
+    /// Copies the next `bytes` into dst; false at a clean end of file; throws InputError
+    /// for a file that ends inside the request.
+    bool Read(void* dst, std::size_t bytes);
+    /// A pointer to the next `bytes` (valid until the next call); nullptr at a clean end.
+    const char* Take(std::size_t bytes);
+
+private:
+    bool Fill(std::size_t need);
+    std::string path_;
+    int fd_ = -1;
+    std::vector<char> buffer_;
+    std::size_t begin_ = 0, end_ = 0;
+    bool eof_ = false;
+};
+
+/// Random access to records of `stride` doubles stored back to back in a file, through an
+/// LRU cache of blocks holding at most about `cacheBytes`.
+class RecordCache {
+public:
+    RecordCache(const std::string& path, int stride, std::size_t cacheBytes);
+    ~RecordCache();
+    RecordCache(const RecordCache&) = delete;
+    RecordCache& operator=(const RecordCache&) = delete;
+
+    /// Record `index`; the pointer stays valid until the next Get or Invalidate.
+    const double* Get(std::int64_t index);
+    /// Forgets every cached block (after the file grew).
+    void Invalidate();
+    std::int64_t Misses() const { return misses_; }
+
+private:
+    struct Block {
+        std::vector<double> data;
+        std::list<std::int64_t>::iterator lru;
+    };
+    std::string path_;
+    int fd_ = -1;
+    int stride_ = 0;
+    std::int64_t recordsPerBlock_ = 0;
+    std::size_t maxBlocks_ = 0;
+    std::unordered_map<std::int64_t, Block> blocks_;
+    std::list<std::int64_t> lru_;  ///< most recent first
+    std::int64_t lastBlock_ = -1;
+    const Block* last_ = nullptr;
+    std::int64_t misses_ = 0;
+};
+
+}  // namespace hpray::partition
