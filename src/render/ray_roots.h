@@ -92,6 +92,13 @@ template <typename F>
 RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                      const RootOptions& options, std::vector<double>& scratch);
 
+/// Every root of f - C on the pieces, in increasing t, each polished as by FirstRoot:
+/// `onRoot(const RootResult&)` returns true to stop. Returns the number of root failures
+/// (windows neither excluded nor resolved).
+template <typename F, typename OnRoot>
+int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
+              const RootOptions& options, std::vector<double>& scratch, OnRoot&& onRoot);
+
 // ---------------------------------------------------------------------------------------
 // Implementation.
 
@@ -245,11 +252,12 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
 
 }  // namespace detail
 
-template <typename F>
-RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
-                     const RootOptions& options, std::vector<double>& scratch) {
+template <typename F, typename OnRoot>
+int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
+              const RootOptions& options, std::vector<double>& scratch, OnRoot&& onRoot) {
     RootResult result;
-    if (pieces.empty()) return result;
+    bool stop = false;
+    if (pieces.empty()) return 0;
     const double length = pieces.back().p.b - pieces.front().p.a;
     const double minWidth = std::max(options.rootTolerance * length,
                                      4 * std::numeric_limits<double>::epsilon() *
@@ -265,7 +273,7 @@ RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                     if (glo == 0 || ghi == 0) {
                         const double t = glo == 0 ? lo : hi;
                         result = {RootKind::Simple, t, 0.0, result.failures};
-                        return true;
+                        return stop = onRoot(result);
                     }
                     auto g = [&](double t) { return f(t) - C; };
                     auto tol = [&](double x, double y) { return std::abs(y - x) <= minWidth; };
@@ -277,7 +285,7 @@ RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                     const double gb = std::abs(g(bracket.second));
                     const double t = ga <= gb ? bracket.first : bracket.second;
                     result = {RootKind::Simple, t, std::min(ga, gb), result.failures};
-                    return true;
+                    return stop = onRoot(result);
                 }
                 // No sign change of the true field across the window: a tangency (kind 2),
                 // a root at the window's end within the error (3), or unresolved (4).
@@ -285,14 +293,26 @@ RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                 if (gs <= accept) {
                     result = {kind == 3 ? RootKind::Simple : RootKind::Tangent, tStar, gs,
                               result.failures};
-                    return true;
+                    return stop = onRoot(result);
                 }
                 if (kind == 4) ++result.failures;
                 return false;
             });
-        if (result.kind != RootKind::None) return result;
+        if (stop) break;
     }
-    return result;
+    return result.failures;
+}
+
+template <typename F>
+RootResult FirstRoot(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
+                     const RootOptions& options, std::vector<double>& scratch) {
+    RootResult first;
+    const int failures = FindRoots(f, pieces, C, options, scratch, [&](const RootResult& r) {
+        first = r;
+        return true;
+    });
+    first.failures = failures;
+    return first;
 }
 
 }  // namespace hpray

@@ -1,6 +1,7 @@
 // Legendre machinery and the ray root finder against closed forms and known roots.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -195,6 +196,38 @@ TEST(RayRoots, RandomPolynomialsWithKnownRoots) {
             EXPECT_NEAR(r.t, first, std::max(1e-12, 1e-6 * (nearestOther < 1e-3))) << trial;
         }
     }
+}
+
+}  // namespace
+}  // namespace hpray
+
+namespace hpray {
+namespace {
+
+TEST(RayRoots, FindRootsReturnsEveryRootInOrder) {
+    // sin(20 t) = 0.3 on [0.05, 2]: roots at (asin(0.3) + 2 pi k) / 20 and
+    // (pi - asin(0.3) + 2 pi k) / 20.
+    std::vector<double> expect;
+    for (int k = 0; k < 10; ++k)
+        for (double base : {std::asin(0.3), M_PI - std::asin(0.3)}) {
+            const double t = (base + 2 * M_PI * k) / 20;
+            if (t >= 0.05 && t <= 2.0) expect.push_back(t);
+        }
+    std::sort(expect.begin(), expect.end());
+    auto f = [](double t) { return std::sin(20 * t); };
+    ProjectionOptions projection;
+    RootOptions options;
+    std::vector<ProjectedPiece> pieces;
+    ProjectionStats stats;
+    std::vector<double> scratch;
+    ProjectSegment(f, 0.05, 2.0, projection, pieces, stats, scratch);
+    std::vector<double> found;
+    FindRoots(f, pieces, 0.3, options, scratch, [&](const RootResult& r) {
+        if (found.empty() || r.t > found.back() + 1e-12) found.push_back(r.t);
+        return false;
+    });
+    ASSERT_EQ(found.size(), expect.size());
+    for (std::size_t i = 0; i < found.size(); ++i) EXPECT_NEAR(found[i], expect[i], 1e-13) << i;
 }
 
 }  // namespace
