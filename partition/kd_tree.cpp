@@ -3,6 +3,7 @@
 #include "kd_tree.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -24,6 +25,13 @@ struct Search {
     double a = 0, b = 0;    ///< current interval [a, b) of the axis coordinate
     double below = 0;       ///< cost of the node's cells with x < a
     bool collect = false;   ///< next pass collects the centroids in [a, b)
+    bool collectTie = false;  ///< next pass collects the centroids with x == tieValue
+    double tieValue = 0;
+    double tieBelow = 0;      ///< cost of the node's cells with x < tieValue
+    double planeSplit = 0, planeError = 0;  ///< best plane, kept while trying a tie-break
+    bool tieBreak = false;
+    std::array<double, 2> tie{};
+    std::vector<std::array<double, 3>> tieCollected;  ///< (y, z, cost) on the plane
     bool first = true;      ///< the first pass also measures the total
     bool done = false;
     double split = 0;
@@ -55,7 +63,7 @@ struct Best {
 
 int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]) {
     int n = 0;
-    while (nodes[n].axis >= 0) n = x[nodes[n].axis] < nodes[n].split ? nodes[n].low : nodes[n].high;
+    while (nodes[n].axis >= 0) n = GoesLow(nodes[n], x) ? nodes[n].low : nodes[n].high;
     return nodes[n].brick;
 }
 
@@ -138,7 +146,9 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             for (Search& s : searches) {
                 if (s.done) continue;
                 pending = true;
-                if (!s.collect) {
+                if (s.collectTie) {
+                    s.tieCollected.clear();
+                } else if (!s.collect) {
                     s.binCost.assign(kBins, 0.0);
                     s.binCount.assign(kBins, 0);
                 } else {
@@ -152,12 +162,18 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
                     const WeightedPoint& p = pts[i];
                     int n = 0;
                     while (nodes[n].axis >= 0)
-                        n = p.x[nodes[n].axis] < nodes[n].split ? nodes[n].low : nodes[n].high;
+                        n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
                     const int si = searchOf[n];
                     if (si < 0) continue;
                     Search& s = searches[si];
                     if (s.done) continue;
                     const double x = p.x[s.axis];
+                    if (s.collectTie) {
+                        if (x == s.tieValue)
+                            s.tieCollected.push_back(
+                                {p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3], p.cost});
+                        continue;
+                    }
                     if (s.first) s.total += p.cost;
                     if (x < s.a) {
                         if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
@@ -192,24 +208,73 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
                         continue;
                     }
                 }
+                if (s.collectTie) {
+                    // Divide the centroids on the plane x == tieValue by (y, z).
+                    std::sort(s.tieCollected.begin(), s.tieCollected.end());
+                    Best best;
+                    double cum = s.tieBelow;
+                    bool found = false;
+                    std::array<double, 2> key{};
+                    for (std::size_t i = 0; i < s.tieCollected.size(); ++i) {
+                        const auto& t = s.tieCollected[i];
+                        if (i == 0 || t[0] != s.tieCollected[i - 1][0] ||
+                            t[1] != s.tieCollected[i - 1][1]) {
+                            const double before = best.error;
+                            best.Offer(0, cum, s.target);
+                            if (best.error < before) {
+                                key = {t[0], t[1]};
+                                found = true;
+                            }
+                        }
+                        cum += t[2];
+                    }
+                    if (found && best.error < s.planeError) {
+                        s.tieBreak = true;
+                        s.tie = key;
+                        finish(s.tieValue);
+                    } else {
+                        finish(s.planeSplit);
+                    }
+                    std::vector<std::array<double, 3>>().swap(s.tieCollected);
+                    continue;
+                }
                 if (s.collect) {
                     // Exact: candidates between consecutive distinct coordinates.
                     std::sort(s.collected.begin(), s.collected.end());
                     Best best;
                     best.Offer(s.a, s.below, s.target);
                     double cum = s.below;
+                    bool straddle = false;
+                    std::int64_t groupCount = 0;
                     for (std::size_t i = 0; i < s.collected.size(); ++i) {
-                        cum += s.collected[i].second;
+                        const double before = cum;
                         const double x = s.collected[i].first;
-                        if (i + 1 < s.collected.size() && s.collected[i + 1].first == x) continue;
-                        const double next =
-                            i + 1 < s.collected.size() ? s.collected[i + 1].first : s.b;
+                        std::size_t j = i;
+                        while (j < s.collected.size() && s.collected[j].first == x)
+                            cum += s.collected[j++].second;
+                        // A group of equal coordinates straddling the target.
+                        if (j - i > 1 && before < s.target && cum > s.target) {
+                            straddle = true;
+                            s.tieValue = x;
+                            s.tieBelow = before;
+                            groupCount = static_cast<std::int64_t>(j - i);
+                        }
+                        const double next = j < s.collected.size() ? s.collected[j].first : s.b;
                         double mid = x + 0.5 * (next - x);
                         if (!(mid > x && mid <= next)) mid = next;
                         best.Offer(mid, cum, s.target);
+                        i = j - 1;
+                    }
+                    std::vector<std::pair<double, double>>().swap(s.collected);
+                    s.collect = false;
+                    if (straddle && best.error > 1e-9 * s.total &&
+                        groupCount <= static_cast<std::int64_t>(collectLimit)) {
+                        s.planeSplit = best.split;
+                        s.planeError = best.error;
+                        s.collectTie = true;
+                        continue;
                     }
                     finish(best.split);
-                    std::vector<std::pair<double, double>>().swap(s.collected);
                     continue;
                 }
                 // Histogram: the bin where the cumulative cost crosses the target.
@@ -252,9 +317,14 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             highNode.box = nodes[n].box;
             highNode.box.lo[s.axis] = s.split;
             std::array<double, 3> lowEnd = ends[n], highEnd = ends[n];
-            lowEnd[s.axis] = s.split;
+            // With a tie-break the low child also holds centroids on the plane.
+            lowEnd[s.axis] = s.tieBreak
+                                 ? std::nextafter(s.split, std::numeric_limits<double>::infinity())
+                                 : s.split;
             nodes[n].axis = s.axis;
             nodes[n].split = s.split;
+            nodes[n].tieBreak = s.tieBreak;
+            nodes[n].tie = s.tie;
             nodes[n].low = low;
             nodes[n].high = high;
             nodes.push_back(lowNode);

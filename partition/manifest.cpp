@@ -219,6 +219,12 @@ Partition ReadPartition(const std::string& dir) {
         KdNode& n = p.nodes[index];
         n.axis = static_cast<int>(axis);
         n.split = split;
+        if (node.contains("tie")) {
+            const json& tie = node["tie"];
+            if (!tie.is_array() || tie.size() != 2) check.Fail(where + ".tie", "is not [y, z]");
+            n.tieBreak = true;
+            n.tie = {check.Number(tie[0], where + ".tie"), check.Number(tie[1], where + ".tie")};
+        }
         n.low = low;
         n.high = high;
         return index;

@@ -340,10 +340,12 @@ nlohmann::json BrickRanges(const Mesh& mesh) {
 nlohmann::json TreeJson(const std::vector<KdNode>& nodes, int n) {
     const KdNode& node = nodes[n];
     if (node.axis < 0) return {{"brick", node.brick}};
-    return {{"axis", node.axis},
-            {"split", node.split},
-            {"low", TreeJson(nodes, node.low)},
-            {"high", TreeJson(nodes, node.high)}};
+    nlohmann::json j = {{"axis", node.axis},
+                        {"split", node.split},
+                        {"low", TreeJson(nodes, node.low)},
+                        {"high", TreeJson(nodes, node.high)}};
+    if (node.tieBreak) j["tie"] = {node.tie[0], node.tie[1]};
+    return j;
 }
 
 nlohmann::json BoxJson(const Box& b) {
@@ -567,23 +569,24 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
 
     // 4. Check every brick fits the memory limit before writing anything.
     const std::size_t pointBytes = sizeof(double) * scan.pointStride;
-    auto brickBytes = [&](const BrickTally& t) {
+    auto brickBytes = [&](const BrickTally& t, std::int64_t points) {
         // Peak of the assembly: two copies of the connectivity (sorted ids, then the VTK
         // copy of the writer), per-cell arrays (offsets twice, kinds, ghost, degrees,
-        // field values twice) and point records for at most min(nodes, points) points.
-        const auto points =
-            static_cast<std::uint64_t>(std::min<std::int64_t>(t.nodes, scan.points));
-        return static_cast<std::uint64_t>(t.nodes) * 16 + points * pointBytes +
+        // field values twice) and the point records.
+        return static_cast<std::uint64_t>(t.nodes) * 16 +
+               static_cast<std::uint64_t>(points) * pointBytes +
                static_cast<std::uint64_t>(t.cells) * (16 + 5 + 24 + 2 * recordTail);
     };
+    auto tooLarge = [&](int b, std::uint64_t bytes) {
+        return InputError("command line", "--memory-limit",
+                          "brick " + std::to_string(b) + " needs about " +
+                              std::to_string(bytes >> 20) + " MiB to assemble, more than the " +
+                              "limit of " + std::to_string(budget >> 20) +
+                              " MiB: ask for more bricks or a larger limit");
+    };
+    // Fail early when a brick cannot fit even before its points are counted.
     for (int b = 0; b < nBricks; ++b)
-        if (brickBytes(tally[b]) > budget)
-            throw InputError("command line", "--memory-limit",
-                             "brick " + std::to_string(b) + " needs about " +
-                                 std::to_string(brickBytes(tally[b]) >> 20) +
-                                 " MiB to assemble, more than the limit of " +
-                                 std::to_string(budget >> 20) +
-                                 " MiB: ask for more bricks or a larger limit");
+        if (brickBytes(tally[b], 0) > budget) throw tooLarge(b, brickBytes(tally[b], 0));
 
     // 5. Brick files, one at a time.
     int exitAfter = -1;
@@ -631,6 +634,8 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
             for (std::int64_t& p : mesh.connectivity)
                 p = std::lower_bound(ids.begin(), ids.end(), p) - ids.begin();
             const std::size_t nPoints = ids.size();
+            if (brickBytes(t, static_cast<std::int64_t>(nPoints)) > budget)
+                throw tooLarge(b, brickBytes(t, static_cast<std::int64_t>(nPoints)));
             mesh.points.resize(3 * nPoints);
             for (const StreamField& f : scan.pointFields) {
                 Field field;

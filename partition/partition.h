@@ -6,7 +6,8 @@
 // manifest.json, written last. Decisions this implementation documents:
 //  - Cell centroid: the arithmetic mean of the cell's nodes. The owner of a cell is the leaf
 //    containing its centroid, where a centroid on a split plane belongs to the high side
-//    (low child: x[axis] < split, high child: x[axis] >= split).
+//    (low child: x[axis] < split, high child: x[axis] >= split) unless the node carries
+//    a tie-break (KdNode, GoesLow) dividing the centroids on the plane.
 //  - A cell is stored in every brick whose closed leaf box intersects the cell's guaranteed
 //    geometry box (exact vertex bounds for order-1 cells, the Bernstein hull of
 //    elements/bounds.h GeometryBox otherwise), with vtkGhostType = 1 everywhere but in its
@@ -80,14 +81,27 @@ struct Box {
 };
 
 /// One node of the k-d tree: an inner node splits `axis` at `split` (low: x < split,
-/// high: x >= split); a leaf names its brick.
+/// high: x >= split); a leaf names its brick. Centroids exactly on the plane (common in
+/// structured meshes) may be divided by a tie-break on the other two coordinates: with
+/// `tieBreak`, x on the plane goes low when (x[(axis+1)%3], x[(axis+2)%3]) < tie
+/// lexicographically. The boxes are unaffected; such a centroid lies in both closed boxes.
 struct KdNode {
     int axis = -1;  ///< -1 for a leaf
     double split = 0;
+    bool tieBreak = false;
+    std::array<double, 2> tie{};
     int low = -1, high = -1;  ///< child node indices
     int brick = -1;           ///< leaf: brick index
     Box box;                  ///< the node's region (closed box)
 };
+
+/// Whether centroid `x` belongs to the low child of inner node `node`.
+inline bool GoesLow(const KdNode& node, const double x[3]) {
+    const double v = x[node.axis];
+    if (v != node.split || !node.tieBreak) return v < node.split;
+    const double y = x[(node.axis + 1) % 3], z = x[(node.axis + 2) % 3];
+    return y < node.tie[0] || (y == node.tie[0] && z < node.tie[1]);
+}
 
 /// One brick of a partition as the manifest describes it.
 struct BrickInfo {

@@ -791,9 +791,28 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
 
 /// Replays an in-memory mesh into the sink (formats that are not streamed).
 void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
+    // Readers that do not select fields (builtins) still must not ignore a bad name, and
+    // must not pass on fields nobody asked for.
+    std::set<const Field*> wanted;
+    if (st.options.fields)
+        for (const std::string& name : *st.options.fields) {
+            const std::optional<ScalarSelector> sel = SelectScalar(mesh, name);
+            if (!sel) {
+                std::string list;
+                for (const Field& f : mesh.pointFields) list += (list.empty() ? "" : ", ") + f.name;
+                for (const Field& f : mesh.cellFields) list += (list.empty() ? "" : ", ") + f.name;
+                throw InputError(source, "",
+                                 "field '" + name + "' does not exist; available: " +
+                                     (list.empty() ? std::string("(none)") : list));
+            }
+            wanted.insert(sel->field);
+        }
+    auto keep = [&](const Field& f) { return !st.options.fields || wanted.count(&f) > 0; };
     std::vector<StreamField> pf, cf;
-    for (const Field& fld : mesh.pointFields) pf.push_back({fld.name, fld.components});
-    for (const Field& fld : mesh.cellFields) cf.push_back({fld.name, fld.components});
+    for (const Field& fld : mesh.pointFields)
+        if (keep(fld)) pf.push_back({fld.name, fld.components});
+    for (const Field& fld : mesh.cellFields)
+        if (keep(fld)) cf.push_back({fld.name, fld.components});
     st.SendFields(pf, cf, source);
     // Align with the layout announced by the first piece.
     std::vector<const Field*> pointOrder, cellOrder;

@@ -1,0 +1,535 @@
+// Partition library: streamed input equals the whole-file reader, balance for any N,
+// ownership and ghost coverage against an independent cell model, manifest validation,
+// checksums, and the front-to-back order of bricks.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+
+#include "cost_model.h"
+#include "io/mesh_io.h"
+#include "io/vtu_writer.h"
+#include "kd_tree.h"
+#include "mesh/builtin.h"
+#include "partition.h"
+#include "partition_test_util.h"
+#include "util/error.h"
+#include "vtu_stream.h"
+
+namespace hpray {
+namespace {
+
+using partition::Box;
+using partition::Partition;
+using test::ScratchDir;
+
+const std::string kData = HPRAY_SHARED_DATA;
+
+/// Collects a streamed mesh back into a Mesh.
+class CollectSink : public partition::MeshSink {
+public:
+    void Fields(const std::vector<partition::StreamField>& pf,
+                const std::vector<partition::StreamField>& cf) override {
+        pointFields = pf;
+        cellFields = cf;
+        for (const auto& f : pf) pointComps += f.components;
+        for (const auto& f : cf) cellComps += f.components;
+    }
+    void Points(std::int64_t count, const double* xyz, const double* values) override {
+        mesh.points.insert(mesh.points.end(), xyz, xyz + 3 * count);
+        pointValues.insert(pointValues.end(), values, values + count * pointComps);
+    }
+    void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
+              int count, const double* values) override {
+        mesh.AddCell(shape, order, family, nodes, count);
+        cellValues.insert(cellValues.end(), values, values + cellComps);
+    }
+    Mesh mesh;
+    std::vector<partition::StreamField> pointFields, cellFields;
+    int pointComps = 0, cellComps = 0;
+    std::vector<double> pointValues, cellValues;
+};
+
+/// Streams `path` with a small buffer and compares everything with ReadMesh.
+void ExpectStreamEqualsRead(const std::string& path, bool expectStreamed) {
+    SCOPED_TRACE(path);
+    const Mesh ref = ReadMesh(path);
+    CollectSink sink;
+    const auto stats = partition::StreamMesh(path, {}, 4096, sink);
+    EXPECT_EQ(stats.streamed, expectStreamed);
+    EXPECT_EQ(stats.cells, ref.CellCount());
+    EXPECT_EQ(sink.mesh.points, ref.points);
+    EXPECT_EQ(sink.mesh.connectivity, ref.connectivity);
+    EXPECT_EQ(sink.mesh.cellOffsets, ref.cellOffsets);
+    EXPECT_EQ(sink.mesh.cellShape, ref.cellShape);
+    EXPECT_EQ(sink.mesh.cellOrder, ref.cellOrder);
+    ASSERT_EQ(sink.pointFields.size(), ref.pointFields.size());
+    int offset = 0;
+    for (const auto& f : sink.pointFields) {
+        const Field* r = ref.FindPointField(f.name);
+        ASSERT_NE(r, nullptr) << f.name;
+        ASSERT_EQ(r->components, f.components);
+        for (std::int64_t p = 0; p < ref.PointCount(); ++p)
+            for (int k = 0; k < f.components; ++k)
+                ASSERT_EQ(sink.pointValues[p * sink.pointComps + offset + k],
+                          r->values[p * f.components + k])
+                    << f.name << " point " << p;
+        offset += f.components;
+    }
+    offset = 0;
+    for (const auto& f : sink.cellFields) {
+        const Field* r = ref.FindCellField(f.name);
+        ASSERT_NE(r, nullptr) << f.name;
+        for (std::int64_t c = 0; c < ref.CellCount(); ++c)
+            for (int k = 0; k < f.components; ++k)
+                ASSERT_EQ(sink.cellValues[c * sink.cellComps + offset + k],
+                          r->values[c * f.components + k]);
+        offset += f.components;
+    }
+}
+
+TEST(VtuStream, EqualsTheWholeFileReader) {
+    // appended raw + zlib UInt32 header; raw uncompressed; zlib UInt64 header (four linear
+    // types interleaved); Float32 points with Int32 connectivity.
+    ExpectStreamEqualsRead(kData + "/gmsh_boolean_tet_p4.vtu", true);
+    ExpectStreamEqualsRead(kData + "/mfem_toroid_wedge_p3.vtu", true);
+    ExpectStreamEqualsRead(kData + "/mfem_fichera_mixed16_linear.vtu", true);
+    // Inline data (ASCII, base64 + zlib) is read whole and replayed.
+    ExpectStreamEqualsRead(kData + "/mfem_spiral_hex_p9.vtu", false);
+    ExpectStreamEqualsRead(kData + "/dealii_step44_hex_q2.vtu", false);
+}
+
+TEST(VtuStream, PvtuPiecesAndFieldSelection) {
+    ScratchDir dir("vtu_stream");
+    // Two pieces of a builtin written by the project's writer, indexed by a .pvtu.
+    const Mesh whole = MakeBuiltin("builtin:cube-tets-3");
+    Mesh a, b;
+    for (Mesh* m : {&a, &b}) *m = whole;
+    WriteVtu(dir / "a.vtu", a);
+    WriteVtu(dir / "b.vtu", b);
+    std::ofstream(dir / "both.pvtu")
+        << "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\">\n"
+           "<PUnstructuredGrid GhostLevel=\"0\"><PPoints><PDataArray type=\"Float64\" "
+           "NumberOfComponents=\"3\"/></PPoints>\n<Piece Source=\"a.vtu\"/><Piece "
+           "Source=\"b.vtu\"/></PUnstructuredGrid></VTKFile>\n";
+    ExpectStreamEqualsRead(dir / "both.pvtu", true);
+
+    ReadOptions only;
+    only.fields = std::set<std::string>{"u"};
+    CollectSink sink;
+    partition::StreamMesh(kData + "/mfem_escher_tet_p3.vtu", only, 1 << 16, sink);
+    ASSERT_EQ(sink.pointFields.size(), 1u);
+    EXPECT_EQ(sink.pointFields[0].name, "u");
+    EXPECT_TRUE(sink.cellFields.empty());
+    only.fields = std::set<std::string>{"nope"};
+    EXPECT_THROW(partition::StreamMesh(kData + "/mfem_escher_tet_p3.vtu", only, 1 << 16, sink),
+                 InputError);
+}
+
+TEST(VtuStream, TruncatedFileIsAnInputError) {
+    ScratchDir dir("vtu_stream_trunc");
+    std::ifstream in(kData + "/mfem_toroid_wedge_p3.vtu", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(dir / "cut.vtu", std::ios::binary) << bytes.substr(0, bytes.size() * 2 / 3);
+    CollectSink sink;
+    try {
+        partition::StreamMesh(dir / "cut.vtu", {}, 4096, sink);
+        FAIL() << "no error";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("cut.vtu"), std::string::npos) << e.what();
+    }
+}
+
+/// Balance of a partition computed independently: each cell's owner found by walking the
+/// manifest's tree with the cell's centroid, costs from the cost model.
+double IndependentBalance(const Mesh& mesh, const Partition& p) {
+    std::vector<double> cost(p.bricks.size(), 0.0);
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+        const auto x = test::Centroid(mesh, c);
+        int n = 0;
+        while (p.nodes[n].axis >= 0) {
+            // The documented rule: low when x[axis] < split; on the plane, by the tie-break
+            // on the next two coordinates when the node has one.
+            const auto& node = p.nodes[n];
+            const int a = node.axis;
+            bool low = x[a] < node.split;
+            if (x[a] == node.split && node.tieBreak) {
+                const double y = x[(a + 1) % 3], z = x[(a + 2) % 3];
+                low = y < node.tie[0] || (y == node.tie[0] && z < node.tie[1]);
+            }
+            n = low ? node.low : node.high;
+        }
+        cost[p.nodes[n].brick] +=
+            partition::CellRenderCost(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
+    }
+    double sum = 0, max = 0;
+    for (double v : cost) {
+        sum += v;
+        max = std::max(max, v);
+    }
+    return max / (sum / cost.size());
+}
+
+TEST(Partition, BalancedForEveryBrickCountUpTo64) {
+    // Curved order-3 tets (every cell costs the same): 21,504 cells, 336 per brick at 64.
+    const std::string path = kData + "/mfem_escher_tet_p3.vtu";
+    const Mesh mesh = ReadMesh(path);
+    ScratchDir dir("partition_balance");
+    for (int n = 2; n <= 64; ++n) {
+        partition::PartitionOptions o;
+        o.bricks = n;
+        o.outDir = dir / "p";
+        o.fields = std::vector<std::string>{"u"};
+        partition::PartitionMesh(path, o);
+        const Partition p = partition::ReadPartition(o.outDir);
+        ASSERT_EQ(static_cast<int>(p.bricks.size()), n);
+        const double balance = IndependentBalance(mesh, p);
+        EXPECT_LE(balance, 1.05) << n << " bricks";
+        // The manifest reports the same owned costs.
+        double max = 0, sum = 0;
+        for (const auto& b : p.bricks) {
+            max = std::max(max, b.cost);
+            sum += b.cost;
+        }
+        EXPECT_NEAR(max / (sum / n), balance, 1e-9) << n;
+    }
+}
+
+TEST(Partition, BalancedOnTheLargeMeshAndMixedCosts) {
+    // 1.25M tets; and the mixed linear mesh, whose four cell types cost differently.
+    for (const auto& [file, counts] :
+         std::vector<std::pair<std::string, std::vector<int>>>{
+             {"mfem_gmsh_t16_tets_1M.vtu", {3, 12, 64}},
+             {"mfem_fichera_mixed16_linear.vtu", {5, 7, 33}}}) {
+        const std::string path = kData + "/" + file;
+        const Mesh mesh = ReadMesh(path, ReadOptions{std::set<std::string>{"u"}});
+        ScratchDir dir("partition_large");
+        for (int n : counts) {
+            partition::PartitionOptions o;
+            o.bricks = n;
+            o.outDir = dir / "p";
+            o.fields = std::vector<std::string>{"u"};
+            o.memoryLimitBytes = std::size_t(256) << 20;
+            partition::PartitionMesh(path, o);
+            const Partition p = partition::ReadPartition(o.outDir);
+            EXPECT_LE(IndependentBalance(mesh, p), 1.05) << file << " " << n;
+        }
+    }
+}
+
+/// The invariants of a partition of `path`: every input cell owned by exactly one brick
+/// (the leaf containing its centroid), present in exactly the bricks whose closed box
+/// meets its guaranteed geometry box, fields copied, ranges containing the nodal values,
+/// leaf boxes tiling the root box, which is exactly the mesh bounds for linear meshes.
+void ExpectValidPartition(const std::string& path, const std::string& dir) {
+    SCOPED_TRACE(path);
+    const Mesh mesh = ReadMesh(path);
+    const Partition p = partition::ReadPartition(dir);
+    std::map<test::CellKey, std::int64_t> index;
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) index.emplace(test::KeyOf(mesh, c), c);
+    ASSERT_EQ(static_cast<std::int64_t>(index.size()), mesh.CellCount());
+
+    std::vector<int> owners(mesh.CellCount(), 0);
+    std::vector<std::set<int>> holders(mesh.CellCount());
+    for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
+        const Mesh brick = partition::LoadBrick(p, b);
+        ASSERT_EQ(brick.ghost.size(), static_cast<std::size_t>(brick.CellCount()));
+        for (std::int64_t c = 0; c < brick.CellCount(); ++c) {
+            const auto it = index.find(test::KeyOf(brick, c));
+            ASSERT_NE(it, index.end()) << "brick " << b << " cell " << c << " is not an input cell";
+            const std::int64_t id = it->second;
+            EXPECT_TRUE(holders[id].insert(b).second) << "cell " << id << " twice in brick " << b;
+            if (brick.ghost[c] == 0) {
+                ++owners[id];
+                // The owner's box contains the centroid.
+                const auto x = test::Centroid(mesh, id);
+                for (int d = 0; d < 3; ++d) {
+                    EXPECT_GE(x[d], p.bricks[b].box.lo[d]);
+                    EXPECT_LE(x[d], p.bricks[b].box.hi[d]);
+                }
+            } else {
+                EXPECT_EQ(brick.ghost[c], 1);
+            }
+            // Point fields copied with their nodes; ranges contain the nodal values.
+            for (const Field& f : brick.pointFields) {
+                const Field* r = mesh.FindPointField(f.name);
+                ASSERT_NE(r, nullptr);
+                for (int k = 0; k < brick.CellNodeCount(c); ++k) {
+                    const std::int64_t bp = brick.CellNodes(c)[k];
+                    const std::int64_t mp = mesh.CellNodes(id)[k];
+                    for (int q = 0; q < f.components; ++q)
+                        ASSERT_EQ(f.values[bp * f.components + q], r->values[mp * f.components + q]);
+                    if (f.components == 1) {
+                        const auto& range = p.bricks[b].ranges.at(f.name);
+                        EXPECT_GE(f.values[bp], range[0]);
+                        EXPECT_LE(f.values[bp], range[1]);
+                    }
+                }
+            }
+        }
+    }
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+        EXPECT_EQ(owners[c], 1) << "cell " << c;
+        // Ghosts exactly cover each leaf box.
+        const Box3 box = test::CellBox(mesh, c);
+        std::set<int> expected;
+        for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
+            bool meets = true;
+            for (int d = 0; d < 3; ++d)
+                meets &= box.lo[d] <= p.bricks[b].box.hi[d] && box.hi[d] >= p.bricks[b].box.lo[d];
+            if (meets) expected.insert(b);
+        }
+        EXPECT_EQ(holders[c], expected) << "cell " << c;
+    }
+    // Leaf boxes tile the root box: volumes add up and interiors are disjoint.
+    double volume = 0;
+    auto vol = [](const Box& b) {
+        return (b.hi[0] - b.lo[0]) * (b.hi[1] - b.lo[1]) * (b.hi[2] - b.lo[2]);
+    };
+    for (std::size_t i = 0; i < p.bricks.size(); ++i) {
+        volume += vol(p.bricks[i].box);
+        for (int d = 0; d < 3; ++d) {
+            EXPECT_GE(p.bricks[i].box.lo[d], p.rootBox.lo[d]);
+            EXPECT_LE(p.bricks[i].box.hi[d], p.rootBox.hi[d]);
+        }
+        for (std::size_t j = i + 1; j < p.bricks.size(); ++j) {
+            bool overlap = true;
+            for (int d = 0; d < 3; ++d)
+                overlap &= p.bricks[i].box.lo[d] < p.bricks[j].box.hi[d] &&
+                           p.bricks[j].box.lo[d] < p.bricks[i].box.hi[d];
+            EXPECT_FALSE(overlap) << i << " " << j;
+        }
+    }
+    EXPECT_NEAR(volume, vol(p.rootBox), 1e-12 * vol(p.rootBox));
+    // Root box: the union of the guaranteed cell boxes.
+    Box3 all = test::CellBox(mesh, 0);
+    for (std::int64_t c = 1; c < mesh.CellCount(); ++c) {
+        const Box3 b = test::CellBox(mesh, c);
+        for (int d = 0; d < 3; ++d) {
+            all.lo[d] = std::min(all.lo[d], b.lo[d]);
+            all.hi[d] = std::max(all.hi[d], b.hi[d]);
+        }
+    }
+    EXPECT_EQ(p.rootBox.lo, all.lo);
+    EXPECT_EQ(p.rootBox.hi, all.hi);
+}
+
+TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
+    ScratchDir dir("partition_valid");
+    struct Case {
+        std::string file;
+        int bricks;
+    };
+    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
+                          Case{"gmsh_boolean_tet_p4.vtu", 5},
+                          Case{"mfem_fichera_mixed_p3.vtu", 12},
+                          Case{"mfem_toroid_hex_p3.vtu", 3}}) {
+        partition::PartitionOptions o;
+        o.bricks = c.bricks;
+        o.outDir = dir / c.file;
+        partition::PartitionMesh(kData + "/" + c.file, o);
+        ExpectValidPartition(kData + "/" + c.file, o.outDir);
+    }
+    // Linear mesh: the root box is exactly the bounds of the points.
+    const Mesh linear = ReadMesh(kData + "/mfem_fichera_mixed16_linear.vtu");
+    const Partition p = partition::ReadPartition(dir / "mfem_fichera_mixed16_linear.vtu");
+    const auto bounds = linear.Bounds();
+    EXPECT_EQ(p.rootBox.lo, bounds[0]);
+    EXPECT_EQ(p.rootBox.hi, bounds[1]);
+    // Curved mesh: cells bulge beyond their nodes; the root box covers the hulls.
+    const Mesh curved = ReadMesh(kData + "/gmsh_boolean_tet_p4.vtu");
+    const Partition q = partition::ReadPartition(dir / "gmsh_boolean_tet_p4.vtu");
+    for (int d = 0; d < 3; ++d) {
+        EXPECT_LE(q.rootBox.lo[d], curved.Bounds()[0][d]);
+        EXPECT_GE(q.rootBox.hi[d], curved.Bounds()[1][d]);
+    }
+}
+
+TEST(Partition, BrickRangesBoundTheTrueFieldInsideCurvedCells) {
+    // Sample the true (order-4) field inside every cell of every brick at random points.
+    ScratchDir dir("partition_ranges");
+    partition::PartitionOptions o;
+    o.bricks = 4;
+    o.outDir = dir / "p";
+    o.fields = std::vector<std::string>{"analytic"};
+    partition::PartitionMesh(kData + "/gmsh_boolean_tet_p4.vtu", o);
+    const Partition p = partition::ReadPartition(o.outDir);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(0, 1);
+    std::vector<double> values(kMaxBasisNodes);
+    for (int b = 0; b < 4; ++b) {
+        const Mesh brick = partition::LoadBrick(p, b);
+        ASSERT_EQ(brick.pointFields.size(), 1u);
+        const auto range = p.bricks[b].ranges.at("analytic");
+        for (std::int64_t c = 0; c < brick.CellCount(); ++c) {
+            const BasisTable& basis = GetBasis(brick.cellShape[c], brick.cellOrder[c]);
+            for (int s = 0; s < 10; ++s) {
+                double r[3] = {u(rng), u(rng), u(rng)};
+                const double sum = r[0] + r[1] + r[2];
+                if (sum > 1)
+                    for (double& v : r) v /= sum + 1e-9;
+                EvalBasis(basis, r, values.data(), nullptr);
+                double f = 0;
+                for (int m = 0; m < basis.nodeCount; ++m)
+                    f += values[m] * brick.pointFields[0].values[brick.CellNodes(c)[m]];
+                EXPECT_GE(f, range[0] - 1e-12);
+                EXPECT_LE(f, range[1] + 1e-12);
+            }
+        }
+    }
+}
+
+TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
+    // Centroids on a coarse lattice (many equal coordinates) with unequal costs: splits
+    // are chosen between distinct coordinates; costs in proportion to the leaf counts.
+    std::vector<partition::WeightedPoint> pts;
+    std::mt19937 rng(7);
+    for (int i = 0; i < 40000; ++i)
+        pts.push_back({{static_cast<double>(rng() % 97), static_cast<double>(rng() % 89),
+                        static_cast<double>(rng() % 83)},
+                       1.0 + (rng() % 4)});
+    const partition::CentroidPass pass = [&](const auto& visit) {
+        for (std::size_t i = 0; i < pts.size(); i += 1000)
+            visit(pts.data() + i, std::min<std::size_t>(1000, pts.size() - i));
+    };
+    Box root;
+    root.lo = {0, 0, 0};
+    root.hi = {96, 88, 82};
+    for (int n : {1, 2, 3, 5, 7, 12, 17, 31, 64}) {
+        for (std::size_t limit : {std::size_t(64), std::size_t(1) << 20}) {
+            const auto nodes = partition::BuildKdTree(root, n, pass, limit);
+            std::vector<double> cost(n, 0.0);
+            for (const auto& p : pts) cost[partition::OwnerBrick(nodes, p.x)] += p.cost;
+            double sum = 0, max = 0;
+            for (double v : cost) {
+                sum += v;
+                max = std::max(max, v);
+            }
+            EXPECT_LE(max / (sum / n), 1.05) << n << " leaves, collect limit " << limit;
+            // Each subtree's cost is close to its share by leaf count.
+            EXPECT_EQ(static_cast<int>(nodes.size()), 2 * n - 1);
+        }
+    }
+}
+
+/// True when boxes a and b are separated by an axis plane with `eye` on a's side (or on
+/// the plane): then nothing of b can hide a from the eye.
+bool SeparatedWithEyeOnSide(const Box& a, const Box& b, const std::array<double, 3>& eye) {
+    for (int d = 0; d < 3; ++d) {
+        if (a.hi[d] <= b.lo[d] && eye[d] <= b.lo[d]) return true;
+        if (b.hi[d] <= a.lo[d] && eye[d] >= b.hi[d]) return true;
+    }
+    return false;
+}
+
+TEST(Partition, FrontToBackOrderForAnyCamera) {
+    ScratchDir dir("partition_order");
+    partition::PartitionOptions o;
+    o.bricks = 11;
+    o.outDir = dir / "p";
+    partition::PartitionMesh("builtin:cube-tets-6", o);
+    const Partition p = partition::ReadPartition(o.outDir);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-2, 3);
+    for (int trial = 0; trial < 200; ++trial) {
+        const std::array<double, 3> eye{u(rng), u(rng), u(rng)};
+        const auto order = partition::FrontToBackOrder(p, eye);
+        ASSERT_EQ(order.size(), 11u);
+        EXPECT_EQ(std::set<int>(order.begin(), order.end()).size(), 11u);
+        for (std::size_t i = 0; i < order.size(); ++i)
+            for (std::size_t j = i + 1; j < order.size(); ++j)
+                EXPECT_TRUE(SeparatedWithEyeOnSide(p.bricks[order[i]].box,
+                                                   p.bricks[order[j]].box, eye))
+                    << trial << ": " << order[i] << " before " << order[j];
+        // Parallel rays: an eye far away against the direction gives a valid order too.
+        std::array<double, 3> dir{u(rng), u(rng), u(rng)};
+        const auto ortho = partition::FrontToBackOrderForDirection(p, dir);
+        std::array<double, 3> far;
+        for (int d = 0; d < 3; ++d) far[d] = 0.5 - 1e6 * dir[d];
+        for (std::size_t i = 0; i < ortho.size(); ++i)
+            for (std::size_t j = i + 1; j < ortho.size(); ++j)
+                EXPECT_TRUE(SeparatedWithEyeOnSide(p.bricks[ortho[i]].box,
+                                                   p.bricks[ortho[j]].box, far));
+    }
+}
+
+TEST(Partition, ManifestAndBrickErrorsAreInputErrors) {
+    ScratchDir dir("partition_errors");
+    partition::PartitionOptions o;
+    o.bricks = 3;
+    o.outDir = dir / "p";
+    partition::PartitionMesh("builtin:cube-tets-4", o);
+    Partition p = partition::ReadPartition(o.outDir);
+    EXPECT_NO_THROW(partition::LoadBrick(p, 1));
+
+    // A flipped byte inside a brick: the checksum catches it.
+    const std::string brick = p.BrickPath(1);
+    {
+        std::fstream f(brick, std::ios::in | std::ios::out | std::ios::binary);
+        f.seekg(-100, std::ios::end);
+        char c;
+        f.get(c);
+        f.seekp(-100, std::ios::end);
+        f.put(static_cast<char>(c ^ 0x5a));
+    }
+    try {
+        partition::LoadBrick(p, 1);
+        FAIL() << "no error";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("checksum"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("brick-0001.vtu"), std::string::npos);
+    }
+    // A missing brick.
+    std::filesystem::remove(brick);
+    try {
+        partition::ReadPartition(o.outDir);
+        FAIL() << "no error";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("missing"), std::string::npos) << e.what();
+    }
+    // Broken manifests name the key.
+    const std::string manifest = o.outDir + "/manifest.json";
+    auto rewrite = [&](const std::function<void(nlohmann::json&)>& edit) {
+        nlohmann::json j = p.manifest;
+        edit(j);
+        std::ofstream(manifest) << j.dump();
+    };
+    partition::PartitionMesh("builtin:cube-tets-4", o);
+    p = partition::ReadPartition(o.outDir);
+    auto expectError = [&](const std::string& key) {
+        try {
+            partition::ReadPartition(o.outDir);
+            ADD_FAILURE() << "no error for " << key;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << e.what();
+        }
+    };
+    rewrite([](nlohmann::json& j) { j["bricks"][2]["sha256"] = "xyz"; });
+    expectError("bricks[2].sha256");
+    rewrite([](nlohmann::json& j) { j["bricks"][0].erase("box"); });
+    expectError("bricks[0].box");
+    rewrite([](nlohmann::json& j) { j["tree"]["high"] = {{"brick", 0}}; });
+    expectError("tree");
+    rewrite([](nlohmann::json& j) { j["tree"]["split"] = 1e9; });
+    expectError("tree.split");
+    rewrite([](nlohmann::json& j) { j["bricks"][1]["box"][0][0] = -5.0; });
+    expectError("bricks[1].box");
+    std::ofstream(manifest) << "{\"bricks\": [";
+    expectError("manifest.json");
+}
+
+TEST(Partition, MemorySizes) {
+    EXPECT_EQ(partition::ParseMemorySize("64M"), std::size_t(64) << 20);
+    EXPECT_EQ(partition::ParseMemorySize("1.5G"), std::size_t(3) << 29);
+    EXPECT_EQ(partition::ParseMemorySize("512MiB"), std::size_t(512) << 20);
+    EXPECT_EQ(partition::ParseMemorySize("8388608"), std::size_t(8) << 20);
+    for (const char* bad : {"", "abc", "12X", "1.2.3G", "1K", "-5G", "G"})
+        EXPECT_THROW(partition::ParseMemorySize(bad), InputError) << bad;
+}
+
+}  // namespace
+}  // namespace hpray
