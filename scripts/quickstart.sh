@@ -7,4 +7,6 @@ configure_and_build
 cd "$HPRAY_ROOT"
 step "running: hpray info builtin:nk-sinc"
 "$HPRAY_BUILD/bin/hpray" info builtin:nk-sinc
+step "running: hpray render configs/quickstart.yaml (writes out/quickstart.{exr,png,json})"
+"$HPRAY_BUILD/bin/hpray" render configs/quickstart.yaml
 step "done"

@@ -3,11 +3,15 @@
 
 #include <algorithm>
 
+#include "elements/tensor_eval.h"
+
 namespace hpray {
 
 double FieldValue(const CellGeometry& cell, const CellScalar& field, const double ref[3],
                   EvalWorkspace& ws) {
     if (!field.nodal) return field.constant;
+    if (cell.basis->kind == BasisKind::HexLagrange)
+        return HexFieldValue(cell.basis->order, field.nodal, ref);
     const int n = cell.basis->nodeCount;
     EvalBasis(*cell.basis, ref, ws.values.data(), nullptr);
     double v = 0.0;
@@ -24,16 +28,21 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
         return true;
     }
     const int n = cell.basis->nodeCount;
-    const double* v = ws.values.data();
     const double* d = ws.dRef.data();
-    EvalBasis(*cell.basis, ref, ws.values.data(), ws.dRef.data());
     double f = 0.0, g[3] = {0.0, 0.0, 0.0};
-    for (int m = 0; m < n; ++m) {
-        const double c = field.nodal[m];
-        f += c * v[m];
-        g[0] += c * d[3 * m];
-        g[1] += c * d[3 * m + 1];
-        g[2] += c * d[3 * m + 2];
+    const bool tensor = cell.basis->kind == BasisKind::HexLagrange;
+    if (tensor && cell.affine) {
+        f = HexFieldValueGradient(cell.basis->order, field.nodal, ref, g);
+    } else {
+        const double* v = ws.values.data();
+        EvalBasis(*cell.basis, ref, ws.values.data(), ws.dRef.data());
+        for (int m = 0; m < n; ++m) {
+            const double c = field.nodal[m];
+            f += c * v[m];
+            g[0] += c * d[3 * m];
+            g[1] += c * d[3 * m + 1];
+            g[2] += c * d[3 * m + 2];
+        }
     }
     value = f;
     double jac[9], inv[9];

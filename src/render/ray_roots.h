@@ -18,6 +18,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "render/legendre.h"
@@ -34,6 +36,9 @@ struct ProjectionOptions {
     int maxDegree = 48;
     /// Pieces are halved when maxDegree does not reach the tolerance, down to this length.
     int maxSplits = 6;
+    /// The scale the tolerance is relative to is at least this (e.g. the magnitude of the
+    /// field over the whole mesh), so pieces where the field is nearly zero converge.
+    double scaleFloor = 0;
 };
 
 /// A projected piece of the segment: p approximates f on [p.a, p.b] with |f - p| <= eps.
@@ -68,6 +73,24 @@ struct RootResult {
 };
 
 namespace detail {
+/// Samples f at n ray parameters: through f.SampleBatch(t, n, out) when F has it (a
+/// batched evaluator), else one call per point.
+template <typename F, typename = void>
+struct HasSampleBatch : std::false_type {};
+template <typename F>
+struct HasSampleBatch<F, std::void_t<decltype(std::declval<F&>().SampleBatch(
+                             std::declval<const double*>(), 0, std::declval<double*>()))>>
+    : std::true_type {};
+
+template <typename F>
+void SampleMany(F& f, const double* t, int n, double* out) {
+    if constexpr (HasSampleBatch<F>::value) {
+        f.SampleBatch(t, n, out);
+    } else {
+        for (int i = 0; i < n; ++i) out[i] = f(t[i]);
+    }
+}
+
 /// Candidate windows of p - C on [p.a, p.b], in increasing t. `visit(lo, hi, kind, tStar)`
 /// returns true to stop. Kinds: 1 a proven sign change (|p - C| > eps at both ends,
 /// opposite signs, p monotone); 2 a tangency within eps at the extremum tStar; 3 a monotone
@@ -121,8 +144,11 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
         const double mid = 0.5 * (w.lo + w.hi), half = 0.5 * (w.hi - w.lo);
         auto sample = [&](int n) {
             const LglRule& rule = LglNodes(n);
+            scratch.resize(2 * (n + 1));
+            double* ts = scratch.data() + n + 1;
+            for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
+            detail::SampleMany(f, ts, n + 1, scratch.data());
             scratch.resize(n + 1);
-            for (int i = 0; i <= n; ++i) scratch[i] = f(mid + half * rule.nodes[i]);
             stats.evaluations += n + 1;
             return InterpolateLgl(scratch.data(), n, w.lo, w.hi);
         };
@@ -138,7 +164,7 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
             int n = options.startDegree;
             for (;;) {
                 piece.p = sample(n);
-                double scale = 0;
+                double scale = options.scaleFloor;
                 for (double v : scratch) scale = std::max(scale, std::abs(v));
                 const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
                 const double floor =

@@ -1,0 +1,24 @@
+// Sum-factorised evaluation of fields on Lagrange hexahedra: O(p^3) multiply-adds per point
+// instead of forming all (p+1)^3 basis functions, and a batched form along a line.
+#pragma once
+
+namespace hpray {
+
+/// The 1-D equispaced Lagrange polynomials of degree p on [0, 1] at x (and derivatives if
+/// dl is not null): l_i(x) = S_i(x) S_{p-i}(1 - x) with the Silvester factors of basis.h.
+void LagrangeEquispaced1D(int p, double x, double* l, double* dl);
+
+/// f(ref) for nodal values u in the internal hex order (i fastest, then j, then k).
+double HexFieldValue(int p, const double* u, const double ref[3]);
+
+/// f(ref) and its reference gradient.
+double HexFieldValueGradient(int p, const double* u, const double ref[3], double dRef[3]);
+
+/// f at the n points ref0 + t[s] * dref (a straight line in reference space), into out[s].
+/// `scratch` must hold (p + 1)^2 * n + 3 * (p + 1) * n doubles (see HexLineScratchSize).
+void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
+                             const double dref[3], const double* t, int n, double* out,
+                             double* scratch);
+inline int HexLineScratchSize(int p, int n) { return (p + 1) * (p + 1) * n + 3 * (p + 1) * n; }
+
+}  // namespace hpray

@@ -1,0 +1,296 @@
+// Ray casting one brick (see brick_renderer.h).
+#include "render/brick_renderer.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <mutex>
+
+#include "render/ray_field.h"
+#include "util/error.h"
+
+namespace hpray {
+
+BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                          const BrickTraverser& traverser, const Scene& scene) {
+    BrickSetup s;
+    s.mesh = &mesh;
+    s.geometry = &geometry;
+    s.traverser = &traverser;
+    s.lighting = scene.lighting;
+    const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
+    for (std::size_t k = 0; k < scene.isosurfaces.size(); ++k) {
+        const SceneIsosurface& iso = scene.isosurfaces[k];
+        const auto sel = SelectScalar(mesh, iso.field);
+        const std::string key = "isosurfaces." + std::to_string(k) + ".field";
+        if (!sel) throw InputError(source, key, "the mesh has no field '" + iso.field + "'");
+        if (sel->field->association != Association::Point)
+            throw InputError(source, key,
+                             "'" + iso.field + "' is a cell field; isosurfaces need a point field");
+        int index = -1;
+        for (std::size_t f = 0; f < s.fields.size(); ++f)
+            if (s.fields[f].field == sel->field && s.fields[f].component == sel->component)
+                index = static_cast<int>(f);
+        if (index < 0) {
+            index = static_cast<int>(s.fields.size());
+            s.fields.push_back(*sel);
+        }
+        s.isos.push_back({index, iso.value, iso.color, iso.opacity});
+    }
+    // Guaranteed per-cell ranges of each isosurface field.
+    const std::int64_t cells = mesh.CellCount();
+    s.cellRanges.assign(s.fields.size(), std::vector<Interval>(cells));
+    for (std::size_t f = 0; f < s.fields.size(); ++f) {
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::vector<double> nodal;
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                GatherCellValues(mesh, *s.fields[f].field, s.fields[f].component, c, nodal);
+                s.cellRanges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
+            }
+        });
+    }
+    for (const ScalarSelector& f : s.fields) {
+        const auto r = f.field->Range(f.component);
+        s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
+    }
+    const SceneAccuracy& acc = scene.accuracy;
+    s.projection.tolerance = acc.projectionTolerance;
+    if (acc.projectionOrder > 0) {
+        s.projection.startDegree = acc.projectionOrder;
+        s.projection.maxDegree = acc.projectionOrder;
+    }
+    s.roots.rootTolerance = acc.rootTolerance;
+    s.inversion.tolerance = acc.mappingTolerance;
+    const auto b = mesh.Bounds();
+    const double diag = std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
+    s.duplicateDistance = 1e-9 * diag;
+    s.tNear = std::max(0.0, scene.clip.near);
+    s.tFar = scene.clip.far;
+    if (scene.clip.box) s.clipBox = *scene.clip.box;
+    return s;
+}
+
+/// Per-thread scratch of the ray loop: grown once, then reused without allocation.
+class RayIntegrator {
+public:
+    void Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
+                   RenderCounters& counters);
+
+private:
+    struct Event {
+        double t;
+        int iso;
+        double residual;
+    };
+    void Shade(const BrickSetup& setup, const Ray& ray, const Event& e, SegmentField& field,
+               PixelSample& out, double& transmittance, RenderCounters& counters);
+
+    std::vector<Segment> segments_;
+    SegmentField field_;
+    std::vector<std::vector<ProjectedPiece>> pieces_;  ///< per field
+    std::vector<char> fieldUsed_;
+    ProjectionStats projectionStats_;
+    std::vector<double> scratch_;
+    std::vector<Event> events_;
+    std::vector<double> lastHit_;
+    std::vector<char> relevant_;
+};
+
+void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
+                          SegmentField& field, PixelSample& out, double& transmittance,
+                          RenderCounters& counters) {
+    const BrickSetup::Iso& iso = setup.isos[e.iso];
+    double value, g[3];
+    field.ValueGradient(e.t, value, g);
+    const double gn = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+    double n[3];
+    if (gn > 0 && std::isfinite(gn)) {
+        for (int i = 0; i < 3; ++i) n[i] = g[i] / gn;
+    } else {
+        for (int i = 0; i < 3; ++i) n[i] = -ray.dir[i];
+    }
+    // Two-sided: the normal faces the camera.
+    double nd = n[0] * ray.dir[0] + n[1] * ray.dir[1] + n[2] * ray.dir[2];
+    if (nd > 0) {
+        for (double& v : n) v = -v;
+        nd = -nd;
+    }
+    const double nl = -nd;  // headlight: L = V = -dir, so H = L and N.H = N.L
+    const SceneLighting& L = setup.lighting;
+    const double spec = L.specular * std::pow(std::max(0.0, nl), L.shininess);
+    const double alpha = iso.opacity;
+    for (int c = 0; c < 3; ++c) {
+        const double radiance =
+            std::min(1.0, iso.color[c] * (L.ambient + L.diffuse * std::max(0.0, nl)) + spec);
+        out.rgba[c] += transmittance * alpha * radiance;
+    }
+    out.rgba[3] += transmittance * alpha;
+    transmittance *= 1 - alpha;
+    if (out.isoId < 0) {
+        out.isoId = e.iso;
+        out.z = e.t;
+        for (int i = 0; i < 3; ++i) out.normal[i] = n[i];
+        out.residual = e.residual;
+    }
+    counters.isoHits += 1;
+    counters.isoResidualSqSum += e.residual * e.residual;
+    counters.isoResidualMax = std::max(counters.isoResidualMax, e.residual);
+}
+
+void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
+                              RenderCounters& counters) {
+    out = PixelSample{};
+    counters.rays += 1;
+    double tMin = setup.tNear, tMax = setup.tFar;
+    if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, tMin, tMax)) return;
+    if (!(tMin < tMax) || setup.isos.empty()) return;
+    setup.traverser->Trace(ray, tMin, tMax, segments_);
+    counters.segments += static_cast<double>(segments_.size());
+    const std::size_t nIso = setup.isos.size();
+    lastHit_.assign(nIso, -std::numeric_limits<double>::infinity());
+    relevant_.resize(nIso);
+    double transmittance = 1.0;
+    for (const Segment& seg : segments_) {
+        bool any = false;
+        for (std::size_t k = 0; k < nIso; ++k) {
+            const Interval& r = setup.cellRanges[setup.isos[k].field][seg.cell];
+            relevant_[k] = setup.isos[k].value >= r.lo && setup.isos[k].value <= r.hi;
+            any |= relevant_[k] != 0;
+        }
+        if (!any) {
+            counters.segmentsCulled += 1;
+            continue;
+        }
+        events_.clear();
+        double cutoff = std::numeric_limits<double>::infinity();
+        const std::size_t nFields = setup.fields.size();
+        if (pieces_.size() < nFields) pieces_.resize(nFields);
+        fieldUsed_.assign(nFields, 0);
+        for (std::size_t k = 0; k < nIso; ++k)
+            if (relevant_[k]) fieldUsed_[setup.isos[k].field] = 1;
+        // Opaque isosurfaces first: their first hit bounds the search of the others.
+        for (int pass = 0; pass < 2; ++pass)
+            for (std::size_t f = 0; f < nFields; ++f) {
+                if (!fieldUsed_[f]) continue;
+                bool any = false;
+                for (std::size_t k = 0; k < nIso; ++k)
+                    any |= relevant_[k] && setup.isos[k].field == int(f) &&
+                           (setup.isos[k].opacity >= 1) == (pass == 0);
+                if (!any) continue;
+                field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell, ray,
+                             setup.inversion);
+                if (fieldUsed_[f] == 1) {  // project once per field and segment
+                    fieldUsed_[f] = 2;
+                    ProjectionOptions projection = setup.projection;
+                    projection.scaleFloor = setup.fieldScale[f];
+                    if (field_.ExactAlongLine())
+                        projection.exactDegree = std::max(1, field_.LineDegree());
+                    projectionStats_ = ProjectionStats{};
+                    ProjectSegment(field_, seg.tEnter, seg.tExit, projection, pieces_[f],
+                                   projectionStats_, scratch_);
+                    counters.projections += projectionStats_.pieces;
+                    counters.projectionOrderSum += projectionStats_.degreeSum;
+                    counters.projectionOrderMax = std::max<double>(
+                        counters.projectionOrderMax, projectionStats_.maxDegree);
+                    counters.projectionUnconverged += projectionStats_.unconverged;
+                }
+                for (std::size_t k = 0; k < nIso; ++k) {
+                    const BrickSetup::Iso& iso = setup.isos[k];
+                    if (!relevant_[k] || iso.field != int(f) ||
+                        (iso.opacity >= 1) != (pass == 0))
+                        continue;
+                    double previous = lastHit_[k];
+                    const int failures = FindRoots(
+                        field_, pieces_[f], iso.value, setup.roots, scratch_,
+                        [&](const RootResult& r) {
+                            if (r.t > cutoff) return true;
+                            if (r.t - previous <= setup.duplicateDistance) return false;
+                            previous = r.t;
+                            events_.push_back({r.t, int(k), r.residual});
+                            if (iso.opacity >= 1) {
+                                cutoff = std::min(cutoff, r.t);
+                                return true;
+                            }
+                            return false;
+                        });
+                    counters.rootFailures += failures;
+                }
+                field_.AddCountersTo(counters);
+            }
+        std::sort(events_.begin(), events_.end(), [](const Event& a, const Event& b) {
+            return a.t < b.t || (a.t == b.t && a.iso < b.iso);
+        });
+        int loaded = -1;
+        for (const Event& e : events_) {
+            if (e.t > cutoff) break;
+            const int f = setup.isos[e.iso].field;
+            if (f != loaded) {
+                field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell, ray,
+                             setup.inversion);
+                loaded = f;
+            }
+            lastHit_[e.iso] = e.t;
+            Shade(setup, ray, e, field_, out, transmittance, counters);
+            if (transmittance <= 0) break;
+        }
+        field_.AddCountersTo(counters);
+        if (transmittance <= 0) return;
+    }
+}
+
+void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
+                  RenderCounters& counters) {
+    thread_local RayIntegrator integrator;
+    integrator.Integrate(setup, ray, sample, counters);
+}
+
+void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
+                 RenderCounters& counters) {
+    const int W = camera.Width(), H = camera.Height();
+    image.Resize(W, H);
+    std::unique_ptr<tbb::global_control> limit;
+    if (threads > 0)
+        limit = std::make_unique<tbb::global_control>(
+            tbb::global_control::max_allowed_parallelism, threads);
+    struct ThreadState {
+        RayIntegrator integrator;
+        RenderCounters counters;
+    };
+    tbb::enumerable_thread_specific<ThreadState> states;
+    constexpr int kTile = 16;
+    const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
+    tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
+        ThreadState& st = states.local();
+        const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
+        PixelSample s;
+        for (int j = y0; j < std::min(H, y0 + kTile); ++j)
+            for (int i = x0; i < std::min(W, x0 + kTile); ++i) {
+                const CameraRay cr = camera.PixelRay(i, j);
+                Ray ray;
+                for (int d = 0; d < 3; ++d) {
+                    ray.origin[d] = cr.origin[d];
+                    ray.dir[d] = cr.direction[d];
+                }
+                st.integrator.Integrate(setup, ray, s, st.counters);
+                const std::size_t p = static_cast<std::size_t>(j) * W + i;
+                image.r[p] = s.rgba[0];
+                image.g[p] = s.rgba[1];
+                image.b[p] = s.rgba[2];
+                image.a[p] = s.rgba[3];
+                image.z[p] = s.z;
+                image.nx[p] = s.normal[0];
+                image.ny[p] = s.normal[1];
+                image.nz[p] = s.normal[2];
+                image.isoResidual[p] = s.residual;
+                image.isoId[p] = s.isoId;
+                image.volError[p] = s.volError;
+            }
+    });
+    for (const ThreadState& st : states) counters.Merge(st.counters);
+}
+
+}  // namespace hpray

@@ -1,0 +1,82 @@
+// Ray casting one brick: segments from the traverser, isosurfaces by root finding on the
+// true field, shaded and composited front to back into a partial image.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "elements/bounds.h"
+#include "elements/mesh_geometry.h"
+#include "io/image.h"
+#include "render/ray_roots.h"
+#include "render/stats.h"
+#include "scene/camera.h"
+#include "scene/scene.h"
+#include "trace/brick_traverser.h"
+
+namespace hpray {
+
+/// Everything the per-ray work of one brick needs, built once and shared read-only by all
+/// threads.
+struct BrickSetup {
+    const Mesh* mesh = nullptr;
+    const MeshGeometry* geometry = nullptr;
+    const BrickTraverser* traverser = nullptr;
+
+    /// The distinct scalar fields the isosurfaces use, and per field and cell a guaranteed
+    /// range (Bernstein hull), so a cell is skipped when no isovalue lies in it.
+    std::vector<ScalarSelector> fields;
+    std::vector<std::vector<Interval>> cellRanges;  ///< [field][cell]
+    std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
+
+    struct Iso {
+        int field = 0;
+        double value = 0;
+        std::array<double, 3> color{};
+        double opacity = 1;
+    };
+    std::vector<Iso> isos;
+    SceneLighting lighting;
+
+    ProjectionOptions projection;
+    RootOptions roots;
+    InversionOptions inversion;
+    /// Two hits of one isosurface closer than this (world units) are one hit: the same
+    /// root seen from the two cells of a face it lies on.
+    double duplicateDistance = 0;
+
+    double tNear = 0;
+    double tFar = std::numeric_limits<double>::infinity();
+    std::optional<AxisBox> clipBox;
+};
+
+/// Builds the setup of a brick for a scene: resolves the isosurface fields (InputError
+/// naming the scene and the field if one is missing or not a point field), computes the
+/// per-cell guaranteed ranges (parallel), and the numerical options from scene.accuracy.
+BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                          const BrickTraverser& traverser, const Scene& scene);
+
+/// The result of one ray in one brick (design.md channels, double precision).
+struct PixelSample {
+    double rgba[4] = {0, 0, 0, 0};  ///< premultiplied
+    double z = std::numeric_limits<double>::infinity();
+    double normal[3] = {0, 0, 0};
+    double residual = std::numeric_limits<double>::quiet_NaN();
+    int isoId = -1;
+    double volError = 0;
+};
+
+/// Renders the whole brick for `camera` into `image` (resized), using `threads` threads
+/// (0: all). Each pixel depends only on its own ray, so the image is bitwise identical for
+/// any thread count. Counters of all rays are merged into `counters`.
+void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
+                 RenderCounters& counters);
+
+/// One ray (exposed for tests): fills `sample` and adds to `counters`.
+class RayIntegrator;
+void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
+                  RenderCounters& counters);
+
+}  // namespace hpray

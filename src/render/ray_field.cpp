@@ -1,0 +1,96 @@
+// SegmentField: the true field along a ray inside one cell.
+#include "render/ray_field.h"
+
+#include <cmath>
+#include <limits>
+
+#include "elements/tensor_eval.h"
+
+namespace hpray {
+
+void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
+                         const ScalarSelector& field, std::int64_t c, const Ray& ray,
+                         const InversionOptions& inversion) {
+    cell_ = &geometry.cells[c];
+    ray_ = ray;
+    inversion_ = inversion;
+    if (field.field->association == Association::Point) {
+        GatherCellValues(mesh, *field.field, field.component, c, nodal_);
+        scalar_.nodal = nodal_.data();
+    } else {
+        scalar_.nodal = nullptr;
+        scalar_.constant = ScalarValue(field, c);
+    }
+    affine_ = cell_->affine && cell_->linearInvertible;
+    exact_ = affine_ && cell_->basis->polynomial;
+    lineDegree_ = scalar_.nodal ? cell_->basis->lineDegree : 0;
+    haveGuess_ = false;
+    if (affine_) {
+        // ref(t) = L^-1 (o + t d - origin): linear in t.
+        const auto& inv = cell_->inverseLinear;
+        double rel[3];
+        for (int i = 0; i < 3; ++i) rel[i] = ray.origin[i] - cell_->origin[i];
+        for (int i = 0; i < 3; ++i) {
+            ref0_[i] = inv[3 * i] * rel[0] + inv[3 * i + 1] * rel[1] + inv[3 * i + 2] * rel[2];
+            dref_[i] = inv[3 * i] * ray.dir[0] + inv[3 * i + 1] * ray.dir[1] +
+                       inv[3 * i + 2] * ray.dir[2];
+        }
+    }
+}
+
+void SegmentField::RefAt(double t, double ref[3]) {
+    if (affine_) {
+        for (int i = 0; i < 3; ++i) ref[i] = ref0_[i] + t * dref_[i];
+        return;
+    }
+    double world[3];
+    for (int i = 0; i < 3; ++i) world[i] = ray_.origin[i] + t * ray_.dir[i];
+    InversionOptions options = inversion_;
+    options.initialGuess = haveGuess_ ? guess_ : nullptr;
+    const InversionResult r = RefFromWorld(*cell_, world, ws_, options);
+    inversions_ += 1;
+    iterations_ += r.iterations;
+    if (!r.converged) failures_ += 1;
+    for (int i = 0; i < 3; ++i) ref[i] = r.ref[i];
+    if (r.converged) {
+        for (int i = 0; i < 3; ++i) guess_[i] = r.ref[i];
+        haveGuess_ = true;
+    }
+}
+
+double SegmentField::operator()(double t) {
+    evaluations_ += 1;
+    if (!scalar_.nodal) return scalar_.constant;
+    double ref[3];
+    RefAt(t, ref);
+    return FieldValue(*cell_, scalar_, ref, ws_);
+}
+
+void SegmentField::SampleBatch(const double* t, int n, double* out) {
+    if (affine_ && scalar_.nodal && cell_->basis->kind == BasisKind::HexLagrange) {
+        const int p = cell_->basis->order;
+        batchScratch_.resize(HexLineScratchSize(p, n));
+        HexFieldValuesAlongLine(p, scalar_.nodal, ref0_, dref_, t, n, out,
+                                batchScratch_.data());
+        evaluations_ += n;
+        return;
+    }
+    for (int s = 0; s < n; ++s) out[s] = (*this)(t[s]);
+}
+
+bool SegmentField::ValueGradient(double t, double& value, double gradient[3]) {
+    evaluations_ += 1;
+    double ref[3];
+    RefAt(t, ref);
+    return FieldValueGradient(*cell_, scalar_, ref, ws_, value, gradient);
+}
+
+void SegmentField::AddCountersTo(RenderCounters& counters) {
+    counters.inversions += inversions_;
+    counters.inversionIterations += iterations_;
+    counters.inversionFailures += failures_;
+    counters.fieldEvaluations += evaluations_;
+    inversions_ = iterations_ = failures_ = evaluations_ = 0;
+}
+
+}  // namespace hpray

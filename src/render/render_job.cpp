@@ -1,0 +1,107 @@
+// A render job on one process (see render_job.h).
+#include "render/render_job.h"
+
+#include <tbb/info.h>
+
+#include <chrono>
+#include <set>
+
+#include "elements/mesh_geometry.h"
+#include "io/mesh_io.h"
+#include "render/brick_renderer.h"
+#include "trace/brick_traverser.h"
+#include "util/log.h"
+
+namespace hpray {
+namespace {
+double Seconds(std::chrono::steady_clock::time_point since) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+}  // namespace
+
+std::vector<double> HitsArray(const Image& image) {
+    std::vector<double> out(image.PixelCount() * 5);
+    for (std::size_t p = 0; p < image.PixelCount(); ++p) {
+        out[5 * p] = image.z[p];
+        out[5 * p + 1] = image.nx[p];
+        out[5 * p + 2] = image.ny[p];
+        out[5 * p + 3] = image.nz[p];
+        out[5 * p + 4] = image.isoResidual[p];
+    }
+    return out;
+}
+
+std::vector<double> RgbaArray(const Image& image) {
+    std::vector<double> out(image.PixelCount() * 4);
+    for (std::size_t p = 0; p < image.PixelCount(); ++p) {
+        out[4 * p] = image.r[p];
+        out[4 * p + 1] = image.g[p];
+        out[4 * p + 2] = image.b[p];
+        out[4 * p + 3] = image.a[p];
+    }
+    return out;
+}
+
+Image RunRenderJob(const Scene& scene, RenderStats& stats) {
+    const auto start = std::chrono::steady_clock::now();
+    stats = RenderStats{};
+    stats.scene = scene.sourcePath;
+    stats.mesh = scene.data.mesh;
+    stats.threads = scene.threads > 0 ? scene.threads : tbb::info::default_concurrency();
+
+    // Load only the fields the scene names.
+    auto t0 = std::chrono::steady_clock::now();
+    ReadOptions options;
+    std::set<std::string> fields;
+    for (const std::string& name : scene.FieldNames()) fields.insert(name);
+    options.fields = fields;
+    const Mesh mesh = ReadMesh(scene.data.mesh, options);
+    stats.timing.load = Seconds(t0);
+    log::Info("loaded " + scene.data.mesh + ": " + std::to_string(mesh.CellCount()) +
+              " cells, " + std::to_string(mesh.PointCount()) + " points");
+
+    t0 = std::chrono::steady_clock::now();
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const Brick brick = Brick::WholeMesh(mesh);
+    TraceOptions traceOptions;
+    traceOptions.mappingTolerance = scene.accuracy.mappingTolerance;
+    const BrickTraverser traverser(brick, traceOptions);
+    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    stats.timing.accel = Seconds(t0);
+    stats.accelBytes = static_cast<double>(traverser.Stats().Bytes());
+    stats.accelBytesPerCell = traverser.Stats().BytesPerCell();
+    stats.bricksLoaded = stats.bricksTotal = 1;
+    if (!setup.fields.empty()) {
+        const Field& f = *setup.fields[0].field;
+        stats.isoFieldRange = f.Range(setup.fields[0].component);
+        for (std::size_t k = 1; k < setup.fields.size(); ++k) {
+            const auto r = setup.fields[k].field->Range(setup.fields[k].component);
+            stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),
+                                   std::max(stats.isoFieldRange[1], r[1])};
+        }
+    }
+
+    t0 = std::chrono::steady_clock::now();
+    const Camera camera(scene.camera);
+    Image image;
+    RenderBrick(setup, camera, scene.threads, image, stats.counters);
+    stats.timing.render = Seconds(t0);
+    stats.width = camera.Width();
+    stats.height = camera.Height();
+    const double range = stats.isoFieldRange[1] - stats.isoFieldRange[0];
+    stats.counters.isoResidualRelMax = range > 0 ? stats.counters.isoResidualMax / range : 0;
+
+    t0 = std::chrono::steady_clock::now();
+    const SceneOutput& out = scene.output;
+    const std::size_t H = image.height, W = image.width;
+    if (!out.exr.empty()) WriteExr(out.exr, image);
+    if (!out.png.empty()) WritePng(out.png, image, scene.background);
+    if (!out.hits.empty()) WriteNpy(out.hits, HitsArray(image), {H, W, 5});
+    if (!out.rgba.empty()) WriteNpy(out.rgba, RgbaArray(image), {H, W, 4});
+    stats.timing.write = Seconds(t0);
+    stats.timing.total = Seconds(start);
+    if (!out.stats.empty()) WriteStats(out.stats, stats);
+    return image;
+}
+
+}  // namespace hpray

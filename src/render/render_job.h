@@ -1,0 +1,21 @@
+// A whole render job on one process: load what the scene needs, build the acceleration
+// structures, ray-cast, composite, write the outputs and the stats.
+#pragma once
+
+#include "io/image.h"
+#include "render/stats.h"
+#include "scene/scene.h"
+
+namespace hpray {
+
+/// Renders `scene` and writes every output it names (EXR, PNG, stats, hits, rgba). Returns
+/// the image and fills `stats`. Throws InputError for bad input; a failed job writes no
+/// output file.
+Image RunRenderJob(const Scene& scene, RenderStats& stats);
+
+/// The float64 (H, W, 5) hits array of design.md: t, N.X, N.Y, N.Z, residual per pixel.
+std::vector<double> HitsArray(const Image& image);
+/// The float64 (H, W, 4) premultiplied R, G, B, A array.
+std::vector<double> RgbaArray(const Image& image);
+
+}  // namespace hpray
