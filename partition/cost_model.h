@@ -16,10 +16,10 @@
 //
 // Calibration plan (once `hpray render` reports per-cell timings): render the shared data
 // sets of one cell type and order each (tet p=1..4, hex p=1..9, wedge p=3, pyramid p=2..3
-// from ../shared/data and builtins), record the render time per traversed segment, and fit
-// traversal and perNodeEvaluation per shape (and kNewtonEvaluations) by non-negative least
-// squares on time = traversal + perNodeEvaluation * nodes * evaluations(order); then
-// replace the table below. The partitioner only needs relative costs to be right.
+// from ../shared/data and builtins), record the render time per traversed segment, and
+// fit traversal and perNodeEvaluation per shape (and kNewtonEvaluations) by non-negative
+// least squares on time = traversal + perNodeEvaluation * nodes * evaluations(order);
+// then replace the table below. The partitioner only needs relative costs to be right.
 #pragma once
 
 #include "mesh/cell.h"
@@ -31,8 +31,8 @@ struct CellCostCoefficients {
     double perNodeEvaluation = 0.1;  ///< cost of one basis evaluation, per node
 };
 
-/// Uncalibrated: traversal by face count (tet 4, hex 6, wedge 5, pyramid 5 faces, relative
-/// to the tet's 4), one node-evaluation a tenth of a tet traversal.
+/// Uncalibrated: traversal by face count (tet 4, hex 6, wedge 5, pyramid 5 faces,
+/// relative to the tet's 4), one node-evaluation a tenth of a tet traversal.
 inline constexpr CellCostCoefficients kCellCost[kNumCellShapes] = {
     {1.0, 0.1},   // Tet
     {1.5, 0.1},   // Hex
@@ -46,10 +46,14 @@ inline constexpr double kNewtonEvaluations = 8.0;
 inline int CostLineDegree(CellShape shape, int order, CellFamily family) {
     if (family == CellFamily::Serendipity) return shape == CellShape::Hex ? 4 : 3;
     switch (shape) {
-        case CellShape::Tet: return order;
-        case CellShape::Hex: return 3 * order;
-        case CellShape::Wedge: return 2 * order;
-        case CellShape::Pyramid: return 2 * order;
+        case CellShape::Tet:
+            return order;
+        case CellShape::Hex:
+            return 3 * order;
+        case CellShape::Wedge:
+            return 2 * order;
+        case CellShape::Pyramid:
+            return 2 * order;
     }
     return order;
 }
@@ -62,7 +66,8 @@ inline double CellRenderCost(CellShape shape, int order, CellFamily family) {
         shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange;
     const double evaluations =
         affine ? 1.0 : kNewtonEvaluations + CostLineDegree(shape, order, family) + 1.0;
-    const double linearTet = kCellCost[0].traversal + kCellCost[0].perNodeEvaluation * 4.0;
+    const double linearTet =
+        kCellCost[0].traversal + kCellCost[0].perNodeEvaluation * 4.0;
     return (k.traversal + k.perNodeEvaluation * nodes * evaluations) / linearTet;
 }
 

@@ -20,19 +20,19 @@ struct Search {
     int node = -1;
     int axis = 0;
     int lowLeaves = 0, leaves = 0;
-    double total = 0;       ///< node cost (known after the first pass)
-    double target = 0;      ///< wanted cost of the low side
-    double a = 0, b = 0;    ///< current interval [a, b) of the axis coordinate
-    double below = 0;       ///< cost of the node's cells with x < a
-    bool collect = false;   ///< next pass collects the centroids in [a, b)
+    double total = 0;         ///< node cost (known after the first pass)
+    double target = 0;        ///< wanted cost of the low side
+    double a = 0, b = 0;      ///< current interval [a, b) of the axis coordinate
+    double below = 0;         ///< cost of the node's cells with x < a
+    bool collect = false;     ///< next pass collects the centroids in [a, b)
     bool collectTie = false;  ///< next pass collects the centroids with x == tieValue
     double tieValue = 0;
-    double tieBelow = 0;      ///< cost of the node's cells with x < tieValue
+    double tieBelow = 0;  ///< cost of the node's cells with x < tieValue
     double planeSplit = 0, planeError = 0;  ///< best plane, kept while trying a tie-break
     bool tieBreak = false;
     std::array<double, 2> tie{};
     std::vector<std::array<double, 3>> tieCollected;  ///< (y, z, cost) on the plane
-    bool first = true;      ///< the first pass also measures the total
+    bool first = true;  ///< the first pass also measures the total
     bool done = false;
     double split = 0;
     int rounds = 0;
@@ -67,8 +67,8 @@ int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]) {
     return nodes[n].brick;
 }
 
-void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3], const double hi[3],
-                      std::vector<int>& bricks) {
+void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3],
+                      const double hi[3], std::vector<int>& bricks) {
     int stack[128];
     int top = 0;
     stack[top++] = 0;
@@ -176,7 +176,8 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
                     }
                     if (s.first) s.total += p.cost;
                     if (x < s.a) {
-                        if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+                        if (s.first)
+                            s.below += p.cost;  // cannot happen: a is the box's lo
                         continue;
                     }
                     if (x >= s.b) continue;
@@ -259,7 +260,8 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
                             s.tieBelow = before;
                             groupCount = static_cast<std::int64_t>(j - i);
                         }
-                        const double next = j < s.collected.size() ? s.collected[j].first : s.b;
+                        const double next =
+                            j < s.collected.size() ? s.collected[j].first : s.b;
                         double mid = x + 0.5 * (next - x);
                         if (!(mid > x && mid <= next)) mid = next;
                         best.Offer(mid, cum, s.target);
@@ -318,9 +320,10 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             highNode.box.lo[s.axis] = s.split;
             std::array<double, 3> lowEnd = ends[n], highEnd = ends[n];
             // With a tie-break the low child also holds centroids on the plane.
-            lowEnd[s.axis] = s.tieBreak
-                                 ? std::nextafter(s.split, std::numeric_limits<double>::infinity())
-                                 : s.split;
+            lowEnd[s.axis] =
+                s.tieBreak
+                    ? std::nextafter(s.split, std::numeric_limits<double>::infinity())
+                    : s.split;
             nodes[n].axis = s.axis;
             nodes[n].split = s.split;
             nodes[n].tieBreak = s.tieBreak;

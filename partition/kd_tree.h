@@ -36,8 +36,8 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
 int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]);
 
 /// Appends to `bricks` every brick whose closed box intersects the closed box [lo, hi].
-void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3], const double hi[3],
-                      std::vector<int>& bricks);
+void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3],
+                      const double hi[3], std::vector<int>& bricks);
 
 /// Front-to-back leaf order: `lowFirst(node)` says whether the low child comes first.
 std::vector<int> OrderedBricks(const std::vector<KdNode>& nodes,

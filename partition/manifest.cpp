@@ -29,10 +29,12 @@ struct ManifestChecker {
     [[noreturn]] void Fail(const std::string& key, const std::string& what) const {
         throw InputError(path, key, what);
     }
-    const json& Member(const json& object, const std::string& key, const std::string& where) const {
+    const json& Member(const json& object, const std::string& key,
+                       const std::string& where) const {
         if (!object.is_object()) Fail(where, "is not an object");
         const auto it = object.find(key);
-        if (it == object.end()) Fail(where.empty() ? key : where + "." + key, "is missing");
+        if (it == object.end())
+            Fail(where.empty() ? key : where + "." + key, "is missing");
         return *it;
     }
     double Number(const json& v, const std::string& where) const {
@@ -54,7 +56,8 @@ struct ManifestChecker {
         for (int d = 0; d < 3; ++d) {
             b.lo[d] = Number(v[0][d], where);
             b.hi[d] = Number(v[1][d], where);
-            if (b.lo[d] > b.hi[d]) Fail(where, "has a lower corner above the upper corner");
+            if (b.lo[d] > b.hi[d])
+                Fail(where, "has a lower corner above the upper corner");
         }
         return b;
     }
@@ -68,13 +71,15 @@ std::string FileSha256(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in) throw InputError(path, "", "cannot open");
     std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(),
-                                                               &EVP_MD_CTX_free);
+                                                                &EVP_MD_CTX_free);
     HPRAY_CHECK(ctx && EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) == 1);
     std::vector<char> buffer(std::size_t(1) << 20);
     while (in) {
         in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
         const std::streamsize n = in.gcount();
-        if (n > 0) HPRAY_CHECK(EVP_DigestUpdate(ctx.get(), buffer.data(), static_cast<std::size_t>(n)) == 1);
+        if (n > 0)
+            HPRAY_CHECK(EVP_DigestUpdate(ctx.get(), buffer.data(),
+                                         static_cast<std::size_t>(n)) == 1);
     }
     if (in.bad()) throw InputError(path, "", "read error");
     unsigned char digest[EVP_MAX_MD_SIZE];
@@ -96,7 +101,8 @@ std::string Partition::BrickPath(int brick) const {
 
 bool IsPartitionDirectory(const std::string& path) {
     std::error_code ec;
-    return fs::is_directory(path, ec) && fs::is_regular_file(fs::path(path) / "manifest.json", ec);
+    return fs::is_directory(path, ec) &&
+           fs::is_regular_file(fs::path(path) / "manifest.json", ec);
 }
 
 Partition ReadPartition(const std::string& dir) {
@@ -114,13 +120,15 @@ Partition ReadPartition(const std::string& dir) {
         try {
             p.manifest = json::parse(text.str());
         } catch (const json::parse_error& e) {
-            throw InputError(path, "byte " + std::to_string(e.byte), "JSON error: " + std::string(e.what()));
+            throw InputError(path, "byte " + std::to_string(e.byte),
+                             "JSON error: " + std::string(e.what()));
         }
     }
     const json& m = p.manifest;
     if (!m.is_object()) check.Fail("", "is not a JSON object");
     const json& bricks = check.Member(m, "bricks", "");
-    if (!bricks.is_array() || bricks.empty()) check.Fail("bricks", "is not a non-empty array");
+    if (!bricks.is_array() || bricks.empty())
+        check.Fail("bricks", "is not a non-empty array");
     if (bricks.size() > 1000000) check.Fail("bricks", "has too many entries");
     for (std::size_t i = 0; i < bricks.size(); ++i) {
         const std::string where = "bricks[" + std::to_string(i) + "]";
@@ -129,9 +137,10 @@ Partition ReadPartition(const std::string& dir) {
         const json& file = check.Member(b, "file", where);
         if (!file.is_string()) check.Fail(where + ".file", "is not a string");
         info.file = file.get<std::string>();
-        if (info.file.empty() || info.file.find('/') != std::string::npos || info.file == "." ||
-            info.file == "..")
-            check.Fail(where + ".file", "'" + info.file + "' is not a file name in the folder");
+        if (info.file.empty() || info.file.find('/') != std::string::npos ||
+            info.file == "." || info.file == "..")
+            check.Fail(where + ".file",
+                       "'" + info.file + "' is not a file name in the folder");
         info.box = check.ParseBox(check.Member(b, "box", where), where + ".box");
         info.cells = check.Count(check.Member(b, "cells", where), where + ".cells");
         info.ghosts = check.Count(check.Member(b, "ghosts", where), where + ".ghosts");
@@ -149,22 +158,25 @@ Partition ReadPartition(const std::string& dir) {
         }
         const json& sha = check.Member(b, "sha256", where);
         if (!sha.is_string() || sha.get<std::string>().size() != 64 ||
-            sha.get<std::string>().find_first_not_of("0123456789abcdef") != std::string::npos)
+            sha.get<std::string>().find_first_not_of("0123456789abcdef") !=
+                std::string::npos)
             check.Fail(where + ".sha256", "is not 64 lowercase hex digits");
         info.sha256 = sha.get<std::string>();
         const std::string brickPath = (fs::path(dir) / info.file).string();
         std::error_code ec;
         if (!fs::is_regular_file(brickPath, ec))
-            throw InputError(brickPath, "", "brick " + std::to_string(i) +
-                                                " listed in " + path + " is missing");
+            throw InputError(
+                brickPath, "",
+                "brick " + std::to_string(i) + " listed in " + path + " is missing");
         const std::uint64_t size = fs::file_size(brickPath, ec);
         if (b.contains("bytes")) {
-            info.bytes = static_cast<std::uint64_t>(check.Count(b["bytes"], where + ".bytes"));
+            info.bytes =
+                static_cast<std::uint64_t>(check.Count(b["bytes"], where + ".bytes"));
             if (size != info.bytes)
-                throw InputError(brickPath, "",
-                                 "has " + std::to_string(size) + " bytes, the manifest says " +
-                                     std::to_string(info.bytes) +
-                                     " (truncated, or from another run)");
+                throw InputError(
+                    brickPath, "",
+                    "has " + std::to_string(size) + " bytes, the manifest says " +
+                        std::to_string(info.bytes) + " (truncated, or from another run)");
         } else {
             info.bytes = size;
         }
@@ -187,9 +199,11 @@ Partition ReadPartition(const std::string& dir) {
     std::vector<int> seen(p.bricks.size(), 0);
     const std::size_t maxNodes = 2 * p.bricks.size() - 1;
     std::function<int(const json&, const std::string&, const Box&, int)> parse =
-        [&](const json& node, const std::string& where, const Box& box, int depth) -> int {
+        [&](const json& node, const std::string& where, const Box& box,
+            int depth) -> int {
         if (depth > 200) check.Fail(where, "is nested too deeply");
-        if (p.nodes.size() >= maxNodes) check.Fail(where, "has more nodes than the bricks allow");
+        if (p.nodes.size() >= maxNodes)
+            check.Fail(where, "has more nodes than the bricks allow");
         if (!node.is_object()) check.Fail(where, "is not an object");
         const int index = static_cast<int>(p.nodes.size());
         p.nodes.emplace_back();
@@ -198,22 +212,26 @@ Partition ReadPartition(const std::string& dir) {
             const std::int64_t b = check.Count(node["brick"], where + ".brick");
             if (b >= static_cast<std::int64_t>(p.bricks.size()))
                 check.Fail(where + ".brick", std::to_string(b) + " is not a brick index");
-            if (seen[b]++) check.Fail(where + ".brick", std::to_string(b) + " appears twice");
+            if (seen[b]++)
+                check.Fail(where + ".brick", std::to_string(b) + " appears twice");
             if (!SameBox(p.bricks[b].box, box))
                 check.Fail("bricks[" + std::to_string(b) + "].box",
                            "differs from the box the tree's splits give");
             p.nodes[index].brick = static_cast<int>(b);
             return index;
         }
-        const std::int64_t axis = check.Count(check.Member(node, "axis", where), where + ".axis");
+        const std::int64_t axis =
+            check.Count(check.Member(node, "axis", where), where + ".axis");
         if (axis > 2) check.Fail(where + ".axis", "is not 0, 1 or 2");
-        const double split = check.Number(check.Member(node, "split", where), where + ".split");
+        const double split =
+            check.Number(check.Member(node, "split", where), where + ".split");
         if (split < box.lo[axis] || split > box.hi[axis])
             check.Fail(where + ".split", "is outside the node's box");
         Box lowBox = box, highBox = box;
         lowBox.hi[axis] = split;
         highBox.lo[axis] = split;
-        const int low = parse(check.Member(node, "low", where), where + ".low", lowBox, depth + 1);
+        const int low =
+            parse(check.Member(node, "low", where), where + ".low", lowBox, depth + 1);
         const int high =
             parse(check.Member(node, "high", where), where + ".high", highBox, depth + 1);
         KdNode& n = p.nodes[index];
@@ -221,9 +239,11 @@ Partition ReadPartition(const std::string& dir) {
         n.split = split;
         if (node.contains("tie")) {
             const json& tie = node["tie"];
-            if (!tie.is_array() || tie.size() != 2) check.Fail(where + ".tie", "is not [y, z]");
+            if (!tie.is_array() || tie.size() != 2)
+                check.Fail(where + ".tie", "is not [y, z]");
             n.tieBreak = true;
-            n.tie = {check.Number(tie[0], where + ".tie"), check.Number(tie[1], where + ".tie")};
+            n.tie = {check.Number(tie[0], where + ".tie"),
+                     check.Number(tie[1], where + ".tie")};
         }
         n.low = low;
         n.high = high;
@@ -256,11 +276,13 @@ Mesh LoadBrick(const Partition& partition, int brick, const ReadOptions& options
         throw InputError(path, "",
                          "holds " + std::to_string(mesh.CellCount()) + " cells (" +
                              std::to_string(ghosts) + " ghosts), the manifest says " +
-                             std::to_string(info.cells) + " (" + std::to_string(info.ghosts) + ")");
+                             std::to_string(info.cells) + " (" +
+                             std::to_string(info.ghosts) + ")");
     return mesh;
 }
 
-std::vector<int> FrontToBackOrder(const Partition& partition, const std::array<double, 3>& eye) {
+std::vector<int> FrontToBackOrder(const Partition& partition,
+                                  const std::array<double, 3>& eye) {
     return OrderedBricks(partition.nodes,
                          [&](const KdNode& n) { return eye[n.axis] < n.split; });
 }
@@ -314,7 +336,8 @@ json SummarizePartition(const std::string& dir) {
     j["cost_mean"] = sumCost / n;
     j["balance"] = sumCost > 0 ? maxCost / (sumCost / n) : 1.0;
     std::error_code ec;
-    const std::uint64_t manifestBytes = fs::file_size(fs::path(dir) / "manifest.json", ec);
+    const std::uint64_t manifestBytes =
+        fs::file_size(fs::path(dir) / "manifest.json", ec);
     const std::uint64_t indexBytes = fs::file_size(fs::path(dir) / "bricks.pvtu", ec);
     j["bytes"] = bytes + (ec ? 0 : indexBytes) + manifestBytes;
     j["brick_bytes"] = bytes;
@@ -332,36 +355,41 @@ std::string FormatPartitionSummary(const json& s) {
     std::ostringstream os;
     char line[256];
     os << s.value("partition", std::string()) << " (partition";
-    if (s.contains("source") && s["source"].is_string()) os << " of " << s["source"].get<std::string>();
+    if (s.contains("source") && s["source"].is_string())
+        os << " of " << s["source"].get<std::string>();
     os << ")\n";
     std::snprintf(line, sizeof line, "  bricks    %lld (k-d tree depth %d)\n",
                   s["bricks"].get<long long>(), s["tree_depth"].get<int>());
     os << line;
-    std::snprintf(line, sizeof line, "  cells     %lld stored, %lld owned, %lld ghosts (%.2f%%)\n",
-                  s["cells"].get<long long>(), s["owned_cells"].get<long long>(),
-                  s["ghosts"].get<long long>(), 100.0 * s["ghost_fraction"].get<double>());
+    std::snprintf(
+        line, sizeof line, "  cells     %lld stored, %lld owned, %lld ghosts (%.2f%%)\n",
+        s["cells"].get<long long>(), s["owned_cells"].get<long long>(),
+        s["ghosts"].get<long long>(), 100.0 * s["ghost_fraction"].get<double>());
     os << line;
     std::snprintf(line, sizeof line, "  balance   %.4f (max/mean cost: %.6g / %.6g)\n",
                   s["balance"].get<double>(), s["cost_max"].get<double>(),
                   s["cost_mean"].get<double>());
     os << line;
     const auto& b = s["bounds"];
-    std::snprintf(line, sizeof line, "  bounds    [%.9g, %.9g] x [%.9g, %.9g] x [%.9g, %.9g]\n",
+    std::snprintf(line, sizeof line,
+                  "  bounds    [%.9g, %.9g] x [%.9g, %.9g] x [%.9g, %.9g]\n",
                   b[0][0].get<double>(), b[1][0].get<double>(), b[0][1].get<double>(),
                   b[1][1].get<double>(), b[0][2].get<double>(), b[1][2].get<double>());
     os << line;
     for (const auto& [name, f] : s["fields"].items()) {
-        std::snprintf(line, sizeof line, "  field     %-24s %-5s %d component%s\n", name.c_str(),
-                      f.value("association", std::string("?")).c_str(), f.value("components", 1),
-                      f.value("components", 1) == 1 ? "" : "s");
+        std::snprintf(line, sizeof line, "  field     %-24s %-5s %d component%s\n",
+                      name.c_str(), f.value("association", std::string("?")).c_str(),
+                      f.value("components", 1), f.value("components", 1) == 1 ? "" : "s");
         os << line;
     }
     std::snprintf(line, sizeof line, "  bytes     %.1f MiB (%llu)\n",
-                  s["bytes"].get<double>() / (1024.0 * 1024.0), s["bytes"].get<unsigned long long>());
+                  s["bytes"].get<double>() / (1024.0 * 1024.0),
+                  s["bytes"].get<unsigned long long>());
     os << line;
     os << "  checksums " << (s["checksums_ok"].get<bool>() ? "ok" : "MISMATCH") << "\n";
     if (s.contains("checksum_failures"))
-        for (const auto& f : s["checksum_failures"]) os << "    " << f.get<std::string>() << "\n";
+        for (const auto& f : s["checksum_failures"])
+            os << "    " << f.get<std::string>() << "\n";
     return os.str();
 }
 

@@ -69,13 +69,14 @@ std::string BrickName(int b) {
 /// An exclusive advisory lock on DIR/.hpray-partition.lock, released on destruction (and
 /// by the kernel if the process dies).
 class DirLock {
-public:
+  public:
     explicit DirLock(const std::string& dir) {
         const std::string path = (fs::path(dir) / kLock).string();
         fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
         if (fd_ < 0)
-            throw InputError(path, "", std::string("cannot create the lock file: ") +
-                                           std::strerror(errno));
+            throw InputError(
+                path, "",
+                std::string("cannot create the lock file: ") + std::strerror(errno));
         if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
             ::close(fd_);
             throw InputError(dir, "", "another 'hpray partition' is writing this folder");
@@ -87,13 +88,13 @@ public:
     DirLock(const DirLock&) = delete;
     DirLock& operator=(const DirLock&) = delete;
 
-private:
+  private:
     int fd_ = -1;
 };
 
 /// Removes a folder tree on destruction unless released.
 class ScopedDir {
-public:
+  public:
     explicit ScopedDir(std::string path) : path_(std::move(path)) {}
     ~ScopedDir() {
         std::error_code ec;
@@ -103,7 +104,7 @@ public:
     ScopedDir& operator=(const ScopedDir&) = delete;
     const std::string& Path() const { return path_; }
 
-private:
+  private:
     std::string path_;
 };
 
@@ -136,11 +137,12 @@ void RemovePreviousRun(const std::string& dir, const std::string& keepSpill) {
 /// Scan: spills points (xyz + point fields) and cells (record + nodes + cell fields),
 /// and the centroid/cost stream for the tree builder.
 class ScanSink : public MeshSink {
-public:
+  public:
     ScanSink(const std::string& spill, std::size_t memoryLimit)
         : spill_(spill), memoryLimit_(memoryLimit) {}
 
-    void Fields(const std::vector<StreamField>& pf, const std::vector<StreamField>& cf) override {
+    void Fields(const std::vector<StreamField>& pf,
+                const std::vector<StreamField>& cf) override {
         pointFields = pf;
         cellFields = cf;
         pointStride = 3;
@@ -151,7 +153,8 @@ public:
         points_ = std::make_unique<SpillWriter>(PointsPath(), buf);
         cells_ = std::make_unique<SpillWriter>(CellsPath(), buf);
         centroids_ = std::make_unique<SpillWriter>(CentroidsPath(), buf);
-        cache_ = std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
+        cache_ =
+            std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::numeric_limits<double>::infinity();
             root.hi[d] = -std::numeric_limits<double>::infinity();
@@ -238,11 +241,13 @@ public:
     double totalCost = 0;
     Box root;
 
-private:
+  private:
     double Cost(CellShape shape, int order, CellFamily family) {
-        const int key = (static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order;
+        const int key =
+            (static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order;
         auto it = costs_.find(key);
-        if (it == costs_.end()) it = costs_.emplace(key, CellRenderCost(shape, order, family)).first;
+        if (it == costs_.end())
+            it = costs_.emplace(key, CellRenderCost(shape, order, family)).first;
         return it->second;
     }
 
@@ -278,7 +283,8 @@ nlohmann::json BrickRanges(const Mesh& mesh) {
         double lo2 = 0, hi2 = 0;
         for (const Interval& c : comps) {
             const double far = std::max(std::abs(c.lo), std::abs(c.hi));
-            const double near = (c.lo <= 0 && c.hi >= 0) ? 0.0 : std::min(std::abs(c.lo), std::abs(c.hi));
+            const double near =
+                (c.lo <= 0 && c.hi >= 0) ? 0.0 : std::min(std::abs(c.lo), std::abs(c.hi));
             hi2 += far * far;
             lo2 += near * near;
         }
@@ -292,17 +298,20 @@ nlohmann::json BrickRanges(const Mesh& mesh) {
         for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
             const std::int64_t* nodes = mesh.CellNodes(c);
             const int n = mesh.CellNodeCount(c);
-            const bool linear = mesh.cellOrder[c] == 1 && mesh.cellFamily[c] == CellFamily::Lagrange;
+            const bool linear =
+                mesh.cellOrder[c] == 1 && mesh.cellFamily[c] == CellFamily::Lagrange;
             coeffs.resize(n);
             for (int k = 0; k < f.components; ++k) {
-                for (int m = 0; m < n; ++m) coeffs[m] = f.values[nodes[m] * f.components + k];
+                for (int m = 0; m < n; ++m)
+                    coeffs[m] = f.values[nodes[m] * f.components + k];
                 if (linear) {
-                    const auto [lo, hi] = std::minmax_element(coeffs.begin(), coeffs.end());
+                    const auto [lo, hi] =
+                        std::minmax_element(coeffs.begin(), coeffs.end());
                     cell[k] = Interval{*lo, *hi};
                 } else {
-                    cell[k] = FieldBounds(
-                        GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]),
-                        coeffs.data());
+                    cell[k] = FieldBounds(GetBasis(mesh.cellShape[c], mesh.cellOrder[c],
+                                                   mesh.cellFamily[c]),
+                                          coeffs.data());
                 }
                 comps[k].lo = std::min(comps[k].lo, cell[k].lo);
                 comps[k].hi = std::max(comps[k].hi, cell[k].hi);
@@ -356,11 +365,20 @@ std::string XmlEscape(const std::string& s) {
     std::string out;
     for (char c : s) {
         switch (c) {
-            case '&': out += "&amp;"; break;
-            case '<': out += "&lt;"; break;
-            case '>': out += "&gt;"; break;
-            case '"': out += "&quot;"; break;
-            default: out += c;
+            case '&':
+                out += "&amp;";
+                break;
+            case '<':
+                out += "&lt;";
+                break;
+            case '>':
+                out += "&gt;";
+                break;
+            case '"':
+                out += "&quot;";
+                break;
+            default:
+                out += c;
         }
     }
     return out;
@@ -381,16 +399,18 @@ void WriteTextAtomically(const std::string& path, const std::string& text) {
     detail::CommitOutputFile(tmp, path);
 }
 
-std::string PvtuText(const std::vector<StreamField>& pf, const std::vector<StreamField>& cf,
-                     int bricks) {
+std::string PvtuText(const std::vector<StreamField>& pf,
+                     const std::vector<StreamField>& cf, int bricks) {
     std::ostringstream x;
     auto array = [&](const char* type, const std::string& name, int comps) {
-        x << "      <PDataArray type=\"" << type << "\" Name=\"" << XmlEscape(name) << "\"";
+        x << "      <PDataArray type=\"" << type << "\" Name=\"" << XmlEscape(name)
+          << "\"";
         if (comps != 1) x << " NumberOfComponents=\"" << comps << "\"";
         x << "/>\n";
     };
     x << "<?xml version=\"1.0\"?>\n"
-      << "<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\" byte_order=\"LittleEndian\" "
+      << "<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\" "
+         "byte_order=\"LittleEndian\" "
          "header_type=\"UInt64\">\n"
       << "  <PUnstructuredGrid GhostLevel=\"1\">\n    <PPointData>\n";
     for (const StreamField& f : pf) array("Float64", f.name, f.components);
@@ -401,7 +421,8 @@ std::string PvtuText(const std::vector<StreamField>& pf, const std::vector<Strea
     x << "    </PCellData>\n    <PPoints>\n";
     array("Float64", "Points", 3);
     x << "    </PPoints>\n";
-    for (int b = 0; b < bricks; ++b) x << "    <Piece Source=\"" << BrickName(b) << "\"/>\n";
+    for (int b = 0; b < bricks; ++b)
+        x << "    <Piece Source=\"" << BrickName(b) << "\"/>\n";
     x << "  </PUnstructuredGrid>\n</VTKFile>\n";
     return x.str();
 }
@@ -422,16 +443,19 @@ std::size_t ParseMemorySize(const std::string& text) {
                              " (expected a size such as 512M, 4G or 1.5G; at least 4M)");
     };
     std::size_t i = 0;
-    while (i < text.size() && (std::isdigit(static_cast<unsigned char>(text[i])) || text[i] == '.'))
+    while (i < text.size() &&
+           (std::isdigit(static_cast<unsigned char>(text[i])) || text[i] == '.'))
         ++i;
     if (i == 0) return bad("is not a size");
     const std::string number = text.substr(0, i);
     if (std::count(number.begin(), number.end(), '.') > 1) return bad("is not a size");
     char* end = nullptr;
     const double value = std::strtod(number.c_str(), &end);
-    if (end != number.c_str() + number.size() || !std::isfinite(value)) return bad("is not a size");
+    if (end != number.c_str() + number.size() || !std::isfinite(value))
+        return bad("is not a size");
     std::string unit = text.substr(i);
-    for (char& c : unit) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    for (char& c : unit)
+        c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
     double scale = 1;
     if (unit.empty() || unit == "B") {
         scale = 1;
@@ -449,11 +473,13 @@ std::size_t ParseMemorySize(const std::string& text) {
     return static_cast<std::size_t>(bytes);
 }
 
-PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOptions& options) {
+PartitionReport PartitionMesh(const std::string& meshPath,
+                              const PartitionOptions& options) {
     const auto start = std::chrono::steady_clock::now();
     if (options.bricks < 1)
-        throw InputError("command line", "--bricks",
-                         std::to_string(options.bricks) + " is not a positive number of bricks");
+        throw InputError(
+            "command line", "--bricks",
+            std::to_string(options.bricks) + " is not a positive number of bricks");
     if (options.outDir.empty()) throw InputError("command line", "--out", "is empty");
     const std::size_t budget =
         options.memoryLimitBytes ? options.memoryLimitBytes : DefaultMemoryLimit();
@@ -462,8 +488,9 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
         std::error_code ec;
         fs::create_directories(dir, ec);
         if (ec || !fs::is_directory(dir))
-            throw InputError(dir, "", "cannot create the output folder" +
-                                          (ec ? ": " + ec.message() : std::string()));
+            throw InputError(dir, "",
+                             "cannot create the output folder" +
+                                 (ec ? ": " + ec.message() : std::string()));
     }
     DirLock lock(dir);
     static int serial = 0;
@@ -475,20 +502,24 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
     // 1. Scan: stream the input into spill files.
     ReadOptions readOptions;
     if (options.fields)
-        readOptions.fields = std::set<std::string>(options.fields->begin(), options.fields->end());
+        readOptions.fields =
+            std::set<std::string>(options.fields->begin(), options.fields->end());
     ScanSink scan(spill.Path(), budget);
-    const std::size_t streamBuffer = std::clamp<std::size_t>(budget / 64, 64 << 10, 4 << 20);
+    const std::size_t streamBuffer =
+        std::clamp<std::size_t>(budget / 64, 64 << 10, 4 << 20);
     const StreamStats stats = StreamMesh(meshPath, readOptions, streamBuffer, scan);
     scan.Close();
     if (stats.wholeMeshBytes > budget)
         log::Warn(meshPath + ": this format is read whole (" +
                   std::to_string(stats.wholeMeshBytes >> 20) +
-                  " MiB), more than --memory-limit; convert it to an appended .vtu to stream it");
+                  " MiB), more than --memory-limit; convert it to an appended .vtu to "
+                  "stream it");
     if (scan.cells == 0) throw InputError(meshPath, "", "has no 3-D cells to partition");
     if (options.bricks > scan.cells)
         throw InputError("command line", "--bricks",
                          std::to_string(options.bricks) + " bricks for " +
-                             std::to_string(scan.cells) + " cells: at most one brick per cell");
+                             std::to_string(scan.cells) +
+                             " cells: at most one brick per cell");
     // The input and arguments are good: now remove what earlier runs left (the manifest
     // first; we hold the lock, so the owners of other spill folders are gone).
     RemovePreviousRun(dir, spill.Path());
@@ -497,22 +528,24 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
 
     // 2. The k-d tree over the centroids.
     const std::string centroidsPath = scan.CentroidsPath();
-    const CentroidPass pass = [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
-        SpillReader reader(centroidsPath, std::size_t(1) << 20);
-        constexpr std::size_t kBlock = 4096;
-        std::vector<WeightedPoint> block(kBlock);
-        std::size_t n = 0;
-        while (reader.Read(&block[n], sizeof(WeightedPoint)))
-            if (++n == kBlock) {
-                visit(block.data(), n);
-                n = 0;
-            }
-        if (n > 0) visit(block.data(), n);
-    };
+    const CentroidPass pass =
+        [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
+            SpillReader reader(centroidsPath, std::size_t(1) << 20);
+            constexpr std::size_t kBlock = 4096;
+            std::vector<WeightedPoint> block(kBlock);
+            std::size_t n = 0;
+            while (reader.Read(&block[n], sizeof(WeightedPoint)))
+                if (++n == kBlock) {
+                    visit(block.data(), n);
+                    n = 0;
+                }
+            if (n > 0) visit(block.data(), n);
+        };
     const std::size_t collectLimit = std::clamp<std::size_t>(
         budget / 8 / (2 * sizeof(double)) / static_cast<std::size_t>(options.bricks), 256,
         std::size_t(1) << 20);
-    const std::vector<KdNode> tree = BuildKdTree(scan.root, options.bricks, pass, collectLimit);
+    const std::vector<KdNode> tree =
+        BuildKdTree(scan.root, options.bricks, pass, collectLimit);
 
     // 3. Distribute cells to brick spills (owner + ghost copies).
     const int nBricks = options.bricks;
@@ -580,8 +613,9 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
     auto tooLarge = [&](int b, std::uint64_t bytes) {
         return InputError("command line", "--memory-limit",
                           "brick " + std::to_string(b) + " needs about " +
-                              std::to_string(bytes >> 20) + " MiB to assemble, more than the " +
-                              "limit of " + std::to_string(budget >> 20) +
+                              std::to_string(bytes >> 20) +
+                              " MiB to assemble, more than the " + "limit of " +
+                              std::to_string(budget >> 20) +
                               " MiB: ask for more bricks or a larger limit");
     };
     // Fail early when a brick cannot fit even before its points are counted.
@@ -595,7 +629,8 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
     std::uint64_t bytesWritten = 0;
     std::int64_t storedCells = 0;
     {
-        RecordCache pointsCache(scan.PointsPath(), scan.pointStride, std::size_t(4) << 20);
+        RecordCache pointsCache(scan.PointsPath(), scan.pointStride,
+                                std::size_t(4) << 20);
         for (int b = 0; b < nBricks; ++b) {
             Mesh mesh;
             const BrickTally& t = tally[b];
@@ -608,7 +643,8 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
             std::vector<double> cellValues;
             cellValues.reserve(static_cast<std::size_t>(t.cells) * scan.cellValues);
             {
-                const std::string path = spill.Path() + "/brick-" + std::to_string(b) + ".bin";
+                const std::string path =
+                    spill.Path() + "/brick-" + std::to_string(b) + ".bin";
                 SpillReader reader(path, std::size_t(1) << 20);
                 CellRecord r;
                 std::vector<std::int64_t> nodes;
@@ -619,7 +655,8 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
                         !reader.Read(values.data(), recordTail))
                         throw InternalError("brick spill ends inside a record");
                     mesh.AddCell(static_cast<CellShape>(r.shape), r.order,
-                                 static_cast<CellFamily>(r.family), nodes.data(), r.nodeCount);
+                                 static_cast<CellFamily>(r.family), nodes.data(),
+                                 r.nodeCount);
                     mesh.ghost.push_back(r.ghost);
                     cellValues.insert(cellValues.end(), values.begin(), values.end());
                 }
@@ -729,7 +766,8 @@ PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOption
     manifest["fields"] = fields;
     manifest["bricks"] = bricksJson;
     manifest["tree"] = TreeJson(tree, 0);
-    manifest["cost_model"] = "estimated render cost, 1 = one linear tet (partition/cost_model.h)";
+    manifest["cost_model"] =
+        "estimated render cost, 1 = one linear tet (partition/cost_model.h)";
     manifest["stats"] = {{"input_cells", scan.cells},
                          {"input_points", scan.points},
                          {"skipped_cells", stats.skippedCells},

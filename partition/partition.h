@@ -1,22 +1,26 @@
 // k-d decomposition of a mesh into load-balanced bricks (hpray partition): writing a
 // partition directory out of core, reading it back, and ordering its bricks for a camera.
 //
-// Partition directory (design.md "Partition directory"): brick-NNNN.vtu (one VTU piece per
-// k-d leaf, appended raw, points renumbered), bricks.pvtu (indexes the pieces) and
+// Partition directory (design.md "Partition directory"): brick-NNNN.vtu (one VTU piece
+// per k-d leaf, appended raw, points renumbered), bricks.pvtu (indexes the pieces) and
 // manifest.json, written last. Decisions this implementation documents:
-//  - Cell centroid: the arithmetic mean of the cell's nodes. The owner of a cell is the leaf
+//  - Cell centroid: the arithmetic mean of the cell's nodes. The owner of a cell is the
+//  leaf
 //    containing its centroid, where a centroid on a split plane belongs to the high side
 //    (low child: x[axis] < split, high child: x[axis] >= split) unless the node carries
 //    a tie-break (KdNode, GoesLow) dividing the centroids on the plane.
-//  - A cell is stored in every brick whose closed leaf box intersects the cell's guaranteed
+//  - A cell is stored in every brick whose closed leaf box intersects the cell's
+//  guaranteed
 //    geometry box (exact vertex bounds for order-1 cells, the Bernstein hull of
-//    elements/bounds.h GeometryBox otherwise), with vtkGhostType = 1 everywhere but in its
-//    owner brick. So each brick holds every cell that can reach into its box.
+//    elements/bounds.h GeometryBox otherwise), with vtkGhostType = 1 everywhere but in
+//    its owner brick. So each brick holds every cell that can reach into its box.
 //  - Root box: the union of those geometry boxes. For a mesh of order-1 cells it is
-//    exactly the bounds of the points; for curved cells it also covers their bulges beyond
-//    the nodes (the Bernstein hull is conservative, so it may exceed the true extent by
-//    the hull's slack but never misses any part of a cell). Leaf boxes tile the root box.
-//  - "cost" of a brick is the estimated render cost of the cells it owns (the quantity the
+//    exactly the bounds of the points; for curved cells it also covers their bulges
+//    beyond the nodes (the Bernstein hull is conservative, so it may exceed the true
+//    extent by the hull's slack but never misses any part of a cell). Leaf boxes tile the
+//    root box.
+//  - "cost" of a brick is the estimated render cost of the cells it owns (the quantity
+//  the
 //    splits balance); "cost_with_ghosts" adds the replicated cells.
 #pragma once
 
@@ -64,7 +68,8 @@ struct PartitionReport {
 /// clean and never mixes runs; a lock file keeps two runs from writing one folder at
 /// once. Throws InputError for bad input or options (bricks < 1 or more than the cells,
 /// a brick that does not fit the memory limit).
-PartitionReport PartitionMesh(const std::string& meshPath, const PartitionOptions& options);
+PartitionReport PartitionMesh(const std::string& meshPath,
+                              const PartitionOptions& options);
 
 /// Parses a memory size: "4096", "512K", "64M", "1.5G", "2T" (binary units, an optional
 /// trailing "B" or "iB"). Throws InputError("command line", "--memory-limit", ...) for
@@ -84,7 +89,8 @@ struct Box {
 /// high: x >= split); a leaf names its brick. Centroids exactly on the plane (common in
 /// structured meshes) may be divided by a tie-break on the other two coordinates: with
 /// `tieBreak`, x on the plane goes low when (x[(axis+1)%3], x[(axis+2)%3]) < tie
-/// lexicographically. The boxes are unaffected; such a centroid lies in both closed boxes.
+/// lexicographically. The boxes are unaffected; such a centroid lies in both closed
+/// boxes.
 struct KdNode {
     int axis = -1;  ///< -1 for a leaf
     double split = 0;
@@ -113,7 +119,7 @@ struct BrickInfo {
     /// Guaranteed [min, max] over all cells of the brick, per field name (vector fields:
     /// "name" is the magnitude, "name[i]" component i).
     std::map<std::string, std::array<double, 2>> ranges;
-    std::string sha256;      ///< hex digest of the file
+    std::string sha256;       ///< hex digest of the file
     std::uint64_t bytes = 0;  ///< file size
 };
 
@@ -147,7 +153,8 @@ Mesh LoadBrick(const Partition& partition, int brick, const ReadOptions& options
 
 /// Bricks in front-to-back order for a perspective camera at `eye` (world units): at
 /// every node the child on the eye's side comes first.
-std::vector<int> FrontToBackOrder(const Partition& partition, const std::array<double, 3>& eye);
+std::vector<int> FrontToBackOrder(const Partition& partition,
+                                  const std::array<double, 3>& eye);
 
 /// Bricks in front-to-back order for parallel rays travelling along `direction` (an
 /// orthographic camera's forward vector).

@@ -117,8 +117,10 @@ RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheB
     if (fd_ < 0) IoFail(path, "cannot open the spill file");
     // Blocks of about 64 KiB; at least 16 of them.
     const std::size_t recordBytes = sizeof(double) * static_cast<std::size_t>(stride);
-    recordsPerBlock_ = std::max<std::int64_t>(1, 65536 / static_cast<std::int64_t>(recordBytes));
-    maxBlocks_ = std::max<std::size_t>(16, cacheBytes / (recordsPerBlock_ * recordBytes + 96));
+    recordsPerBlock_ =
+        std::max<std::int64_t>(1, 65536 / static_cast<std::int64_t>(recordBytes));
+    maxBlocks_ =
+        std::max<std::size_t>(16, cacheBytes / (recordsPerBlock_ * recordBytes + 96));
 }
 
 RecordCache::~RecordCache() {
@@ -150,8 +152,9 @@ const double* RecordCache::Get(std::int64_t index) {
         const off_t offset = static_cast<off_t>(b * recordsPerBlock_ * stride_ * 8);
         std::size_t got = 0;
         while (got < want) {
-            const ssize_t n = ::pread(fd_, reinterpret_cast<char*>(block.data.data()) + got,
-                                      want - got, offset + static_cast<off_t>(got));
+            const ssize_t n =
+                ::pread(fd_, reinterpret_cast<char*>(block.data.data()) + got, want - got,
+                        offset + static_cast<off_t>(got));
             if (n < 0 && errno == EINTR) continue;
             if (n < 0) IoFail(path_, "cannot read the spill file");
             if (n == 0) break;

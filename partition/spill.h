@@ -1,5 +1,5 @@
-// Spill files of the out-of-core partitioner: buffered sequential writers and readers, and
-// a bounded LRU cache for random access to fixed-size point records.
+// Spill files of the out-of-core partitioner: buffered sequential writers and readers,
+// and a bounded LRU cache for random access to fixed-size point records.
 #pragma once
 
 #include <cstddef>
@@ -14,7 +14,7 @@ namespace hpray::partition {
 /// Appends bytes to a file through a buffer of `bufferBytes`. Closed (flushed) by Close()
 /// or the destructor. Throws InputError(path) on write errors (disk full).
 class SpillWriter {
-public:
+  public:
     SpillWriter(const std::string& path, std::size_t bufferBytes);
     ~SpillWriter();
     SpillWriter(const SpillWriter&) = delete;
@@ -26,7 +26,7 @@ public:
     std::uint64_t Bytes() const { return written_ + buffer_.size(); }
     const std::string& Path() const { return path_; }
 
-private:
+  private:
     std::string path_;
     int fd_ = -1;
     std::vector<char> buffer_;
@@ -36,7 +36,7 @@ private:
 
 /// Reads a file sequentially through a buffer of `bufferBytes`.
 class SpillReader {
-public:
+  public:
     SpillReader(const std::string& path, std::size_t bufferBytes);
     ~SpillReader();
     SpillReader(const SpillReader&) = delete;
@@ -48,7 +48,7 @@ public:
     /// A pointer to the next `bytes` (valid until the next call); nullptr at a clean end.
     const char* Take(std::size_t bytes);
 
-private:
+  private:
     bool Fill(std::size_t need);
     std::string path_;
     int fd_ = -1;
@@ -60,7 +60,7 @@ private:
 /// Random access to records of `stride` doubles stored back to back in a file, through an
 /// LRU cache of blocks holding at most about `cacheBytes`.
 class RecordCache {
-public:
+  public:
     RecordCache(const std::string& path, int stride, std::size_t cacheBytes);
     ~RecordCache();
     RecordCache(const RecordCache&) = delete;
@@ -72,7 +72,7 @@ public:
     void Invalidate();
     std::int64_t Misses() const { return misses_; }
 
-private:
+  private:
     struct Block {
         std::vector<double> data;
         std::list<std::int64_t>::iterator lru;

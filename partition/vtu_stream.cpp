@@ -56,9 +56,12 @@ bool HostIsBigEndian() {
 
 /// An open file descriptor, closed on destruction.
 class Fd {
-public:
-    explicit Fd(const std::string& path) : fd_(::open(path.c_str(), O_RDONLY | O_CLOEXEC)) {
-        if (fd_ < 0) throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
+  public:
+    explicit Fd(const std::string& path)
+        : fd_(::open(path.c_str(), O_RDONLY | O_CLOEXEC)) {
+        if (fd_ < 0)
+            throw InputError(path, "",
+                             std::string("cannot open: ") + std::strerror(errno));
     }
     ~Fd() {
         if (fd_ >= 0) ::close(fd_);
@@ -67,7 +70,7 @@ public:
     Fd& operator=(const Fd&) = delete;
     int get() const { return fd_; }
 
-private:
+  private:
     int fd_ = -1;
 };
 
@@ -112,8 +115,8 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
     constexpr std::size_t kChunk = std::size_t(1) << 20;
     while (marker == std::string::npos) {
         if (prefix.size() >= kMaxXmlBytes || prefix.size() >= sf->size) return nullptr;
-        const std::size_t n =
-            static_cast<std::size_t>(std::min<std::uint64_t>(kChunk, sf->size - prefix.size()));
+        const std::size_t n = static_cast<std::size_t>(
+            std::min<std::uint64_t>(kChunk, sf->size - prefix.size()));
         const std::size_t old = prefix.size();
         prefix.resize(old + n);
         if (!PreadAll(sf->fd->get(), prefix.data() + old, n, old))
@@ -145,12 +148,14 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
              std::string("XML error: ") + parsed.description());
     f.root = f.doc.document_element();
     if (std::strcmp(f.root.name(), "VTKFile") != 0)
-        Fail(f, "", std::string("root element is <") + f.root.name() + ">, expected <VTKFile>");
+        Fail(f, "",
+             std::string("root element is <") + f.root.name() + ">, expected <VTKFile>");
     f.type = f.root.attribute("type").value();
     const std::string version = f.root.attribute("version").value();
     if (!version.empty()) {
         const auto dot = version.find('.');
-        if (dot == std::string::npos || !ParseInt(version.substr(0, dot), f.versionMajor) ||
+        if (dot == std::string::npos ||
+            !ParseInt(version.substr(0, dot), f.versionMajor) ||
             !ParseInt(version.substr(dot + 1), f.versionMinor))
             Fail(f, "<VTKFile>", "version '" + version + "' is not MAJOR.MINOR");
     }
@@ -161,7 +166,8 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
     else if (order == "BigEndian")
         fileBig = true;
     else if (!order.empty())
-        Fail(f, "<VTKFile>", "byte_order '" + order + "' is neither LittleEndian nor BigEndian");
+        Fail(f, "<VTKFile>",
+             "byte_order '" + order + "' is neither LittleEndian nor BigEndian");
     f.swapBytes = fileBig != HostIsBigEndian();
     const std::string header = f.root.attribute("header_type").value();
     if (header == "UInt64")
@@ -173,11 +179,14 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
         f.zlib = true;
     else if (!compressor.empty())
         Fail(f, "<VTKFile>",
-             "compressor '" + compressor + "' is not supported (only vtkZLibDataCompressor)");
-    const std::string encoding = f.root.child("AppendedData").attribute("encoding").value();
+             "compressor '" + compressor +
+                 "' is not supported (only vtkZLibDataCompressor)");
+    const std::string encoding =
+        f.root.child("AppendedData").attribute("encoding").value();
     if (encoding == "base64") return nullptr;
     if (!encoding.empty() && encoding != "raw")
-        Fail(f, "<AppendedData>", "encoding '" + encoding + "' is neither raw nor base64");
+        Fail(f, "<AppendedData>",
+             "encoding '" + encoding + "' is neither raw nor base64");
     f.hasAppended = true;
     f.appendedBegin = marker + 1;
     f.appendedEnd = static_cast<std::size_t>(sf->size);
@@ -215,7 +224,7 @@ void ConvertAs(const std::uint8_t* src, std::size_t n, bool swap, Dst* dst) {
 /// A sequential reader of one appended array: decodes raw bytes or zlib blocks on demand,
 /// holding one block (or one chunk of raw data) at a time.
 class ArrayCursor {
-public:
+  public:
     ArrayCursor(const StreamFile& sf, const ArrayDesc& a, std::size_t chunkBytes)
         : sf_(sf), a_(a), valueSize_(vtkxml::ScalarSize(a.type)) {
         const XmlFile& f = *sf.xml;
@@ -230,7 +239,8 @@ public:
                      " is beyond the end of the file");
         pos_ = f.appendedBegin + a.offset;
         headerSize_ = f.headerUInt64 ? 8 : 4;
-        chunk_ = std::max<std::size_t>(chunkBytes / valueSize_ * valueSize_, 64 * valueSize_);
+        chunk_ =
+            std::max<std::size_t>(chunkBytes / valueSize_ * valueSize_, 64 * valueSize_);
         std::uint64_t totalBytes = 0;
         if (!f.zlib) {
             totalBytes = Word("the size header");
@@ -266,13 +276,16 @@ public:
                      "the compressed blocks need " + std::to_string(compressedTotal) +
                          " bytes but the file ends first (truncated?)");
             if (blocks > 0)
-                totalBytes = (blocks - 1) * blockSize_ + (lastSize_ ? lastSize_ : blockSize_);
+                totalBytes =
+                    (blocks - 1) * blockSize_ + (lastSize_ ? lastSize_ : blockSize_);
         }
-        const std::uint64_t tupleBytes = valueSize_ * static_cast<std::uint64_t>(a.components);
+        const std::uint64_t tupleBytes =
+            valueSize_ * static_cast<std::uint64_t>(a.components);
         if (totalBytes % tupleBytes != 0)
             Fail(f, a.where,
-                 "holds " + std::to_string(totalBytes) + " bytes, not a whole number of " +
-                     std::to_string(a.components) + "-component " + a.typeName + " tuples");
+                 "holds " + std::to_string(totalBytes) +
+                     " bytes, not a whole number of " + std::to_string(a.components) +
+                     "-component " + a.typeName + " tuples");
         values_ = totalBytes / valueSize_;
     }
 
@@ -303,11 +316,12 @@ public:
         }
     }
 
-private:
+  private:
     std::uint64_t Word(const char* what) {
         std::uint8_t b[8];
         if (!PreadAll(sf_.fd->get(), b, headerSize_, pos_))
-            Fail(*sf_.xml, At(a_.where, pos_), std::string(what) + " is cut off (truncated?)");
+            Fail(*sf_.xml, At(a_.where, pos_),
+                 std::string(what) + " is cut off (truncated?)");
         pos_ += headerSize_;
         if (headerSize_ == 8) {
             std::uint64_t v;
@@ -322,10 +336,11 @@ private:
     /// Keeps the partial value at the end of the buffer and appends the next chunk/block.
     void Refill() {
         const XmlFile& f = *sf_.xml;
-        std::vector<std::uint8_t> keep(buf_.begin() + static_cast<std::ptrdiff_t>(bufPos_),
-                                       buf_.end());
+        std::vector<std::uint8_t> keep(
+            buf_.begin() + static_cast<std::ptrdiff_t>(bufPos_), buf_.end());
         if (!f.zlib) {
-            const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(chunk_, rawLeft_));
+            const std::size_t n =
+                static_cast<std::size_t>(std::min<std::uint64_t>(chunk_, rawLeft_));
             HPRAY_CHECK_GT(n, 0u);
             buf_.resize(keep.size() + n);
             std::copy(keep.begin(), keep.end(), buf_.begin());
@@ -335,13 +350,13 @@ private:
             rawLeft_ -= n;
         } else {
             HPRAY_CHECK_LT(block_, compressed_.size());
-            const std::uint64_t len = (block_ + 1 == compressed_.size() && lastSize_)
-                                          ? lastSize_ : blockSize_;
+            const std::uint64_t len =
+                (block_ + 1 == compressed_.size() && lastSize_) ? lastSize_ : blockSize_;
             const std::uint64_t clen = compressed_[block_];
             if (len / 1032 > clen + 1)
                 Fail(f, At(a_.where, pos_),
-                     "block " + std::to_string(block_) + " claims " + std::to_string(len) +
-                         " bytes from " + std::to_string(clen) +
+                     "block " + std::to_string(block_) + " claims " +
+                         std::to_string(len) + " bytes from " + std::to_string(clen) +
                          " compressed bytes, more than zlib can produce");
             scratch_.resize(clen);
             if (!PreadAll(sf_.fd->get(), scratch_.data(), clen, pos_))
@@ -349,13 +364,14 @@ private:
             buf_.resize(keep.size() + len);
             std::copy(keep.begin(), keep.end(), buf_.begin());
             uLongf produced = static_cast<uLongf>(len);
-            const int rc = uncompress(buf_.data() + keep.size(), &produced, scratch_.data(),
-                                      static_cast<uLong>(clen));
+            const int rc = uncompress(buf_.data() + keep.size(), &produced,
+                                      scratch_.data(), static_cast<uLong>(clen));
             if (rc != Z_OK || produced != len)
                 Fail(f, At(a_.where, pos_),
                      "zlib block " + std::to_string(block_) + " of " +
                          std::to_string(compressed_.size()) +
-                         (rc == Z_OK ? ": inflates to the wrong size" : ": corrupt compressed data"));
+                         (rc == Z_OK ? ": inflates to the wrong size"
+                                     : ": corrupt compressed data"));
             pos_ += clen;
             ++block_;
         }
@@ -366,21 +382,40 @@ private:
     void Convert(const std::uint8_t* src, std::size_t n, Dst* dst) const {
         const bool swap = sf_.xml->swapBytes;
         switch (a_.type) {
-            case ScalarType::Int8: ConvertAs<std::int8_t>(src, n, swap, dst); break;
-            case ScalarType::UInt8: ConvertAs<std::uint8_t>(src, n, swap, dst); break;
-            case ScalarType::Int16: ConvertAs<std::int16_t>(src, n, swap, dst); break;
-            case ScalarType::UInt16: ConvertAs<std::uint16_t>(src, n, swap, dst); break;
-            case ScalarType::Int32: ConvertAs<std::int32_t>(src, n, swap, dst); break;
-            case ScalarType::UInt32: ConvertAs<std::uint32_t>(src, n, swap, dst); break;
-            case ScalarType::Int64: ConvertAs<std::int64_t>(src, n, swap, dst); break;
-            case ScalarType::UInt64: ConvertAs<std::uint64_t>(src, n, swap, dst); break;
+            case ScalarType::Int8:
+                ConvertAs<std::int8_t>(src, n, swap, dst);
+                break;
+            case ScalarType::UInt8:
+                ConvertAs<std::uint8_t>(src, n, swap, dst);
+                break;
+            case ScalarType::Int16:
+                ConvertAs<std::int16_t>(src, n, swap, dst);
+                break;
+            case ScalarType::UInt16:
+                ConvertAs<std::uint16_t>(src, n, swap, dst);
+                break;
+            case ScalarType::Int32:
+                ConvertAs<std::int32_t>(src, n, swap, dst);
+                break;
+            case ScalarType::UInt32:
+                ConvertAs<std::uint32_t>(src, n, swap, dst);
+                break;
+            case ScalarType::Int64:
+                ConvertAs<std::int64_t>(src, n, swap, dst);
+                break;
+            case ScalarType::UInt64:
+                ConvertAs<std::uint64_t>(src, n, swap, dst);
+                break;
             case ScalarType::Float32:
-                if constexpr (std::is_floating_point_v<Dst>) ConvertAs<float>(src, n, swap, dst);
+                if constexpr (std::is_floating_point_v<Dst>)
+                    ConvertAs<float>(src, n, swap, dst);
                 break;
             case ScalarType::Float64:
-                if constexpr (std::is_floating_point_v<Dst>) ConvertAs<double>(src, n, swap, dst);
+                if constexpr (std::is_floating_point_v<Dst>)
+                    ConvertAs<double>(src, n, swap, dst);
                 break;
-            case ScalarType::NonNumeric: break;
+            case ScalarType::NonNumeric:
+                break;
         }
     }
 
@@ -405,7 +440,8 @@ std::int64_t Count(const XmlFile& f, pugi::xml_node piece, const char* name,
     long long v = -1;
     auto [p, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
     if (ec != std::errc() || p != text.data() + text.size() || v < 0)
-        Fail(f, where, std::string(name) + " '" + text + "' is not a non-negative integer");
+        Fail(f, where,
+             std::string(name) + " '" + text + "' is not a non-negative integer");
     return v;
 }
 
@@ -458,7 +494,8 @@ PieceArrays DescribePiece(const XmlFile& f, pugi::xml_node piece, int index,
              {std::pair{&p.offsets, "offsets"}, std::pair{&p.types, "types"},
               std::pair{&p.connectivity, "connectivity"}})
             if (!*arr)
-                Fail(f, where + " <Cells>", std::string("has no DataArray named '") + name + "'");
+                Fail(f, where + " <Cells>",
+                     std::string("has no DataArray named '") + name + "'");
     std::string degreesName = piece.child("CellData").attribute(kDegreesName).value();
     if (degreesName.empty()) degreesName = kDegreesName;
     std::vector<std::string> available;
@@ -505,8 +542,9 @@ PieceArrays DescribePiece(const XmlFile& f, pugi::xml_node piece, int index,
                      (list.empty() ? std::string("(none)") : list));
         }
         auto keep = [&](std::vector<ArrayDesc>& v) {
-            v.erase(std::remove_if(v.begin(), v.end(),
-                                   [&](const ArrayDesc& a) { return !selected.count(a.name); }),
+            v.erase(std::remove_if(
+                        v.begin(), v.end(),
+                        [&](const ArrayDesc& a) { return !selected.count(a.name); }),
                     v.end());
         };
         keep(p.pointFields);
@@ -529,12 +567,14 @@ struct StreamState {
     std::int64_t pointBase = 0;
     StreamStats stats;
 
-    void SendFields(const std::vector<StreamField>& pf, const std::vector<StreamField>& cf,
-                    const std::string& source) {
-        auto same = [](const std::vector<StreamField>& a, const std::vector<StreamField>& b) {
+    void SendFields(const std::vector<StreamField>& pf,
+                    const std::vector<StreamField>& cf, const std::string& source) {
+        auto same = [](const std::vector<StreamField>& a,
+                       const std::vector<StreamField>& b) {
             if (a.size() != b.size()) return false;
             for (std::size_t i = 0; i < a.size(); ++i)
-                if (a[i].name != b[i].name || a[i].components != b[i].components) return false;
+                if (a[i].name != b[i].name || a[i].components != b[i].components)
+                    return false;
             return true;
         };
         if (!fieldsSent) {
@@ -569,16 +609,19 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
         for (const ArrayDesc& a : p.pointFields) pointOrder.push_back(&a);
         for (const ArrayDesc& a : p.cellFields) cellOrder.push_back(&a);
     } else {
-        auto align = [&](const std::vector<StreamField>& want, const std::vector<ArrayDesc>& have,
+        auto align = [&](const std::vector<StreamField>& want,
+                         const std::vector<ArrayDesc>& have,
                          std::vector<const ArrayDesc*>& order) {
             if (want.size() != have.size())
                 Fail(f, where, "has a different set of fields than the first piece");
             for (const StreamField& w : want) {
-                auto it = std::find_if(have.begin(), have.end(),
-                                       [&](const ArrayDesc& a) { return a.name == w.name; });
+                auto it = std::find_if(have.begin(), have.end(), [&](const ArrayDesc& a) {
+                    return a.name == w.name;
+                });
                 if (it == have.end() || it->components != w.components)
-                    Fail(f, where, "field '" + w.name +
-                                       "' is missing or has a different number of components");
+                    Fail(f, where,
+                         "field '" + w.name +
+                             "' is missing or has a different number of components");
                 order.push_back(&*it);
             }
         };
@@ -597,14 +640,15 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
         std::vector<std::unique_ptr<ArrayCursor>> fields;
         for (const ArrayDesc* a : pointOrder) {
             fields.push_back(std::make_unique<ArrayCursor>(sf, *a, chunk));
-            if (fields.back()->Values() != static_cast<std::uint64_t>(p.points) * a->components)
+            if (fields.back()->Values() !=
+                static_cast<std::uint64_t>(p.points) * a->components)
                 Fail(f, a->where,
                      "holds " + std::to_string(fields.back()->Values() / a->components) +
                          " tuples, expected " + std::to_string(p.points));
         }
         const int comps = SumComponents(st.pointFields);
-        const std::int64_t batch =
-            std::max<std::int64_t>(1, static_cast<std::int64_t>(chunk / (8 * (3 + comps))));
+        const std::int64_t batch = std::max<std::int64_t>(
+            1, static_cast<std::int64_t>(chunk / (8 * (3 + comps))));
         std::vector<double> xyz, values, tmp;
         for (std::int64_t first = 0; first < p.points; first += batch) {
             const std::int64_t n = std::min(batch, p.points - first);
@@ -623,7 +667,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                     for (int c = 0; c < nc; ++c) {
                         const double v = tmp[i * nc + c];
                         if (!std::isfinite(v))
-                            Fail(f, pointOrder[k]->where, "holds a NaN or infinite value");
+                            Fail(f, pointOrder[k]->where,
+                                 "holds a NaN or infinite value");
                         values[i * comps + offset + c] = v;
                     }
                 offset += nc;
@@ -641,7 +686,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
             std::int64_t zero = -1;
             offs.Read(&zero, 1);
             if (zero != 0)
-                Fail(f, p.offsets->where, "holds NumberOfCells + 1 values but does not start at 0");
+                Fail(f, p.offsets->where,
+                     "holds NumberOfCells + 1 values but does not start at 0");
         } else if (offs.Values() != nCells) {
             Fail(f, p.offsets->where,
                  "holds " + std::to_string(offs.Values()) +
@@ -653,15 +699,18 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                      std::to_string(p.cells));
         std::unique_ptr<ArrayCursor> degrees, ghost;
         if (p.degrees) {
-            if (p.degrees->components != 3) Fail(f, p.degrees->where, "must have 3 components");
+            if (p.degrees->components != 3)
+                Fail(f, p.degrees->where, "must have 3 components");
             degrees = std::make_unique<ArrayCursor>(sf, *p.degrees, chunk);
             if (degrees->Values() != nCells * 3)
                 Fail(f, p.degrees->where, "does not hold 3 values per cell");
         }
         if (p.ghost) {
-            if (p.ghost->components != 1) Fail(f, p.ghost->where, "must have 1 component");
+            if (p.ghost->components != 1)
+                Fail(f, p.ghost->where, "must have 1 component");
             ghost = std::make_unique<ArrayCursor>(sf, *p.ghost, chunk);
-            if (ghost->Values() != nCells) Fail(f, p.ghost->where, "does not hold 1 value per cell");
+            if (ghost->Values() != nCells)
+                Fail(f, p.ghost->where, "does not hold 1 value per cell");
         }
         std::vector<std::unique_ptr<ArrayCursor>> fields;
         for (const ArrayDesc* a : cellOrder) {
@@ -691,7 +740,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
             if (count < 0)
                 Fail(f, p.offsets->where,
                      "offset of cell " + std::to_string(c) + " (" + std::to_string(end) +
-                         ") is smaller than the previous one (" + std::to_string(previous) + ")");
+                         ") is smaller than the previous one (" +
+                         std::to_string(previous) + ")");
             previous = end;
             int degree[3] = {-1, -1, -1};
             if (degrees) {
@@ -700,7 +750,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 for (int k = 0; k < 3; ++k) {
                     if (!(d[k] >= 0 && d[k] <= 1000) || d[k] != std::floor(d[k]))
                         Fail(f, p.degrees->where,
-                             "value of cell " + std::to_string(c) + " is not a valid degree");
+                             "value of cell " + std::to_string(c) +
+                                 " is not a valid degree");
                     degree[k] = static_cast<int>(d[k]);
                 }
             }
@@ -715,7 +766,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                     for (int i = 0; i < nc; ++i)
                         if (!std::isfinite(values[offset + i]))
                             Fail(f, cellOrder[k]->where,
-                                 "value of cell " + std::to_string(c) + " is NaN or infinite");
+                                 "value of cell " + std::to_string(c) +
+                                     " is NaN or infinite");
                     offset += nc;
                 }
             }
@@ -723,11 +775,11 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 !std::equal(degree, degree + 3, cached.degree)) {
                 std::string why;
                 cached.skip = false;
-                const bool lower = type == 0 || (type >= 1 && type <= 9) ||
-                                   (type >= 21 && type <= 23) || type == 28 || type == 30 ||
-                                   (type >= 34 && type <= 36) || (type >= 51 && type <= 54) ||
-                                   (type >= 60 && type <= 63) || (type >= 68 && type <= 70) ||
-                                   (type >= 75 && type <= 77);
+                const bool lower =
+                    type == 0 || (type >= 1 && type <= 9) || (type >= 21 && type <= 23) ||
+                    type == 28 || type == 30 || (type >= 34 && type <= 36) ||
+                    (type >= 51 && type <= 54) || (type >= 60 && type <= 63) ||
+                    (type >= 68 && type <= 70) || (type >= 75 && type <= 77);
                 std::optional<CellKind> kind;
                 if (!lower && type > 0 && type < 256)
                     kind = ClassifyVtkCell(static_cast<int>(type), count,
@@ -736,8 +788,10 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                     cached.skip = true;
                 } else if (kind) {
                     cached.kind = *kind;
-                    cached.perm = &VtkToInternal(static_cast<int>(type), *kind, legacyHex);
-                } else if (type == 11 && count == 8) {  // voxel: internal linear hex order
+                    cached.perm =
+                        &VtkToInternal(static_cast<int>(type), *kind, legacyHex);
+                } else if (type == 11 &&
+                           count == 8) {  // voxel: internal linear hex order
                     static const std::vector<int> kVoxel{0, 1, 2, 3, 4, 5, 6, 7};
                     cached.kind = CellKind{CellShape::Hex, 1, CellFamily::Lagrange};
                     cached.perm = &kVoxel;
@@ -772,18 +826,19 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 const std::int64_t pt = fileNodes[perm[k]];
                 if (pt < 0 || pt >= p.points)
                     Fail(f, p.connectivity->where,
-                         "cell " + std::to_string(c) + " refers to point " + std::to_string(pt) +
-                             ", outside [0, " + std::to_string(p.points) + ")");
+                         "cell " + std::to_string(c) + " refers to point " +
+                             std::to_string(pt) + ", outside [0, " +
+                             std::to_string(p.points) + ")");
                 nodes[k] = pt + st.pointBase;
             }
-            st.sink.Cell(cached.kind.shape, cached.kind.order, cached.kind.family, nodes.data(),
-                         static_cast<int>(count), values.data());
+            st.sink.Cell(cached.kind.shape, cached.kind.order, cached.kind.family,
+                         nodes.data(), static_cast<int>(count), values.data());
             ++st.stats.cells;
         }
         if (conn.Remaining() != 0)
             Fail(f, p.connectivity->where,
-                 "holds " + std::to_string(conn.Values()) + " values, the offsets end at " +
-                     std::to_string(previous));
+                 "holds " + std::to_string(conn.Values()) +
+                     " values, the offsets end at " + std::to_string(previous));
     }
     st.pointBase += p.points;
     st.stats.points += p.points;
@@ -799,15 +854,19 @@ void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
             const std::optional<ScalarSelector> sel = SelectScalar(mesh, name);
             if (!sel) {
                 std::string list;
-                for (const Field& f : mesh.pointFields) list += (list.empty() ? "" : ", ") + f.name;
-                for (const Field& f : mesh.cellFields) list += (list.empty() ? "" : ", ") + f.name;
+                for (const Field& f : mesh.pointFields)
+                    list += (list.empty() ? "" : ", ") + f.name;
+                for (const Field& f : mesh.cellFields)
+                    list += (list.empty() ? "" : ", ") + f.name;
                 throw InputError(source, "",
                                  "field '" + name + "' does not exist; available: " +
                                      (list.empty() ? std::string("(none)") : list));
             }
             wanted.insert(sel->field);
         }
-    auto keep = [&](const Field& f) { return !st.options.fields || wanted.count(&f) > 0; };
+    auto keep = [&](const Field& f) {
+        return !st.options.fields || wanted.count(&f) > 0;
+    };
     std::vector<StreamField> pf, cf;
     for (const Field& fld : mesh.pointFields)
         if (keep(fld)) pf.push_back({fld.name, fld.components});
@@ -816,8 +875,10 @@ void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
     st.SendFields(pf, cf, source);
     // Align with the layout announced by the first piece.
     std::vector<const Field*> pointOrder, cellOrder;
-    for (const StreamField& w : st.pointFields) pointOrder.push_back(mesh.FindPointField(w.name));
-    for (const StreamField& w : st.cellFields) cellOrder.push_back(mesh.FindCellField(w.name));
+    for (const StreamField& w : st.pointFields)
+        pointOrder.push_back(mesh.FindPointField(w.name));
+    for (const StreamField& w : st.cellFields)
+        cellOrder.push_back(mesh.FindCellField(w.name));
     const int pc = SumComponents(st.pointFields), cc = SumComponents(st.cellFields);
     const std::int64_t batch = 65536;
     std::vector<double> values;
@@ -828,7 +889,8 @@ void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
         for (const Field* fld : pointOrder) {
             for (std::int64_t i = 0; i < n; ++i)
                 for (int c = 0; c < fld->components; ++c)
-                    values[i * pc + offset + c] = fld->values[(first + i) * fld->components + c];
+                    values[i * pc + offset + c] =
+                        fld->values[(first + i) * fld->components + c];
             offset += fld->components;
         }
         st.sink.Points(n, mesh.points.data() + 3 * first, values.data());
@@ -849,8 +911,8 @@ void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
         const int count = mesh.CellNodeCount(c);
         nodes.assign(mesh.CellNodes(c), mesh.CellNodes(c) + count);
         for (auto& n : nodes) n += st.pointBase;
-        st.sink.Cell(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c], nodes.data(),
-                     count, cellValues.data());
+        st.sink.Cell(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c],
+                     nodes.data(), count, cellValues.data());
         ++st.stats.cells;
     }
     st.pointBase += mesh.PointCount();
@@ -904,7 +966,8 @@ StreamStats StreamMesh(const std::string& path, const ReadOptions& options,
         // The index is small: parse it whole, then stream each piece in turn.
         const std::unique_ptr<XmlFile> index = vtkxml::LoadXmlFile(path);
         if (index->type != "PUnstructuredGrid")
-            Fail(*index, "<VTKFile>", "type '" + index->type + "' is not PUnstructuredGrid");
+            Fail(*index, "<VTKFile>",
+                 "type '" + index->type + "' is not PUnstructuredGrid");
         const pugi::xml_node grid = index->root.child("PUnstructuredGrid");
         if (!grid) Fail(*index, "<VTKFile>", "has no <PUnstructuredGrid> element");
         const std::filesystem::path folder = std::filesystem::path(path).parent_path();
@@ -917,7 +980,8 @@ StreamStats StreamMesh(const std::string& path, const ReadOptions& options,
             const std::string piecePath = (folder / source).lexically_normal().string();
             std::error_code ec;
             if (!std::filesystem::is_regular_file(piecePath, ec))
-                Fail(*index, where + " Source=\"" + source + "\"", "no such file: " + piecePath);
+                Fail(*index, where + " Source=\"" + source + "\"",
+                     "no such file: " + piecePath);
             st.stats.streamed = false;
             StreamSerial(piecePath, st);
             allStreamed &= st.stats.streamed;

@@ -21,7 +21,7 @@ struct StreamField {
 /// Receives a mesh in input order. Points are numbered globally (pieces of a .pvtu
 /// follow each other); every point a cell refers to has been delivered before the cell.
 class MeshSink {
-public:
+  public:
     virtual ~MeshSink() = default;
     /// Called once, before any data: the selected point and cell fields (the same set for
     /// every piece).
@@ -39,7 +39,7 @@ public:
 
 /// Statistics of one streaming pass.
 struct StreamStats {
-    bool streamed = false;           ///< false: the input was read whole (other formats)
+    bool streamed = false;  ///< false: the input was read whole (other formats)
     std::int64_t points = 0;
     std::int64_t cells = 0;          ///< 3-D cells delivered
     std::int64_t skippedCells = 0;   ///< lower-dimensional cells and input ghost cells

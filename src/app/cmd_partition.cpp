@@ -11,8 +11,9 @@ namespace hpray::app {
 int RunPartition(const PartitionArgs& args) {
     partition::PartitionOptions options;
     if (args.bricks < 1)
-        throw InputError("command line", "--bricks",
-                         std::to_string(args.bricks) + " is not a positive number of bricks");
+        throw InputError(
+            "command line", "--bricks",
+            std::to_string(args.bricks) + " is not a positive number of bricks");
     options.bricks = args.bricks;
     options.outDir = args.outDir;
     if (!args.memoryLimit.empty())
@@ -20,13 +21,14 @@ int RunPartition(const PartitionArgs& args) {
     if (!args.fields.empty()) options.fields = args.fields;
     const partition::PartitionReport r = partition::PartitionMesh(args.mesh, options);
     char line[256];
-    std::snprintf(line, sizeof line,
-                  "partition: %d bricks in %s: %lld cells (%lld stored with ghosts), balance "
-                  "%.4f, %.1f MiB written in %.2f s%s",
-                  args.bricks, args.outDir.c_str(), static_cast<long long>(r.inputCells),
-                  static_cast<long long>(r.storedCells), r.balance,
-                  static_cast<double>(r.bytesWritten) / (1024.0 * 1024.0), r.seconds,
-                  r.streamed ? "" : " (input read whole)");
+    std::snprintf(
+        line, sizeof line,
+        "partition: %d bricks in %s: %lld cells (%lld stored with ghosts), balance "
+        "%.4f, %.1f MiB written in %.2f s%s",
+        args.bricks, args.outDir.c_str(), static_cast<long long>(r.inputCells),
+        static_cast<long long>(r.storedCells), r.balance,
+        static_cast<double>(r.bytesWritten) / (1024.0 * 1024.0), r.seconds,
+        r.streamed ? "" : " (input read whole)");
     log::Info(line);
     return 0;
 }

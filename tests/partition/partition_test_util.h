@@ -2,12 +2,13 @@
 // cells (node-coordinate keys, centroids, guaranteed boxes) to check bricks against.
 #pragma once
 
+#include <unistd.h>
+
 #include <array>
 #include <cstdint>
 #include <filesystem>
 #include <map>
 #include <string>
-#include <unistd.h>
 #include <vector>
 
 #include "elements/basis.h"
@@ -18,7 +19,7 @@ namespace hpray::test {
 
 /// A fresh folder under the system temporary folder, removed on destruction.
 class ScratchDir {
-public:
+  public:
     explicit ScratchDir(const std::string& name)
         : path_(std::filesystem::temp_directory_path() /
                 ("hpray_test_" + name + "_" + std::to_string(::getpid()))) {
@@ -29,10 +30,12 @@ public:
         std::error_code ec;
         std::filesystem::remove_all(path_, ec);
     }
-    std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+    std::string operator/(const std::string& name) const {
+        return (path_ / name).string();
+    }
     std::string str() const { return path_.string(); }
 
-private:
+  private:
     std::filesystem::path path_;
 };
 
@@ -77,9 +80,9 @@ inline Box3 CellBox(const Mesh& mesh, std::int64_t c) {
             box.hi[d] = std::max(box.hi[d], v);
         }
     if (mesh.cellOrder[c] > 1 || mesh.cellFamily[c] != CellFamily::Lagrange) {
-        const Box3 g = GeometryBox(GetBasis(mesh.cellShape[c], mesh.cellOrder[c],
-                                            mesh.cellFamily[c]),
-                                   xyz.data());
+        const Box3 g = GeometryBox(
+            GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]),
+            xyz.data());
         for (int d = 0; d < 3; ++d) {
             box.lo[d] = std::min(box.lo[d], g.lo[d]);
             box.hi[d] = std::max(box.hi[d], g.hi[d]);

@@ -31,7 +31,7 @@ const std::string kData = HPRAY_SHARED_DATA;
 
 /// Collects a streamed mesh back into a Mesh.
 class CollectSink : public partition::MeshSink {
-public:
+  public:
     void Fields(const std::vector<partition::StreamField>& pf,
                 const std::vector<partition::StreamField>& cf) override {
         pointFields = pf;
@@ -93,8 +93,8 @@ void ExpectStreamEqualsRead(const std::string& path, bool expectStreamed) {
 }
 
 TEST(VtuStream, EqualsTheWholeFileReader) {
-    // appended raw + zlib UInt32 header; raw uncompressed; zlib UInt64 header (four linear
-    // types interleaved); Float32 points with Int32 connectivity.
+    // appended raw + zlib UInt32 header; raw uncompressed; zlib UInt64 header (four
+    // linear types interleaved); Float32 points with Int32 connectivity.
     ExpectStreamEqualsRead(kData + "/gmsh_boolean_tet_p4.vtu", true);
     ExpectStreamEqualsRead(kData + "/mfem_toroid_wedge_p3.vtu", true);
     ExpectStreamEqualsRead(kData + "/mfem_fichera_mixed16_linear.vtu", true);
@@ -112,7 +112,8 @@ TEST(VtuStream, PvtuPiecesAndFieldSelection) {
     WriteVtu(dir / "a.vtu", a);
     WriteVtu(dir / "b.vtu", b);
     std::ofstream(dir / "both.pvtu")
-        << "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"2.2\">\n"
+        << "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" "
+           "version=\"2.2\">\n"
            "<PUnstructuredGrid GhostLevel=\"0\"><PPoints><PDataArray type=\"Float64\" "
            "NumberOfComponents=\"3\"/></PPoints>\n<Piece Source=\"a.vtu\"/><Piece "
            "Source=\"b.vtu\"/></PUnstructuredGrid></VTKFile>\n";
@@ -126,15 +127,18 @@ TEST(VtuStream, PvtuPiecesAndFieldSelection) {
     EXPECT_EQ(sink.pointFields[0].name, "u");
     EXPECT_TRUE(sink.cellFields.empty());
     only.fields = std::set<std::string>{"nope"};
-    EXPECT_THROW(partition::StreamMesh(kData + "/mfem_escher_tet_p3.vtu", only, 1 << 16, sink),
-                 InputError);
+    EXPECT_THROW(
+        partition::StreamMesh(kData + "/mfem_escher_tet_p3.vtu", only, 1 << 16, sink),
+        InputError);
 }
 
 TEST(VtuStream, TruncatedFileIsAnInputError) {
     ScratchDir dir("vtu_stream_trunc");
     std::ifstream in(kData + "/mfem_toroid_wedge_p3.vtu", std::ios::binary);
-    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    std::ofstream(dir / "cut.vtu", std::ios::binary) << bytes.substr(0, bytes.size() * 2 / 3);
+    std::string bytes((std::istreambuf_iterator<char>(in)),
+                      std::istreambuf_iterator<char>());
+    std::ofstream(dir / "cut.vtu", std::ios::binary)
+        << bytes.substr(0, bytes.size() * 2 / 3);
     CollectSink sink;
     try {
         partition::StreamMesh(dir / "cut.vtu", {}, 4096, sink);
@@ -152,8 +156,8 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
         const auto x = test::Centroid(mesh, c);
         int n = 0;
         while (p.nodes[n].axis >= 0) {
-            // The documented rule: low when x[axis] < split; on the plane, by the tie-break
-            // on the next two coordinates when the node has one.
+            // The documented rule: low when x[axis] < split; on the plane, by the
+            // tie-break on the next two coordinates when the node has one.
             const auto& node = p.nodes[n];
             const int a = node.axis;
             bool low = x[a] < node.split;
@@ -163,8 +167,8 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
             }
             n = low ? node.low : node.high;
         }
-        cost[p.nodes[n].brick] +=
-            partition::CellRenderCost(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
+        cost[p.nodes[n].brick] += partition::CellRenderCost(
+            mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
     }
     double sum = 0, max = 0;
     for (double v : cost) {
@@ -230,7 +234,8 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
     const Mesh mesh = ReadMesh(path);
     const Partition p = partition::ReadPartition(dir);
     std::map<test::CellKey, std::int64_t> index;
-    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) index.emplace(test::KeyOf(mesh, c), c);
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c)
+        index.emplace(test::KeyOf(mesh, c), c);
     ASSERT_EQ(static_cast<std::int64_t>(index.size()), mesh.CellCount());
 
     std::vector<int> owners(mesh.CellCount(), 0);
@@ -240,9 +245,11 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
         ASSERT_EQ(brick.ghost.size(), static_cast<std::size_t>(brick.CellCount()));
         for (std::int64_t c = 0; c < brick.CellCount(); ++c) {
             const auto it = index.find(test::KeyOf(brick, c));
-            ASSERT_NE(it, index.end()) << "brick " << b << " cell " << c << " is not an input cell";
+            ASSERT_NE(it, index.end())
+                << "brick " << b << " cell " << c << " is not an input cell";
             const std::int64_t id = it->second;
-            EXPECT_TRUE(holders[id].insert(b).second) << "cell " << id << " twice in brick " << b;
+            EXPECT_TRUE(holders[id].insert(b).second)
+                << "cell " << id << " twice in brick " << b;
             if (brick.ghost[c] == 0) {
                 ++owners[id];
                 // The owner's box contains the centroid.
@@ -262,7 +269,8 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
                     const std::int64_t bp = brick.CellNodes(c)[k];
                     const std::int64_t mp = mesh.CellNodes(id)[k];
                     for (int q = 0; q < f.components; ++q)
-                        ASSERT_EQ(f.values[bp * f.components + q], r->values[mp * f.components + q]);
+                        ASSERT_EQ(f.values[bp * f.components + q],
+                                  r->values[mp * f.components + q]);
                     if (f.components == 1) {
                         const auto& range = p.bricks[b].ranges.at(f.name);
                         EXPECT_GE(f.values[bp], range[0]);
@@ -280,7 +288,8 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
         for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
             bool meets = true;
             for (int d = 0; d < 3; ++d)
-                meets &= box.lo[d] <= p.bricks[b].box.hi[d] && box.hi[d] >= p.bricks[b].box.lo[d];
+                meets &= box.lo[d] <= p.bricks[b].box.hi[d] &&
+                         box.hi[d] >= p.bricks[b].box.lo[d];
             if (meets) expected.insert(b);
         }
         EXPECT_EQ(holders[c], expected) << "cell " << c;
@@ -324,10 +333,9 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
         std::string file;
         int bricks;
     };
-    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
-                          Case{"gmsh_boolean_tet_p4.vtu", 5},
-                          Case{"mfem_fichera_mixed_p3.vtu", 12},
-                          Case{"mfem_toroid_hex_p3.vtu", 3}}) {
+    for (const Case& c :
+         {Case{"mfem_fichera_mixed16_linear.vtu", 7}, Case{"gmsh_boolean_tet_p4.vtu", 5},
+          Case{"mfem_fichera_mixed_p3.vtu", 12}, Case{"mfem_toroid_hex_p3.vtu", 3}}) {
         partition::PartitionOptions o;
         o.bricks = c.bricks;
         o.outDir = dir / c.file;
@@ -418,7 +426,8 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
 
 /// True when boxes a and b are separated by an axis plane with `eye` on a's side (or on
 /// the plane): then nothing of b can hide a from the eye.
-bool SeparatedWithEyeOnSide(const Box& a, const Box& b, const std::array<double, 3>& eye) {
+bool SeparatedWithEyeOnSide(const Box& a, const Box& b,
+                            const std::array<double, 3>& eye) {
     for (int d = 0; d < 3; ++d) {
         if (a.hi[d] <= b.lo[d] && eye[d] <= b.lo[d]) return true;
         if (b.hi[d] <= a.lo[d] && eye[d] >= b.hi[d]) return true;

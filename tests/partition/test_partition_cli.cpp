@@ -1,8 +1,7 @@
 // `hpray partition` as a process: peak memory against --memory-limit on an input 4x
 // larger, interrupted runs and reruns, malformed arguments, `hpray info DIR`.
-#include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -12,6 +11,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
@@ -29,15 +29,16 @@ namespace fs = std::filesystem;
 using test::ScratchDir;
 
 struct ChildResult {
-    int code = -1;         ///< exit code, or -signal
-    long maxRssKiB = 0;    ///< ru_maxrss of the child
-    std::string output;    ///< stdout + stderr
+    int code = -1;       ///< exit code, or -signal
+    long maxRssKiB = 0;  ///< ru_maxrss of the child
+    std::string output;  ///< stdout + stderr
 };
 
 /// Runs hpray with `args` (and extra environment entries), waits, and reports the exit
 /// status and the child's peak resident set size. `killWhen`, if set, is polled every
 /// 20 ms; when it returns true the child gets SIGKILL.
-ChildResult RunChild(const std::vector<std::string>& args, const std::vector<std::string>& env,
+ChildResult RunChild(const std::vector<std::string>& args,
+                     const std::vector<std::string>& env,
                      const std::function<bool()>& killWhen = nullptr) {
     const std::string log = fs::temp_directory_path() /
                             ("hpray_test_child_" + std::to_string(::getpid()) + ".log");
@@ -108,8 +109,8 @@ TEST(PartitionCli, PeakMemoryStaysWithinTheLimit) {
     }
     const std::size_t limit = std::size_t(16) << 20;
     ASSERT_GE(fs::file_size(input), 4 * limit);
-    const ChildResult r = RunChild({"partition", input, "--bricks", "16", "--out", dir / "p",
-                                    "--memory-limit", "16M"},
+    const ChildResult r = RunChild({"partition", input, "--bricks", "16", "--out",
+                                    dir / "p", "--memory-limit", "16M"},
                                    {});
     ASSERT_EQ(r.code, 0) << r.output;
     const double peakMiB = r.maxRssKiB / 1024.0;
@@ -117,10 +118,10 @@ TEST(PartitionCli, PeakMemoryStaysWithinTheLimit) {
     EXPECT_LE(peakMiB, 16.0 + 64.0) << r.output;
     ExpectCompletePartition(dir / "p", 16, cells);
     // A partition's own index streams back in: the ghost copies are dropped.
-    const ChildResult again = RunChild(
-        {"partition", dir / "p/bricks.pvtu", "--bricks", "12", "--out", dir / "q",
-         "--memory-limit", "16M"},
-        {});
+    const ChildResult again =
+        RunChild({"partition", dir / "p/bricks.pvtu", "--bricks", "12", "--out",
+                  dir / "q", "--memory-limit", "16M"},
+                 {});
     ASSERT_EQ(again.code, 0) << again.output;
     ExpectCompletePartition(dir / "q", 12, cells);
 }
@@ -140,9 +141,8 @@ TEST(PartitionCli, InterruptedRunsAreRerunCleanly) {
     ExpectCompletePartition(out, 9, cells);
 
     // Dies after writing 2 of 6 bricks: no manifest may survive.
-    const ChildResult dead =
-        RunChild({"partition", input, "--bricks", "6", "--out", out},
-                 {"HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS=2"});
+    const ChildResult dead = RunChild({"partition", input, "--bricks", "6", "--out", out},
+                                      {"HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS=2"});
     EXPECT_EQ(dead.code, 75) << dead.output;
     EXPECT_FALSE(fs::exists(out + "/manifest.json"));
     EXPECT_THROW(partition::ReadPartition(out), InputError);
@@ -151,9 +151,10 @@ TEST(PartitionCli, InterruptedRunsAreRerunCleanly) {
     ExpectCompletePartition(out, 6, cells);
 
     // kill -9 at the moment the first brick appears.
-    const ChildResult killed = RunChild(
-        {"partition", input, "--bricks", "4", "--out", out}, {}, [&] {
-            return !fs::exists(out + "/manifest.json") && fs::exists(out + "/brick-0000.vtu");
+    const ChildResult killed =
+        RunChild({"partition", input, "--bricks", "4", "--out", out}, {}, [&] {
+            return !fs::exists(out + "/manifest.json") &&
+                   fs::exists(out + "/brick-0000.vtu");
         });
     if (killed.code == -SIGKILL) {
         EXPECT_FALSE(fs::exists(out + "/manifest.json"));
@@ -171,18 +172,20 @@ TEST(PartitionCli, MalformedArgumentsExit2) {
     };
     const std::vector<Case> cases = {
         {{"partition", "builtin:cube-tets-2", "--bricks", "0", "--out", out}, "--bricks"},
-        {{"partition", "builtin:cube-tets-2", "--bricks", "-3", "--out", out}, "--bricks"},
+        {{"partition", "builtin:cube-tets-2", "--bricks", "-3", "--out", out},
+         "--bricks"},
         {{"partition", "builtin:cube-tets-1", "--bricks", "6", "--out", out}, "5 cells"},
-        {{"partition", "builtin:cube-tets-2", "--bricks", "2", "--out", out, "--memory-limit",
-          "lots"},
+        {{"partition", "builtin:cube-tets-2", "--bricks", "2", "--out", out,
+          "--memory-limit", "lots"},
          "--memory-limit"},
-        {{"partition", "builtin:cube-tets-2", "--bricks", "2", "--out", out, "--memory-limit",
-          "1K"},
+        {{"partition", "builtin:cube-tets-2", "--bricks", "2", "--out", out,
+          "--memory-limit", "1K"},
          "too small"},
         {{"partition", "builtin:cube-tets-2", "--bricks", "2", "--out", out, "--fields",
           "nope"},
          "nope"},
-        {{"partition", dir / "missing.vtu", "--bricks", "2", "--out", out}, "missing.vtu"},
+        {{"partition", dir / "missing.vtu", "--bricks", "2", "--out", out},
+         "missing.vtu"},
         {{"partition", "builtin:cube-tets-2", "--bricks", "two", "--out", out}, "bricks"},
     };
     for (const Case& c : cases) {
@@ -196,8 +199,10 @@ TEST(PartitionCli, MalformedArgumentsExit2) {
 TEST(PartitionCli, InfoSummarisesAPartition) {
     ScratchDir dir("partition_info");
     const std::string out = dir / "p";
-    ASSERT_EQ(RunChild({"partition", "builtin:cube-tets-5", "--bricks", "5", "--out", out}, {}).code,
-              0);
+    ASSERT_EQ(
+        RunChild({"partition", "builtin:cube-tets-5", "--bricks", "5", "--out", out}, {})
+            .code,
+        0);
     const ChildResult r = RunChild({"info", "--json", "-q", out}, {});
     ASSERT_EQ(r.code, 0) << r.output;
     const nlohmann::json j = nlohmann::json::parse(r.output);
@@ -210,7 +215,8 @@ TEST(PartitionCli, InfoSummarisesAPartition) {
     EXPECT_TRUE(j["checksums_ok"].get<bool>());
     std::uint64_t bytes = 0;
     for (const auto& e : fs::directory_iterator(out))
-        if (e.is_regular_file() && e.path().filename().string()[0] != '.') bytes += e.file_size();
+        if (e.is_regular_file() && e.path().filename().string()[0] != '.')
+            bytes += e.file_size();
     EXPECT_EQ(j["bytes"].get<std::uint64_t>(), bytes);
     EXPECT_EQ(j["bounds"], nlohmann::json({{0.0, 0.0, 0.0}, {1.0, 1.0, 1.0}}));
 
@@ -220,7 +226,8 @@ TEST(PartitionCli, InfoSummarisesAPartition) {
     EXPECT_NE(text.output.find("ghosts"), std::string::npos) << text.output;
     // A corrupted brick: info reports it and exits 2.
     {
-        std::fstream f(out + "/brick-0002.vtu", std::ios::in | std::ios::out | std::ios::binary);
+        std::fstream f(out + "/brick-0002.vtu",
+                       std::ios::in | std::ios::out | std::ios::binary);
         f.seekp(-50, std::ios::end);
         f.put('#');
     }
