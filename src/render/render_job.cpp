@@ -43,24 +43,28 @@ std::vector<double> RgbaArray(const Image& image) {
 }
 
 Image RunRenderJob(const Scene& scene, RenderStats& stats) {
-    const auto start = std::chrono::steady_clock::now();
-    stats = RenderStats{};
-    stats.scene = scene.sourcePath;
-    stats.mesh = scene.data.mesh;
-    stats.threads = scene.threads > 0 ? scene.threads : tbb::info::default_concurrency();
-
     // Load only the fields the scene names.
-    auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = std::chrono::steady_clock::now();
     ReadOptions options;
     std::set<std::string> fields;
     for (const std::string& name : scene.FieldNames()) fields.insert(name);
     options.fields = fields;
     const Mesh mesh = ReadMesh(scene.data.mesh, options);
-    stats.timing.load = Seconds(t0);
     log::Info("loaded " + scene.data.mesh + ": " + std::to_string(mesh.CellCount()) +
               " cells, " + std::to_string(mesh.PointCount()) + " points");
+    return RenderMeshJob(mesh, scene, stats, Seconds(t0));
+}
 
-    t0 = std::chrono::steady_clock::now();
+Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
+                    double loadSeconds) {
+    const auto start = std::chrono::steady_clock::now();
+    stats = RenderStats{};
+    stats.scene = scene.sourcePath;
+    stats.mesh = scene.data.mesh;
+    stats.threads = scene.threads > 0 ? scene.threads : tbb::info::default_concurrency();
+    stats.timing.load = loadSeconds;
+
+    auto t0 = std::chrono::steady_clock::now();
     const MeshGeometry geometry = MeshGeometry::Build(mesh);
     const Brick brick = Brick::WholeMesh(mesh);
     TraceOptions traceOptions;
@@ -99,7 +103,7 @@ Image RunRenderJob(const Scene& scene, RenderStats& stats) {
     if (!out.hits.empty()) WriteNpy(out.hits, HitsArray(image), {H, W, 5});
     if (!out.rgba.empty()) WriteNpy(out.rgba, RgbaArray(image), {H, W, 4});
     stats.timing.write = Seconds(t0);
-    stats.timing.total = Seconds(start);
+    stats.timing.total = Seconds(start) + loadSeconds;
     if (!out.stats.empty()) WriteStats(out.stats, stats);
     return image;
 }

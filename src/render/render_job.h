@@ -3,6 +3,7 @@
 #pragma once
 
 #include "io/image.h"
+#include "mesh/mesh.h"
 #include "render/stats.h"
 #include "scene/scene.h"
 
@@ -12,6 +13,11 @@ namespace hpray {
 /// the image and fills `stats`. Throws InputError for bad input; a failed job writes no
 /// output file.
 Image RunRenderJob(const Scene& scene, RenderStats& stats);
+
+/// The same for a mesh already in memory (tests, and callers that build meshes).
+/// `loadSeconds` is reported as timing_s.load.
+Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
+                    double loadSeconds = 0);
 
 /// The float64 (H, W, 5) hits array of design.md: t, N.X, N.Y, N.Z, residual per pixel.
 std::vector<double> HitsArray(const Image& image);

@@ -1,0 +1,450 @@
+// Isosurface rendering against analytic ray-surface intersections: spheres of ball-p2,
+// planes of linear fields on p = 10 tets, planes of isoparametric fields on highly curved
+// hexes, offset and near-constant fields, tangent rays, compositing and thread invariance.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <algorithm>
+#include <cstring>
+#include <optional>
+#include <random>
+
+#include "mesh/builtin.h"
+#include "render/brick_renderer.h"
+#include "render/render_job.h"
+#include "scene/camera.h"
+#include "scene/scene.h"
+
+namespace hpray {
+namespace {
+
+Scene MakeScene(const std::string& yaml) { return ParseScene(yaml, "test.yaml", {}, ""); }
+
+struct Hit {
+    double t;
+    std::array<double, 3> normal;  // unit, facing the camera
+};
+
+// Nearest intersection of a ray with the sphere |x| = R, if the ray is not within `tangent`
+// (relative) of grazing it; `grazing` reports rays too close to call.
+std::optional<Hit> RaySphere(const CameraRay& ray, double R, bool& grazing) {
+    const auto& o = ray.origin;
+    const auto& d = ray.direction;
+    const double b = o[0] * d[0] + o[1] * d[1] + o[2] * d[2];
+    const double c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - R * R;
+    const double disc = b * b - c;
+    grazing = std::abs(disc) <= 1e-9 * R * R;
+    if (disc < 0) return std::nullopt;
+    const double t = -b - std::sqrt(disc);
+    if (t < 0) return std::nullopt;
+    Hit h;
+    h.t = t;
+    for (int i = 0; i < 3; ++i) h.normal[i] = (o[i] + t * d[i]) / R;
+    return h;
+}
+
+// zTol is the bound for well-conditioned pixels; `dataError` (the absolute error of the
+// field data) adds its conditioning dataError / |df/dt|, with df/dt = 2 R (n . d).
+void ExpectSphereImage(const Scene& scene, const Mesh& mesh, double R, double zTol,
+                       double nTol, double dataError = 0) {
+    RenderStats stats;
+    const Image image = RenderMeshJob(mesh, scene, stats);
+    const Camera camera(scene.camera);
+    int hits = 0, graze = 0;
+    for (int j = 0; j < image.height; ++j)
+        for (int i = 0; i < image.width; ++i) {
+            const std::size_t p = std::size_t(j) * image.width + i;
+            bool grazing = false;
+            const auto expect = RaySphere(camera.PixelRay(i, j), R, grazing);
+            if (grazing) {
+                ++graze;
+                continue;
+            }
+            ASSERT_EQ(expect.has_value(), std::isfinite(image.z[p])) << i << "," << j;
+            if (!expect) {
+                EXPECT_EQ(image.isoId[p], -1);
+                EXPECT_EQ(image.a[p], 0.0);
+                continue;
+            }
+            ++hits;
+            const CameraRay ray = camera.PixelRay(i, j);
+            double nd = 0;
+            for (int a = 0; a < 3; ++a) nd += expect->normal[a] * ray.direction[a];
+            const double conditioning = 4 * dataError / (2 * R * std::abs(nd));
+            EXPECT_NEAR(image.z[p], expect->t, zTol + conditioning) << i << "," << j;
+            EXPECT_NEAR(image.nx[p], expect->normal[0], nTol) << i << "," << j;
+            EXPECT_NEAR(image.ny[p], expect->normal[1], nTol) << i << "," << j;
+            EXPECT_NEAR(image.nz[p], expect->normal[2], nTol) << i << "," << j;
+            EXPECT_EQ(image.isoId[p], 0);
+            EXPECT_EQ(image.a[p], 1.0);
+        }
+    EXPECT_GT(hits, image.width * image.height / 20);
+    EXPECT_LT(graze, image.width);
+    EXPECT_EQ(stats.counters.rootFailures, 0);
+    EXPECT_EQ(stats.counters.inversionFailures, 0);
+}
+
+const char* kBallScene = R"(
+data: {mesh: "builtin:ball-p2"}
+camera: {position: [2.1, 1.3, 2.9], look_at: [0.01, -0.02, 0.03], up: [0, 1, 0], fov_y: 40,
+         width: 72, height: 64}
+isosurfaces:
+  - {field: u, value: 0.49}
+)";
+
+TEST(IsoRender, BallP2SpheresMatchAnalyticIntersection) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    // Scene size ~ 2 (the cube [-1,1]^3): Z within 1e-10 of it, normals within 1e-9.
+    ExpectSphereImage(MakeScene(kBallScene), mesh, 0.7, 2e-10, 1e-9);
+    // R = 0.5 passes through mesh nodes, edges and faces: isovalue equal to nodal values.
+    Scene scene = MakeScene(kBallScene);
+    scene.isosurfaces[0].value = 0.25;
+    ExpectSphereImage(scene, mesh, 0.5, 2e-10, 1e-9);
+}
+
+TEST(IsoRender, OffsetAndNearConstantFields) {
+    Mesh offset = MakeBuiltin("builtin:ball-p2");
+    for (double& u : offset.pointFields[0].values) u += 1e6;
+    Scene scene = MakeScene(kBallScene);
+    scene.isosurfaces[0].value = 1e6 + 0.49;
+    // The data carries half an ulp of 1e6 (5.8e-11) of rounding, times the Lebesgue
+    // constant of the P2 interpolant (< 2): t is known to that over |df/dt|.
+    ExpectSphereImage(scene, offset, 0.7, 2e-10, 1e-5, 1.2e-10);
+
+    Mesh tiny = MakeBuiltin("builtin:ball-p2");
+    for (double& u : tiny.pointFields[0].values) u *= 1e-12;  // |grad u| ~ 1e-12
+    scene.isosurfaces[0].value = 0.49e-12;
+    ExpectSphereImage(scene, tiny, 0.7, 2e-10, 1e-9);
+}
+
+// The plane x + 2y + 3z = C through the unit cube, on order-10 tets (line degree 10).
+TEST(IsoRender, OrderTenTetsGiveTheExactPlane) {
+    const Mesh mesh = MakeBuiltin("builtin:cube-tets-2?order=10");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:cube-tets-2?order=10"}
+camera: {position: [2.5, 1.9, 3.1], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 35,
+         width: 48, height: 48}
+isosurfaces:
+  - {field: u, value: 2.5, opacity: 0.5}
+)");
+    RenderStats stats;
+    const Image image = RenderMeshJob(mesh, scene, stats);
+    const Camera camera(scene.camera);
+    const double n[3] = {1 / std::sqrt(14.0), 2 / std::sqrt(14.0), 3 / std::sqrt(14.0)};
+    int hits = 0;
+    for (int j = 0; j < 48; ++j)
+        for (int i = 0; i < 48; ++i) {
+            const CameraRay r = camera.PixelRay(i, j);
+            const double dn = r.direction[0] + 2 * r.direction[1] + 3 * r.direction[2];
+            const double t = (2.5 - r.origin[0] - 2 * r.origin[1] - 3 * r.origin[2]) / dn;
+            std::array<double, 3> x;
+            for (int d = 0; d < 3; ++d) x[d] = r.origin[d] + t * r.direction[d];
+            const double inside = std::min({x[0], x[1], x[2], 1 - x[0], 1 - x[1], 1 - x[2]});
+            const std::size_t p = std::size_t(j) * 48 + i;
+            if (std::abs(inside) < 1e-9) continue;  // grazing the cube's boundary
+            ASSERT_EQ(inside > 0, std::isfinite(image.z[p])) << i << "," << j;
+            if (inside < 0) continue;
+            ++hits;
+            EXPECT_NEAR(image.z[p], t, 1e-10);
+            // Facing the camera: the normal points against the ray.
+            const double s = dn > 0 ? -1 : 1;
+            EXPECT_NEAR(image.nx[p], s * n[0], 1e-9);
+            EXPECT_NEAR(image.ny[p], s * n[1], 1e-9);
+            EXPECT_NEAR(image.nz[p], s * n[2], 1e-9);
+            // Exactly one hit: opacity 0.5 composited once, never twice.
+            EXPECT_EQ(image.a[p], 0.5) << i << "," << j;
+        }
+    EXPECT_GT(hits, 300);
+}
+
+// The isosurface u = 1 of u = x + 2y + 3z on cube-tets-3 passes through mesh vertices
+// ((1,0,0), (1/3,1/3,0), ...), edges and faces: no holes and no double hits.
+TEST(IsoRender, PlaneThroughVerticesEdgesAndFacesHasNoHolesOrDoubleHits) {
+    const Mesh mesh = MakeBuiltin("builtin:cube-tets-3");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:cube-tets-3"}
+camera: {position: [0.1, 0.2, 3.0], look_at: [0.3, 0.2, 0.1], up: [0, 1, 0],
+         ortho_height: 1.3, width: 64, height: 64}
+isosurfaces:
+  - {field: u, value: 1.0, opacity: 0.5}
+)");
+    RenderStats stats;
+    const Image image = RenderMeshJob(mesh, scene, stats);
+    const Camera camera(scene.camera);
+    int hits = 0;
+    for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 64; ++i) {
+            const CameraRay r = camera.PixelRay(i, j);
+            const double dn = r.direction[0] + 2 * r.direction[1] + 3 * r.direction[2];
+            const double t = (1.0 - r.origin[0] - 2 * r.origin[1] - 3 * r.origin[2]) / dn;
+            std::array<double, 3> x;
+            for (int d = 0; d < 3; ++d) x[d] = r.origin[d] + t * r.direction[d];
+            const double inside = std::min({x[0], x[1], x[2], 1 - x[0], 1 - x[1], 1 - x[2]});
+            if (std::abs(inside) < 1e-12) continue;
+            const std::size_t p = std::size_t(j) * 64 + i;
+            ASSERT_EQ(inside > 0, std::isfinite(image.z[p])) << i << "," << j;
+            if (inside > 0) {
+                ++hits;
+                EXPECT_NEAR(image.z[p], t, 1e-12);
+                EXPECT_EQ(image.a[p], 0.5) << i << "," << j;
+            }
+        }
+    EXPECT_GT(hits, 500);
+}
+
+// A field that is the world x coordinate of an isoparametric, strongly curved hex mesh is
+// exactly x, whatever the curvature: its isosurface is the plane x = C.
+Mesh CurvedHexMesh(int n, int p, double amplitude) {
+    Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=" + std::to_string(p));
+    (void)n;
+    const double pi = std::acos(-1.0);
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        double* x = &mesh.points[3 * i];
+        const double bump = std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
+        const double X = x[0], Y = x[1], Z = x[2];
+        x[0] = X + amplitude * bump * std::cos(3 * Y);
+        x[1] = Y + amplitude * bump * std::sin(2 * Z);
+        x[2] = Z + amplitude * bump * std::cos(2 * X);
+    }
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) mesh.pointFields[0].values[i] = mesh.points[3 * i];
+    return mesh;
+}
+
+TEST(IsoRender, HighlyCurvedHexesGiveTheExactPlaneOfAnIsoparametricField) {
+    const Mesh mesh = CurvedHexMesh(5, 4, 0.08);
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:nk-sinc"}
+camera: {position: [2.6, 1.7, 2.2], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 32,
+         width: 40, height: 40}
+isosurfaces:
+  - {field: u, value: 0.37}
+)");
+    RenderStats stats;
+    const Image image = RenderMeshJob(mesh, scene, stats);
+    const Camera camera(scene.camera);
+    int hits = 0;
+    for (int j = 0; j < 40; ++j)
+        for (int i = 0; i < 40; ++i) {
+            const CameraRay r = camera.PixelRay(i, j);
+            const double t = (0.37 - r.origin[0]) / r.direction[0];
+            std::array<double, 3> x;
+            for (int d = 0; d < 3; ++d) x[d] = r.origin[d] + t * r.direction[d];
+            // The domain stays the unit cube: the displacement vanishes on its boundary.
+            const double inside = std::min({x[1], x[2], 1 - x[1], 1 - x[2]});
+            if (std::abs(inside) < 1e-9) continue;
+            const std::size_t p = std::size_t(j) * 40 + i;
+            ASSERT_EQ(inside > 0, std::isfinite(image.z[p])) << i << "," << j;
+            if (inside < 0) continue;
+            ++hits;
+            EXPECT_NEAR(image.z[p], t, 1e-10) << i << "," << j;
+            EXPECT_NEAR(std::abs(image.nx[p]), 1.0, 1e-9) << i << "," << j;
+            EXPECT_LE(image.isoResidual[p], 1e-12);
+        }
+    EXPECT_GT(hits, 200);
+    EXPECT_EQ(stats.counters.inversionFailures, 0);
+    EXPECT_GT(stats.counters.inversions, 0);  // the cells really are curved
+}
+
+TEST(IsoRender, TangentAndNearTangentRays) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    const Scene scene = MakeScene(kBallScene);
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    Scene s = scene;
+    s.isosurfaces[0].value = 0.25;  // R = 0.5
+    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, s);
+    RenderCounters counters;
+    PixelSample sample;
+    // Tangent to the sphere at (0, 0.5, 0), a mesh vertex: a double root at t = 2.
+    Ray ray;
+    ray.origin[0] = -2;
+    ray.origin[1] = 0.5;
+    ray.dir[0] = 1;
+    ray.dir[2] = 0;
+    IntegrateRay(setup, ray, sample, counters);
+    EXPECT_NEAR(sample.z, 2.0, 1e-6);  // a double root is determined to ~sqrt(eps)
+    EXPECT_LE(sample.residual, 1e-14);
+    // Tangent inside a face of the grid (z = 0.25 is not a grid plane): at (0.1, 0.4, 0.25)?
+    // Use y offset: passing 1e-6 outside misses, 1e-6 inside hits at the analytic chord.
+    ray.origin[1] = 0.5 + 1e-6;
+    IntegrateRay(setup, ray, sample, counters);
+    EXPECT_EQ(sample.isoId, -1);
+    ray.origin[1] = 0.5 - 1e-6;
+    IntegrateRay(setup, ray, sample, counters);
+    ASSERT_EQ(sample.isoId, 0);
+    const double y = 0.5 - 1e-6;
+    EXPECT_NEAR(sample.z, 2.0 - std::sqrt(0.25 - y * y), 1e-10);
+}
+
+TEST(IsoRender, NestedTransparentSpheresCompositeInDepthOrder) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:ball-p2"}
+camera: {position: [0.05, 0.03, 3.0], look_at: [0, 0, 0], up: [0, 1, 0], fov_y: 40,
+         width: 40, height: 40}
+isosurfaces:
+  - {field: u, value: 0.25, color: [1, 0, 0], opacity: 0.5}
+  - {field: u, value: 0.64, color: [0, 0, 1], opacity: 0.4}
+lighting: {ambient: 0.2, diffuse: 0.7, specular: 0.0, shininess: 8}
+)");
+    RenderStats stats;
+    const Image image = RenderMeshJob(mesh, scene, stats);
+    const Camera camera(scene.camera);
+    for (int j = 0; j < 40; ++j)
+        for (int i = 0; i < 40; ++i) {
+            const CameraRay r = camera.PixelRay(i, j);
+            // Every crossing of the two spheres along the ray, in depth order.
+            struct Crossing {
+                double t;
+                int id;
+                double nl;
+            };
+            std::vector<Crossing> xs;
+            bool grazing = false;
+            for (int k = 0; k < 2; ++k) {
+                const double R = k == 0 ? 0.5 : 0.8;
+                const auto& o = r.origin;
+                const auto& d = r.direction;
+                const double b = o[0] * d[0] + o[1] * d[1] + o[2] * d[2];
+                const double c = o[0] * o[0] + o[1] * o[1] + o[2] * o[2] - R * R;
+                const double disc = b * b - c;
+                grazing |= std::abs(disc) < 1e-6;
+                if (disc <= 0) continue;
+                for (double t : {-b - std::sqrt(disc), -b + std::sqrt(disc)}) {
+                    double nd = 0;
+                    for (int a = 0; a < 3; ++a) nd += (o[a] + t * d[a]) / R * d[a];
+                    xs.push_back({t, k, std::abs(nd)});
+                }
+            }
+            if (grazing) continue;
+            std::sort(xs.begin(), xs.end(), [](auto& a, auto& b) { return a.t < b.t; });
+            double T = 1, rgb[3] = {0, 0, 0};
+            for (const auto& x : xs) {
+                const double alpha = x.id == 0 ? 0.5 : 0.4;
+                const double color[3] = {x.id == 0 ? 1.0 : 0.0, 0.0, x.id == 0 ? 0.0 : 1.0};
+                for (int c = 0; c < 3; ++c) rgb[c] += T * alpha * std::min(1.0, color[c] * (0.2 + 0.7 * x.nl));
+                T *= 1 - alpha;
+            }
+            const std::size_t p = std::size_t(j) * 40 + i;
+            EXPECT_NEAR(image.a[p], 1 - T, 1e-14) << i << "," << j;
+            EXPECT_NEAR(image.r[p], rgb[0], 1e-9) << i << "," << j;
+            EXPECT_NEAR(image.b[p], rgb[2], 1e-9) << i << "," << j;
+            if (!xs.empty()) {
+                EXPECT_EQ(image.isoId[p], xs.front().id);
+            }
+        }
+}
+
+bool SameBits(const std::vector<double>& a, const std::vector<double>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0;
+}
+
+TEST(IsoRender, OneAndTwoThreadsGiveBitIdenticalImages) {
+    const Mesh mesh = MakeBuiltin("builtin:nk-sinc");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:nk-sinc"}
+camera: {position: [2.2, 1.6, 2.6], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 30,
+         width: 48, height: 40}
+isosurfaces:
+  - {field: u, value: 0.0, opacity: 0.7}
+  - {field: u, value: 0.3, opacity: 0.6}
+)");
+    RenderStats s1, s2;
+    scene.threads = 1;
+    const Image one = RenderMeshJob(mesh, scene, s1);
+    scene.threads = 2;
+    const Image two = RenderMeshJob(mesh, scene, s2);
+    const auto a = one.Channels();
+    const auto b = two.Channels();
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t c = 0; c < a.size(); ++c) EXPECT_TRUE(SameBits(*a[c].second, *b[c].second)) << a[c].first;
+    EXPECT_EQ(s1.counters.isoHits, s2.counters.isoHits);
+}
+
+// Nelson & Kirby's examples at default accuracy: the residual on the true field at every
+// hit is at the rounding level of the data (done-when: RMS <= 1e-12, max <= 1e-10 of the
+// field range).
+TEST(IsoRender, NelsonKirbyExamplesResidualBudget) {
+    for (const char* name : {"builtin:nk-sinc", "builtin:nk-quartic"}) {
+        const Mesh mesh = MakeBuiltin(name);
+        Scene scene = MakeScene(std::string("data: {mesh: \"") + name + R"("}
+camera: {position: [2.2, 1.6, 2.6], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 30,
+         width: 40, height: 40}
+isosurfaces:
+  - {field: u, value: 0.0}
+)");
+        if (std::string(name) == "builtin:nk-quartic") scene.isosurfaces[0].value = -0.00716511;
+        RenderStats stats;
+        RenderMeshJob(mesh, scene, stats);
+        const double range = stats.isoFieldRange[1] - stats.isoFieldRange[0];
+        ASSERT_GT(stats.counters.isoHits, 200) << name;
+        const double rms = std::sqrt(stats.counters.isoResidualSqSum / stats.counters.isoHits);
+        EXPECT_LE(rms / range, 1e-12) << name;
+        EXPECT_LE(stats.counters.isoResidualMax / range, 1e-10) << name;
+        EXPECT_EQ(stats.counters.rootFailures, 0) << name;
+    }
+}
+
+}  // namespace
+}  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Rays aimed exactly at points of the isosurface that lie on mesh faces, edges and
+// vertices: each must composite the semi-transparent surface exactly once.
+TEST(IsoRender, RaysThroughVerticesEdgesAndFacesOnTheSurfaceHitOnce) {
+    const Mesh mesh = MakeBuiltin("builtin:cube-tets-3");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:cube-tets-3"}
+isosurfaces:
+  - {field: u, value: 1.0, opacity: 0.5}
+)");
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    // Points with x + 2y + 3z = 1 on grid planes (cube faces), grid lines (edges) and
+    // grid points (vertices) of the 3^3 cube grid.
+    std::vector<std::array<double, 3>> targets = {
+        {1.0 / 3, 1.0 / 3, 0.0}, {1.0, 0.0, 0.0}, {0.0, 1.0 / 3, 1.0 / 9},  // vertex, vertex, face
+        {1.0 / 3, 0.1, (2.0 / 3 - 0.2) / 3},                               // on x = 1/3
+        {0.2, 1.0 / 3, (0.8 - 2.0 / 3) / 3},                               // on y = 1/3
+        {1.0 / 3, 1.0 / 3, 0.0},                                           // edge and vertex
+        {2.0 / 3, 0.0, 1.0 / 9},                                           // on y = 0 edge
+        {0.1, 0.0, 0.3},                                                    // boundary face
+    };
+    RenderCounters counters;
+    PixelSample sample;
+    int checked = 0;
+    for (std::size_t k = 0; k < targets.size(); ++k)
+        for (int trial = 0; trial < 200; ++trial) {
+            std::mt19937 rng(1000 * k + trial);
+            std::normal_distribution<double> g;
+            double d[3] = {g(rng), g(rng), g(rng)};
+            const double n = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            Ray ray;
+            for (int a = 0; a < 3; ++a) {
+                ray.dir[a] = d[a] / n;
+                ray.origin[a] = targets[k][a] - 3.0 * ray.dir[a];
+            }
+            // Targets on the boundary: keep the rays that pass through the inside of the
+            // cube next to the target (the others touch the domain at one point only).
+            auto inside = [&](double s) {
+                for (int a = 0; a < 3; ++a) {
+                    const double x = targets[k][a] + s * ray.dir[a];
+                    if (x <= 0 || x >= 1) return false;
+                }
+                return true;
+            };
+            if (!inside(1e-3) && !inside(-1e-3)) continue;
+            IntegrateRay(setup, ray, sample, counters);
+            ASSERT_EQ(sample.isoId, 0) << k << " " << trial;
+            EXPECT_NEAR(sample.z, 3.0, 1e-12) << k << " " << trial;
+            EXPECT_EQ(sample.rgba[3], 0.5) << k << " " << trial;
+            ++checked;
+        }
+    EXPECT_GT(checked, 1000);
+}
+
+}  // namespace
+}  // namespace hpray
