@@ -27,7 +27,8 @@ struct CompositeNode {
 /// The tree over ranks. Every rank 0..P-1 is exactly one leaf; any leaf order is allowed
 /// (the compositor follows the tree, not the rank numbers). Built by the renderer with
 /// BuildRankTree from the partition's k-d tree and its brick -> rank assignment, or by
-/// hand (tests, benchmarks).
+/// hand (tests, benchmarks). With brick indices in the leaves instead of ranks, the same
+/// structure and VisibilityOrder order a rank's own bricks for CompositeOver.
 struct CompositeTree {
     std::vector<CompositeNode> nodes;
     int root = 0;

@@ -103,18 +103,32 @@ int StepTag(const MergeStep& step) {
     return step.tag + 1;
 }
 
-/// A message this rank expects in a step: from `source`, for `range`, of child `child`.
+/// Message buffers kept across the steps of one Composite call: later rounds move less
+/// data than earlier ones, so they reuse pages already mapped instead of faulting in new
+/// memory (a first touch costs about as much as the copy itself).
+struct Scratch {
+    std::vector<WireBuffer> send, recv;
+
+    static WireBuffer& Get(std::vector<WireBuffer>& pool, std::size_t k) {
+        if (pool.size() <= k) pool.resize(k + 1);
+        pool[k].clear();
+        return pool[k];
+    }
+};
+
+/// A message this rank expects in a step: from `source`, for `range`, of child `child`,
+/// received into scratch.recv[buffer].
 struct Incoming {
     int source = -1;
     int child = -1;
     PixelRange range;
-    WireBuffer data;
+    std::size_t buffer = 0;
     bool received = false;
 };
 
 /// Runs this rank's part of `step`. Returns bytes sent.
 std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int me,
-                      Image& image, MPI_Comm comm) {
+                      Image& image, MPI_Comm comm, Scratch& scratch) {
     int ownChild = -1;
     PixelRange oldRange, newRange;
     for (std::size_t c = 0; c < step.children.size(); ++c)
@@ -130,20 +144,18 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
 
     // Sends first (non-blocking), so that no pair of ranks can wait on each other.
     std::uint64_t bytesSent = 0;
-    std::vector<WireBuffer> outgoing;
     std::vector<MPI_Request> requests;
-    outgoing.reserve(step.result.size());
     requests.reserve(step.result.size());
     for (const Piece& piece : step.result) {
         if (piece.rank == me) continue;
         const PixelRange overlap = Intersect(oldRange, piece.range);
         if (overlap.Empty()) continue;
-        outgoing.emplace_back();
-        EncodeActive(image, overlap, outgoing.back());
+        WireBuffer& out = Scratch::Get(scratch.send, requests.size());
+        EncodeActive(image, overlap, out);
         requests.emplace_back();
-        MPI_Isend(outgoing.back().data(), CountOf(outgoing.back()), MPI_DOUBLE,
-                  piece.rank, tag, comm, &requests.back());
-        bytesSent += outgoing.back().size() * sizeof(double);
+        MPI_Isend(out.data(), CountOf(out), MPI_DOUBLE, piece.rank, tag, comm,
+                  &requests.back());
+        bytesSent += out.size() * sizeof(double);
     }
 
     std::vector<Incoming> incoming;
@@ -152,7 +164,8 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
             if (piece.rank == me) continue;
             const PixelRange overlap = Intersect(piece.range, newRange);
             if (!overlap.Empty())
-                incoming.push_back({piece.rank, static_cast<int>(c), overlap, {}, false});
+                incoming.push_back(
+                    {piece.rank, static_cast<int>(c), overlap, incoming.size(), false});
         }
     // Receive in arrival order; sizes vary with the number of active pixels.
     for (std::size_t k = 0; k < incoming.size(); ++k) {
@@ -166,9 +179,9 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
         int count = 0;
         MPI_Get_count(&status, MPI_DOUBLE, &count);
         HPRAY_CHECK_GE(count, 0);
-        it->data.resize(static_cast<std::size_t>(count));
-        MPI_Recv(it->data.data(), count, MPI_DOUBLE, it->source, tag, comm,
-                 MPI_STATUS_IGNORE);
+        WireBuffer& in = Scratch::Get(scratch.recv, it->buffer);
+        in.resize(static_cast<std::size_t>(count));
+        MPI_Recv(in.data(), count, MPI_DOUBLE, it->source, tag, comm, MPI_STATUS_IGNORE);
         it->received = true;
     }
 
@@ -189,8 +202,10 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
     ClearRange(image, {std::max(newRange.begin, oldRange.end), newRange.end});
     const auto apply = [&](int child, DecodeMode mode) {
         for (const Incoming& in : incoming)
-            if (in.child == child)
-                DecodeActive(in.data.data(), in.data.size(), in.range, mode, image);
+            if (in.child == child) {
+                const WireBuffer& data = scratch.recv[in.buffer];
+                DecodeActive(data.data(), data.size(), in.range, mode, image);
+            }
     };
     apply(ownChild, DecodeMode::Assign);
     // Associativity lets us grow the composite around our own group: groups behind it
@@ -205,12 +220,12 @@ std::uint64_t RunStep(const MergeStep& step, const std::vector<int>& visPos, int
 
 /// Sends every rank's final range to rank 0, which assembles the full image. Returns
 /// bytes sent by this rank.
-std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image,
-                          MPI_Comm comm) {
+std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image, MPI_Comm comm,
+                          Scratch& scratch) {
     const int size = plan.ranks;
     if (size == 1) return 0;
     if (me != 0) {
-        WireBuffer buffer;
+        WireBuffer& buffer = Scratch::Get(scratch.send, 0);
         EncodeActive(image, plan.finalRange[me], buffer);
         MPI_Send(buffer.data(), CountOf(buffer), MPI_DOUBLE, 0, kGatherTag, comm);
         return buffer.size() * sizeof(double);
@@ -218,7 +233,7 @@ std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image,
     const PixelRange mine = plan.finalRange[0];
     ClearRange(image, {0, mine.begin});
     ClearRange(image, {mine.end, plan.pixels});
-    WireBuffer buffer;
+    WireBuffer& buffer = Scratch::Get(scratch.recv, 0);
     for (int k = 1; k < size; ++k) {
         MPI_Status status;
         MPI_Probe(MPI_ANY_SOURCE, kGatherTag, comm, &status);
@@ -236,6 +251,7 @@ std::uint64_t GatherFinal(const CompositePlan& plan, int me, Image& image,
 /// The reference: whole images to rank 0, composited there in visibility order.
 std::uint64_t GatherReference(const std::vector<int>& visibility, int me, Image& image,
                               MPI_Comm comm) {
+    if (visibility.size() == 1) return 0;
     const std::size_t n = image.PixelCount();
     HPRAY_CHECK_LE(n, static_cast<std::size_t>(INT_MAX));
     const int count = static_cast<int>(n);
@@ -290,10 +306,11 @@ CompositeStats Composite(Image& image, const CompositeTree& tree,
             std::vector<int> visPos(size);
             for (int k = 0; k < size; ++k) visPos[visibility[k]] = k;
             const double t0 = MPI_Wtime();
+            Scratch scratch;
             for (const MergeStep& step : plan.steps)
-                sentLocal += RunStep(step, visPos, me, image, work.Get());
+                sentLocal += RunStep(step, visPos, me, image, work.Get(), scratch);
             const double t1 = MPI_Wtime();
-            gatherLocal = GatherFinal(plan, me, image, work.Get());
+            gatherLocal = GatherFinal(plan, me, image, work.Get(), scratch);
             swapSeconds = t1 - t0;
             gatherSeconds = MPI_Wtime() - t1;
             stats.rounds = plan.rounds;

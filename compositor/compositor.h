@@ -12,6 +12,22 @@
 namespace hpray::compositor {
 
 /// How partial images are combined.
+///
+/// Why TreeSwap is the default, for any P (measured with benchmarks/bench_composite on
+/// the 2-core development machine, P = 2..8 oversubscribed, 512^2..4096^2 images):
+/// - Folding a non-power-of-two P onto the next lower power of two makes each folded
+///   rank send its whole image S, over the 1.1 S (1 - 1/P) per-rank budget for every
+///   P < 11, and 2-3 swap fixes its own groups of 2 and 3, which a k-d tree over ranks
+///   does not have. The tree swap (PlanTreeSwap) follows any tree shape, merges only
+///   adjacent groups of the visibility order, and sends exactly S (1 - 1/P) per rank.
+/// - Direct send moves the same bytes for dense images and fewer for sparse ones (an
+///   active pixel crosses the network once; a swap resends the union of its group's
+///   active pixels every round): 0.25 GB against 0.35 GB per rank at 4096^2, P = 4, 16 %
+///   active. But every rank exchanges P - 1 messages (P^2 in all) and holds its P - 1
+///   incoming pieces at once: for dense 4096^2 images at P = 4 it took 11.6-23.9 s
+///   against 7.9-8.3 s for the swap; at 512^2-2048^2 the two are within the noise of a
+///   shared machine. The swap's log2 P rounds and O(1) messages per round scale to large
+///   P; direct send stays selectable for measurements.
 enum class Method {
     /// Binary swap along the tree over ranks (PlanTreeSwap), active pixels only, then a
     /// gather of the final pieces to rank 0. The default.
