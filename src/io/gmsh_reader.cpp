@@ -14,7 +14,6 @@
 //             then per element its tag and node tags (size_t)
 //   $NodeData / $ElementData  text tags, then per entity tag (int) and values (double)
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -27,6 +26,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "io/gmsh_detail.h"
 #include "io/gmsh_nodes.h"
 #include "io/mesh_io.h"
 #include "util/check.h"
@@ -49,18 +49,6 @@ std::string ReadWholeFile(const std::string& path) {
     return data;
 }
 
-// Whether a field of this name is to be loaded ("u.x" or "u[0]" in the set selects "u").
-bool FieldWanted(const ReadOptions& options, const std::string& name) {
-    if (!options.fields) return true;
-    for (const std::string& want : *options.fields) {
-        if (want == name) return true;
-        if (want.size() > name.size() && want.compare(0, name.size(), name) == 0 &&
-            (want[name.size()] == '.' || want[name.size()] == '['))
-            return true;
-    }
-    return false;
-}
-
 // Values of one data section, by entity index (point or cell), before choosing a time
 // step.
 struct PendingField {
@@ -79,8 +67,8 @@ class MshParser {
 
     Mesh Parse();
 
-  private:
-    // ---- positions and errors ----
+    // ---- the reader interface of io/gmsh_detail.h ----
+    // positions and errors
     std::string Where(std::size_t pos) const {
         std::ostringstream os;
         if (binary_) {
@@ -95,6 +83,20 @@ class MshParser {
         throw InputError(path_, Where(pos), message);
     }
     [[noreturn]] void Fail(const std::string& message) const { FailAt(last_, message); }
+    std::size_t Last() const { return last_; }
+    bool Binary() const { return binary_; }
+    void SetEncoding(bool binary, bool swap, int sizeT) {
+        binary_ = binary;
+        swap_ = swap;
+        sizeT_ = sizeT;
+    }
+    std::uint32_t UnswappedUInt32(const char* what) {
+        Need(4, what);
+        std::uint32_t v;
+        std::memcpy(&v, buf_.data() + pos_, 4);
+        pos_ += 4;
+        return v;
+    }
 
     // ---- text ----
     static bool IsSpace(char c) {
@@ -119,8 +121,7 @@ class MshParser {
     std::uint64_t TextUnsigned(const char* what) {
         const std::string_view t = Token(what);
         std::uint64_t v = 0;
-        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (ec != std::errc() || end != t.data() + t.size())
+        if (!gmsh::ParseUnsigned(t, v))
             Fail(std::string("expected ") + what + " (a non-negative integer), found '" +
                  std::string(t.substr(0, 40)) + "'");
         return v;
@@ -128,8 +129,7 @@ class MshParser {
     long long TextInt(const char* what) {
         const std::string_view t = Token(what);
         long long v = 0;
-        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (ec != std::errc() || end != t.data() + t.size())
+        if (!gmsh::ParseInt(t, v))
             Fail(std::string("expected ") + what + " (an integer), found '" +
                  std::string(t.substr(0, 40)) + "'");
         return v;
@@ -137,13 +137,9 @@ class MshParser {
     double TextDouble(const char* what) {
         const std::string_view t = Token(what);
         double v = 0;
-        auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-        if (ec == std::errc::result_out_of_range) {
-            v = std::strtod(std::string(t).c_str(), nullptr);  // subnormal or +-inf
-        } else if (ec != std::errc() || end != t.data() + t.size()) {
+        if (!gmsh::ParseDouble(t, v))
             Fail(std::string("expected ") + what + " (a number), found '" +
                  std::string(t.substr(0, 40)) + "'");
-        }
         return v;
     }
     // A string tag: "quoted, possibly with spaces" or one bare token.
@@ -245,10 +241,8 @@ class MshParser {
                        : 2ull * (sizes + ints + doubles);
     }
 
+  private:
     // ---- sections ----
-    void ParseMeshFormat();
-    void SkipEntities();
-    void SkipPartitionedEntities();
     void ParseNodes();
     void ParseElements();
     void ParseData(const std::string& section);
@@ -279,106 +273,13 @@ class MshParser {
     std::map<std::string, PendingField> pointData_, cellData_;
 };
 
-void MshParser::ParseMeshFormat() {
-    const std::string_view version = Token("the MSH version");
-    if (version != "4.1") {
-        std::string v(version.substr(0, 20));
-        Fail("MSH version " + v +
-             " is not supported; hpray reads MSH 4.1 (write it with "
-             "gmsh -format msh41, or Mesh.MshFileVersion = 4.1)");
-    }
-    const std::uint64_t fileType = TextUnsigned("the file type (0 ASCII, 1 binary)");
-    if (fileType > 1) Fail("file type must be 0 (ASCII) or 1 (binary)");
-    const std::uint64_t dataSize = TextUnsigned("the data size");
-    if (dataSize != 4 && dataSize != 8) Fail("data size must be 4 or 8");
-    sizeT_ = static_cast<int>(dataSize);
-    if (fileType == 1) {
-        EndOfTextLine();
-        binary_ = true;
-        Need(4, "the endianness check integer");
-        std::uint32_t one;
-        std::memcpy(&one, buf_.data() + pos_, 4);
-        pos_ += 4;
-        if (one == 1) {
-            swap_ = false;
-        } else if (one == 0x01000000u) {
-            swap_ = true;
-        } else {
-            std::ostringstream os;
-            os << "the endianness check integer is " << one << ", expected 1";
-            Fail(os.str());
-        }
-    }
-    Expect("$EndMeshFormat");
-}
-
-void MshParser::SkipEntities() {
-    std::uint64_t counts[4];
-    for (auto& c : counts) c = Size("an entity count");
-    for (int dim = 0; dim < 4; ++dim) {
-        CheckCount(counts[dim], MinBytes(1, 1, dim == 0 ? 3 : 6), "entity");
-        for (std::uint64_t e = 0; e < counts[dim]; ++e) {
-            Int("an entity tag");
-            for (int i = 0; i < (dim == 0 ? 3 : 6); ++i) Double("an entity coordinate");
-            const std::uint64_t physicals = Size("a physical tag count");
-            CheckCount(physicals, MinBytes(0, 1, 0), "physical tag");
-            for (std::uint64_t i = 0; i < physicals; ++i) Int("a physical tag");
-            if (dim > 0) {
-                const std::uint64_t bounding = Size("a bounding entity count");
-                CheckCount(bounding, MinBytes(0, 1, 0), "bounding entity");
-                for (std::uint64_t i = 0; i < bounding; ++i) Int("a bounding entity tag");
-            }
-        }
-    }
-    Expect("$EndEntities");
-}
-
-void MshParser::SkipPartitionedEntities() {
-    Size("the partition count");
-    const std::uint64_t ghosts = Size("the ghost entity count");
-    CheckCount(ghosts, MinBytes(0, 2, 0), "ghost entity");
-    for (std::uint64_t i = 0; i < ghosts; ++i) {
-        Int("a ghost entity tag");
-        Int("a partition");
-    }
-    std::uint64_t counts[4];
-    for (auto& c : counts) c = Size("an entity count");
-    for (int dim = 0; dim < 4; ++dim) {
-        CheckCount(counts[dim], MinBytes(2, 3, dim == 0 ? 3 : 6), "partitioned entity");
-        for (std::uint64_t e = 0; e < counts[dim]; ++e) {
-            Int("an entity tag");
-            Int("a parent dimension");
-            Int("a parent tag");
-            const std::uint64_t parts = Size("a partition count");
-            CheckCount(parts, MinBytes(0, 1, 0), "partition tag");
-            for (std::uint64_t i = 0; i < parts; ++i) Int("a partition tag");
-            for (int i = 0; i < (dim == 0 ? 3 : 6); ++i) Double("an entity coordinate");
-            const std::uint64_t physicals = Size("a physical tag count");
-            CheckCount(physicals, MinBytes(0, 1, 0), "physical tag");
-            for (std::uint64_t i = 0; i < physicals; ++i) Int("a physical tag");
-            if (dim > 0) {
-                const std::uint64_t bounding = Size("a bounding entity count");
-                CheckCount(bounding, MinBytes(0, 1, 0), "bounding entity");
-                for (std::uint64_t i = 0; i < bounding; ++i) Int("a bounding entity tag");
-            }
-        }
-    }
-    Expect("$EndPartitionedEntities");
-}
-
 void MshParser::ParseNodes() {
     if (haveNodes_) Fail("a second $Nodes section");
     haveNodes_ = true;
     if (binary_) EndOfTextLine();
-    const std::uint64_t numBlocks = Size("the entity block count");
-    CheckCount(numBlocks, MinBytes(1, 3, 0), "node entity block");
-    const std::uint64_t numNodes = Size("the node count");
-    CheckCount(numNodes, MinBytes(1, 0, 3), "node");
-    const std::uint64_t minTag = Size("the minimum node tag");
-    const std::uint64_t maxTag = Size("the maximum node tag");
-    if (numNodes > 0 && (minTag > maxTag || minTag == 0))
-        Fail("node tag range [" + std::to_string(minTag) + ", " + std::to_string(maxTag) +
-             "] is invalid");
+    const gmsh::NodesHeader header = gmsh::ReadNodesHeader(*this);
+    const std::uint64_t numBlocks = header.numBlocks, numNodes = header.numNodes;
+    const std::uint64_t maxTag = header.maxTag;
     // A dense tag -> index table when the tags are not much sparser than the nodes.
     denseTags_ = numNodes == 0 || maxTag <= 2 * numNodes + 1024;
     if (denseTags_) nodeIndexDense_.assign(numNodes == 0 ? 0 : maxTag + 1, -1);
@@ -387,25 +288,13 @@ void MshParser::ParseNodes() {
     std::vector<std::uint64_t> tags;
     std::uint64_t total = 0;
     for (std::uint64_t b = 0; b < numBlocks; ++b) {
-        const long long entityDim = Int("an entity dimension");
-        if (entityDim < 0 || entityDim > 3) Fail("entity dimension must be 0..3");
-        Int("an entity tag");
-        const long long parametric = Int("the parametric flag");
-        if (parametric != 0 && parametric != 1) Fail("parametric flag must be 0 or 1");
-        const std::uint64_t count = Size("the block's node count");
-        const std::size_t countPos = last_;
-        if (count > numNodes - total)
-            FailAt(countPos, "node blocks hold more nodes than the declared " +
-                                 std::to_string(numNodes));
-        const int extra = parametric ? static_cast<int>(entityDim) : 0;
-        CheckCount(count, MinBytes(1, 0, 3 + extra), "node");
+        const gmsh::NodeBlockHeader block = gmsh::ReadNodeBlockHeader(*this, header, total);
+        const std::uint64_t count = block.count;
+        const int extra = block.extra;
         tags.resize(count);
         for (std::uint64_t i = 0; i < count; ++i) {
             const std::uint64_t tag = Size("a node tag");
-            if (tag < minTag || tag > maxTag)
-                Fail("node tag " + std::to_string(tag) +
-                     " is outside the declared range [" + std::to_string(minTag) + ", " +
-                     std::to_string(maxTag) + "]");
+            gmsh::CheckNodeTag(*this, header, tag);
             const std::int64_t index = static_cast<std::int64_t>(total + i);
             bool fresh;
             if (denseTags_) {
@@ -440,43 +329,23 @@ void MshParser::ParseElements() {
     if (haveElements_) Fail("a second $Elements section");
     haveElements_ = true;
     if (binary_) EndOfTextLine();
-    const std::uint64_t numBlocks = Size("the entity block count");
-    CheckCount(numBlocks, MinBytes(1, 3, 0), "element entity block");
-    const std::uint64_t numElements = Size("the element count");
-    CheckCount(numElements, MinBytes(2, 0, 0), "element");
-    Size("the minimum element tag");
-    Size("the maximum element tag");
+    const gmsh::ElementsHeader header = gmsh::ReadElementsHeader(*this);
+    const std::uint64_t numBlocks = header.numBlocks, numElements = header.numElements;
 
     std::vector<std::int64_t> fileNodes, cellNodes;
     std::uint64_t total = 0;
     for (std::uint64_t b = 0; b < numBlocks; ++b) {
-        Int("an entity dimension");
-        Int("an entity tag");
-        const long long type = Int("an element type");
-        const std::size_t typePos = last_;
-        const std::uint64_t count = Size("the block's element count");
-        if (count > numElements - total)
-            Fail("element blocks hold more elements than the declared " +
-                 std::to_string(numElements));
-        const int nodes = GmshTypeNodeCount(static_cast<int>(type));
-        const int dim = GmshTypeDimension(static_cast<int>(type));
-        if (nodes <= 0)
-            FailAt(typePos,
-                   "unknown or variable-size gmsh element type " + std::to_string(type));
-        CheckCount(count, MinBytes(1 + nodes, 0, 0), "element");
+        const gmsh::ElementBlockHeader block =
+            gmsh::ReadElementBlockHeader(*this, header, total);
+        const std::uint64_t count = block.count;
+        const int nodes = block.nodes;
         total += count;
-        if (dim < 3) {
+        if (block.dim < 3) {
             SkipSizes(count * (1 + nodes), "an element tag or node tag");
             skippedElements_ += count;
             continue;
         }
-        const std::optional<GmshCellType> kind = ClassifyGmshType(static_cast<int>(type));
-        if (!kind)
-            FailAt(typePos, "gmsh element type " + std::to_string(type) + " (" +
-                                std::to_string(nodes) +
-                                " nodes) is not supported: hpray reads complete Lagrange "
-                                "tetrahedra, hexahedra, prisms and pyramids and the "
-                                "20-node hex, 15-node prism and 13-node pyramid");
+        const std::optional<GmshCellType>& kind = block.kind;
         const std::vector<int>& perm = GmshToInternal(kind->type);
         fileNodes.resize(nodes);
         cellNodes.resize(nodes);
@@ -509,28 +378,11 @@ void MshParser::ParseData(const std::string& section) {
     const std::size_t sectionPos = last_;
     const bool isNode = section == "NodeData";
     const bool isElementNode = section == "ElementNodeData";
-    const long long numStrings = TextInt("the string tag count");
-    if (numStrings < 0 || numStrings > 64) Fail("bad string tag count");
-    std::vector<std::string> strings;
-    for (long long i = 0; i < numStrings; ++i)
-        strings.push_back(TextString("a string tag"));
-    const long long numReals = TextInt("the real tag count");
-    if (numReals < 0 || numReals > 64) Fail("bad real tag count");
-    for (long long i = 0; i < numReals; ++i) TextDouble("a real tag");
-    const long long numInts = TextInt("the integer tag count");
-    if (numInts < 3 || numInts > 64)
-        Fail(
-            "a data section needs at least 3 integer tags (time step, components, "
-            "count)");
-    std::vector<long long> ints;
-    for (long long i = 0; i < numInts; ++i) ints.push_back(TextInt("an integer tag"));
-    const std::string name = strings.empty() ? std::string("unnamed") : strings[0];
-    const long long timeStep = ints[0];
-    const long long components = ints[1];
-    const long long count = ints[2];
-    if (components < 1 || components > 64)
-        Fail("'" + name + "': component count must be 1..64");
-    if (count < 0) Fail("'" + name + "': negative entity count");
+    const gmsh::DataHeader header = gmsh::ReadDataHeader(*this);
+    const std::string& name = header.name;
+    const long long timeStep = header.timeStep;
+    const long long components = header.components;
+    const long long count = header.count;
     if (binary_) EndOfTextLine();
     const std::uint64_t itemBytes =
         binary_ ? 4 + 8ull * components : 2ull * (1 + components);
@@ -539,7 +391,7 @@ void MshParser::ParseData(const std::string& section) {
         FailAt(sectionPos, "$" + section + " before the " +
                                (isNode ? "$Nodes" : "$Elements") + " it refers to");
     if (isElementNode) {
-        if (options_.fields && FieldWanted(options_, name))
+        if (options_.fields && gmsh::FieldWanted(options_, name))
             FailAt(sectionPos, "field '" + name +
                                    "' is $ElementNodeData, which hpray does not read; "
                                    "write it as $NodeData");
@@ -549,7 +401,7 @@ void MshParser::ParseData(const std::string& section) {
         return;
     }
     CheckCount(static_cast<std::uint64_t>(count), itemBytes, "data entry");
-    const bool wanted = FieldWanted(options_, name);
+    const bool wanted = gmsh::FieldWanted(options_, name);
     if (!wanted) {
         if (binary_) {
             pos_ += count * itemBytes;
@@ -672,7 +524,7 @@ Mesh MshParser::Parse() {
                  std::string(token.substr(0, 40)) + "'");
         const std::string name(token.substr(1));
         if (first) {
-            ParseMeshFormat();
+            gmsh::ParseMeshFormat(*this);
             first = false;
             continue;
         }
@@ -684,10 +536,10 @@ Mesh MshParser::Parse() {
             ParseElements();
         else if (name == "Entities") {
             if (binary_) EndOfTextLine();
-            SkipEntities();
+            gmsh::SkipEntities(*this);
         } else if (name == "PartitionedEntities") {
             if (binary_) EndOfTextLine();
-            SkipPartitionedEntities();
+            gmsh::SkipPartitionedEntities(*this);
         } else if (name == "NodeData" || name == "ElementData" ||
                    name == "ElementNodeData")
             ParseData(name);
