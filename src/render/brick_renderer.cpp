@@ -71,6 +71,25 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
     if (scene.clip.box) s.clipBox = *scene.clip.box;
+    if (scene.volume) s.volume = MakeVolumeSetup(mesh, geometry, scene);
+    for (std::size_t k = 0; k < scene.slices.size(); ++k) {
+        const SceneSlice& in = scene.slices[k];
+        const auto sel = SelectScalar(mesh, in.field);
+        if (!sel)
+            throw InputError(source, "slices." + std::to_string(k) + ".field",
+                             "the mesh has no field '" + in.field + "'");
+        BrickSetup::Slice slice;
+        const double len = std::hypot(in.normal[0], in.normal[1], in.normal[2]);
+        slice.offset = 0;
+        for (int d = 0; d < 3; ++d) {
+            slice.normal[d] = in.normal[d] / len;
+            slice.offset += slice.normal[d] * in.point[d];
+        }
+        slice.field = *sel;
+        slice.colorTf = MakeColorTf(in.colorTf);
+        slice.opacity = in.opacity;
+        s.slices.push_back(std::move(slice));
+    }
     return s;
 }
 
@@ -83,11 +102,14 @@ public:
 private:
     struct Event {
         double t;
-        int iso;
+        int iso;  ///< isosurface index, or -1 for a slice
         double residual;
+        int slice = -1;  ///< slice index, or -1 for an isosurface
     };
     void Shade(const BrickSetup& setup, const Ray& ray, const Event& e, SegmentField& field,
                PixelSample& out, double& transmittance, RenderCounters& counters);
+    void ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                    const Event& e, RayComposite& composite, RenderCounters& counters);
 
     std::vector<Segment> segments_;
     SegmentField field_;
@@ -98,7 +120,29 @@ private:
     std::vector<Event> events_;
     std::vector<double> lastHit_;
     std::vector<char> relevant_;
+    std::vector<double> sliceT_;
+    SegmentField sliceField_;
+    VolumeRayMarcher marcher_;
 };
+
+void RayIntegrator::ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                               const Event& e, RayComposite& composite,
+                               RenderCounters& counters) {
+    const BrickSetup::Slice& slice = setup.slices[e.slice];
+    // The true field on the plane: the cell of this segment holds the crossing point.
+    sliceField_.Begin(*setup.mesh, *setup.geometry, slice.field, seg.cell, ray,
+                      setup.inversion);
+    const double value = sliceField_(e.t);
+    sliceField_.AddCountersTo(counters);
+    double color[3];
+    slice.colorTf.Eval(value, color);
+    const double T = composite.transmittance, alpha = slice.opacity;
+    double rgb[3];
+    for (int c = 0; c < 3; ++c) rgb[c] = T * alpha * color[c];
+    composite.AddColor(rgb);
+    composite.rgba[3] += T * alpha;
+    composite.transmittance = T * (1 - alpha);
+}
 
 void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
                           SegmentField& field, PixelSample& out, double& transmittance,
@@ -147,24 +191,58 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
     counters.rays += 1;
     double tMin = setup.tNear, tMax = setup.tFar;
     if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, tMin, tMax)) return;
-    if (!(tMin < tMax) || setup.isos.empty()) return;
+    const bool hasVolume = setup.volume.has_value();
+    const std::size_t nSlices = setup.slices.size();
+    if (!(tMin < tMax) || (setup.isos.empty() && !hasVolume && nSlices == 0)) return;
     setup.traverser->Trace(ray, tMin, tMax, segments_);
     counters.segments += static_cast<double>(segments_.size());
     const std::size_t nIso = setup.isos.size();
     lastHit_.assign(nIso, -std::numeric_limits<double>::infinity());
     relevant_.resize(nIso);
-    double transmittance = 1.0;
-    for (const Segment& seg : segments_) {
+    // Ray parameter of each slice plane (NaN for a ray parallel to it).
+    sliceT_.resize(nSlices);
+    for (std::size_t k = 0; k < nSlices; ++k) {
+        const BrickSetup::Slice& sl = setup.slices[k];
+        double nd = 0, no = 0;
+        for (int d = 0; d < 3; ++d) {
+            nd += sl.normal[d] * ray.dir[d];
+            no += sl.normal[d] * ray.origin[d];
+        }
+        sliceT_[k] = nd != 0 ? (sl.offset - no) / nd : std::numeric_limits<double>::quiet_NaN();
+    }
+    RayComposite composite;
+    composite.rgba = out.rgba;
+    double& transmittance = composite.transmittance;
+    if (hasVolume && !segments_.empty())
+        marcher_.BeginRay(*setup.volume, ray, segments_.front().tEnter,
+                          segments_.back().tExit);
+    bool volumeSeen = false;
+    for (std::size_t si = 0; si < segments_.size(); ++si) {
+        const Segment& seg = segments_[si];
         bool any = false;
         for (std::size_t k = 0; k < nIso; ++k) {
             const Interval& r = setup.cellRanges[setup.isos[k].field][seg.cell];
             relevant_[k] = setup.isos[k].value >= r.lo && setup.isos[k].value <= r.hi;
             any |= relevant_[k] != 0;
         }
-        if (!any) {
+        // A plane through a face shared by two segments belongs to the second; the end of
+        // the last segment of a run inside the mesh is closed.
+        bool anySlice = false;
+        const bool closedEnd =
+            si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
+        for (std::size_t k = 0; k < nSlices; ++k) {
+            const double t = sliceT_[k];
+            anySlice |= t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit));
+        }
+        // Empty-space skipping: BeginSegment evaluates nothing in cells whose guaranteed
+        // ranges map to no extinction (and no glow).
+        const bool volumeHere =
+            hasVolume && marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
+        if (!any && !anySlice && !volumeHere) {
             counters.segmentsCulled += 1;
             continue;
         }
+        volumeSeen |= volumeHere;
         events_.clear();
         double cutoff = std::numeric_limits<double>::infinity();
         const std::size_t nFields = setup.fields.size();
@@ -221,24 +299,56 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                 }
                 field_.AddCountersTo(counters);
             }
+        if (anySlice)
+            for (std::size_t k = 0; k < nSlices; ++k) {
+                const double t = sliceT_[k];
+                if (t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit)))
+                    events_.push_back({t, -1, 0.0, int(k)});
+            }
         std::sort(events_.begin(), events_.end(), [](const Event& a, const Event& b) {
-            return a.t < b.t || (a.t == b.t && a.iso < b.iso);
+            return a.t < b.t || (a.t == b.t && (a.iso < b.iso ||
+                                                (a.iso == b.iso && a.slice < b.slice)));
         });
+        // Front to back: the volume up to each event, the event, ..., the rest.
         int loaded = -1;
+        double tDone = seg.tEnter;
+        bool stop = false;
         for (const Event& e : events_) {
             if (e.t > cutoff) break;
-            const int f = setup.isos[e.iso].field;
-            if (f != loaded) {
-                field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell, ray,
-                             setup.inversion);
-                loaded = f;
+            if (volumeHere) {
+                stop = marcher_.Integrate(tDone, e.t, composite, counters);
+                tDone = std::max(tDone, e.t);
+                if (stop) break;
             }
-            lastHit_[e.iso] = e.t;
-            Shade(setup, ray, e, field_, out, transmittance, counters);
+            if (e.slice >= 0) {
+                ShadeSlice(setup, ray, seg, e, composite, counters);
+            } else {
+                const int f = setup.isos[e.iso].field;
+                if (f != loaded) {
+                    field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell,
+                                 ray, setup.inversion);
+                    loaded = f;
+                }
+                lastHit_[e.iso] = e.t;
+                const double before[3] = {out.rgba[0], out.rgba[1], out.rgba[2]};
+                Shade(setup, ray, e, field_, out, transmittance, counters);
+                if (composite.depthError > 0)
+                    for (int c = 0; c < 3; ++c)
+                        composite.error[c] +=
+                            std::abs(out.rgba[c] - before[c]) * composite.depthError;
+            }
             if (transmittance <= 0) break;
         }
+        if (volumeHere && !stop && transmittance > 0)
+            stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite, counters);
         field_.AddCountersTo(counters);
-        if (transmittance <= 0) return;
+        if (transmittance <= 0 || stop) break;
+    }
+    if (volumeSeen) {
+        out.volError = std::max({composite.error[0], composite.error[1], composite.error[2]});
+        counters.volumePixels += 1;
+        counters.volumeErrorSqSum += out.volError * out.volError;
+        counters.volumeErrorMax = std::max(counters.volumeErrorMax, out.volError);
     }
 }
 

@@ -1,5 +1,6 @@
 // Ray casting one brick: segments from the traverser, isosurfaces by root finding on the
-// true field, shaded and composited front to back into a partial image.
+// true field, slice planes, and the volume integral, composited front to back into a
+// partial image.
 #pragma once
 
 #include <array>
@@ -12,6 +13,8 @@
 #include "io/image.h"
 #include "render/ray_roots.h"
 #include "render/stats.h"
+#include "render/volume.h"
+#include "render/volume_ray.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
 #include "trace/brick_traverser.h"
@@ -50,11 +53,25 @@ struct BrickSetup {
     double tNear = 0;
     double tFar = std::numeric_limits<double>::infinity();
     std::optional<AxisBox> clipBox;
+
+    /// The volume integral (design.md "Volume semantics"), when the scene has a volume.
+    std::optional<VolumeSetup> volume;
+
+    /// A cut plane {x : normal . x = offset} showing the true field through `colorTf`.
+    struct Slice {
+        double normal[3] = {0, 0, 1};  ///< unit, world
+        double offset = 0;             ///< world units
+        ScalarSelector field;
+        PiecewiseLinearTf colorTf;
+        double opacity = 1;
+    };
+    std::vector<Slice> slices;
 };
 
-/// Builds the setup of a brick for a scene: resolves the isosurface fields (InputError
-/// naming the scene and the field if one is missing or not a point field), computes the
-/// per-cell guaranteed ranges (parallel), and the numerical options from scene.accuracy.
+/// Builds the setup of a brick for a scene: resolves the isosurface, slice and volume
+/// fields (InputError naming the scene and the key if one is missing, or an isosurface
+/// field is not a point field), computes the per-cell guaranteed ranges (parallel), and
+/// the numerical options from scene.accuracy.
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                           const BrickTraverser& traverser, const Scene& scene);
 

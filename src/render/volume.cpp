@@ -1,0 +1,247 @@
+// The optical model of volume rendering (see volume.h).
+#include "render/volume.h"
+
+#include <boost/math/quadrature/gauss.hpp>
+#include <boost/math/quadrature/gauss_kronrod.hpp>
+
+#include <algorithm>
+#include <cerf.h>
+#include <cmath>
+#include <limits>
+
+#include "util/check.h"
+
+namespace hpray {
+
+PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars, std::vector<double> values,
+                                     int channels)
+    : scalars_(std::move(scalars)), values_(std::move(values)), channels_(channels) {
+    HPRAY_CHECK(channels_ >= 1);
+    HPRAY_CHECK(!scalars_.empty());
+    HPRAY_CHECK(values_.size() == scalars_.size() * std::size_t(channels_));
+    for (std::size_t k = 1; k < scalars_.size(); ++k) HPRAY_CHECK(scalars_[k - 1] < scalars_[k]);
+}
+
+int PiecewiseLinearTf::IntervalOf(double s) const {
+    if (!(s >= scalars_.front())) return -1;
+    if (s >= scalars_.back()) return Size() - 1;
+    // First control point > s, minus one.
+    const auto it = std::upper_bound(scalars_.begin(), scalars_.end(), s);
+    return static_cast<int>(it - scalars_.begin()) - 1;
+}
+
+void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) {
+        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
+        for (int c = 0; c < channels_; ++c) out[c] = v[c];
+        return;
+    }
+    // (1 - w) v_k + w v_{k+1} reproduces both control values exactly at w = 0 and w = 1.
+    const double w = (s - scalars_[k]) / (scalars_[k + 1] - scalars_[k]);
+    const double* v0 = values_.data() + std::size_t(k) * channels_;
+    const double* v1 = v0 + channels_;
+    for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
+}
+
+void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut, double* maxOut) const {
+    double v[3];
+    HPRAY_CHECK(channels_ <= 3);
+    Eval(lo, minOut);
+    for (int c = 0; c < channels_; ++c) maxOut[c] = minOut[c];
+    auto include = [&](const double* x) {
+        for (int c = 0; c < channels_; ++c) {
+            minOut[c] = std::min(minOut[c], x[c]);
+            maxOut[c] = std::max(maxOut[c], x[c]);
+        }
+    };
+    Eval(hi, v);
+    include(v);
+    for (int k = 0; k < Size(); ++k)
+        if (scalars_[k] > lo && scalars_[k] < hi) include(values_.data() + std::size_t(k) * channels_);
+}
+
+double PiecewiseLinearTf::MaxValue() const {
+    return *std::max_element(values_.begin(), values_.end());
+}
+
+namespace {
+
+constexpr int kMaxTaylorTerms = 64;
+/// Series in the slope: at most this many terms, so moments up to E_{2 + 2 kMaxSlopeTerms}.
+constexpr int kMaxSlopeTerms = 32;
+constexpr int kMaxExpMoment = 2 + 2 * kMaxSlopeTerms;
+
+/// Regime "small depth" (alpha + |beta| <= 1): the Taylor series T(x) = sum c_n x^n of
+/// exp(-alpha x - beta x^2), c_0 = 1, (n + 1) c_{n+1} = -alpha c_n - 2 beta c_{n-1}, so
+/// I_m = sum c_n / (n + m + 1). |c_n| <= 2^n / n!: 30 terms reach 1e-23, and the
+/// alternating sum loses at most a factor e^2 to cancellation.
+void TaylorMoments(double alpha, double beta, double m[3]) {
+    double cPrev = 0, c = 1;
+    m[0] = m[1] = m[2] = 0;
+    for (int n = 0; n < kMaxTaylorTerms; ++n) {
+        m[0] += c / (n + 1);
+        m[1] += c / (n + 2);
+        m[2] += c / (n + 3);
+        const double next = (-alpha * c - 2 * beta * cPrev) / (n + 1);
+        cPrev = c;
+        c = next;
+        if (std::abs(c) + std::abs(cPrev) <= 1e-19) break;
+    }
+}
+
+/// E_n(alpha) = integral_0^1 x^n exp(-alpha x) dx for n = 0..count-1 (count <=
+/// kMaxExpMoment + 1), alpha >= 0. Upward recurrence E_n = (n E_{n-1} - e^-alpha) / alpha
+/// where it is stable (alpha >= n); otherwise the positive series
+/// E_N = e^-alpha sum_j alpha^j / ((N+1)...(N+j+1)) at N >= 2 alpha (ratio <= 1/2), then
+/// the downward recurrence E_{n-1} = (alpha E_n + e^-alpha) / n (positive terms).
+void ExpMoments(double alpha, int count, double* e) {
+    const double ea = std::exp(-alpha);
+    if (alpha >= count) {
+        e[0] = -std::expm1(-alpha) / alpha;
+        for (int n = 1; n < count; ++n) e[n] = (n * e[n - 1] - ea) / alpha;
+        return;
+    }
+    const int top = std::max(count - 1, static_cast<int>(std::ceil(2 * alpha)));
+    double term = 1.0 / (top + 1), sum = 0;
+    for (int j = 0; j < 400; ++j) {
+        sum += term;
+        term *= alpha / (top + j + 2);
+        if (term <= 1e-19 * sum) break;
+    }
+    double en = ea * sum;
+    for (int n = top; n > 0; --n) {
+        if (n < count) e[n] = en;
+        en = (alpha * en + ea) / n;
+    }
+    e[0] = en;
+}
+
+/// Regime "small slope or large depth": exp(-alpha x - beta x^2) = e^(-alpha x) sum_k
+/// (-beta x^2)^k / k!, so I_m = sum_k (-beta)^k / k! E_{m+2k}(alpha). Used for |beta| <= 1
+/// (term ratio <= |beta| / k) and for alpha >= 128 with beta <= alpha / 2 (term ratio about
+/// 4 k beta / alpha^2 <= 2 k / alpha, and the sum of |terms| stays within a small factor
+/// of the result); 32 terms reach 1e-19 relative in both.
+void SlopeSeriesMoments(double alpha, double beta, double m[3]) {
+    double e[kMaxExpMoment + 1];
+    ExpMoments(alpha, kMaxExpMoment + 1, e);
+    double coef = 1;
+    m[0] = m[1] = m[2] = 0;
+    for (int k = 0; k <= kMaxSlopeTerms; ++k) {
+        const double t0 = coef * e[2 * k];
+        m[0] += t0;
+        m[1] += coef * e[2 * k + 1];
+        m[2] += coef * e[2 * k + 2];
+        if (std::abs(t0) <= 1e-19 * std::abs(m[0])) break;
+        coef *= -beta / (k + 1);
+    }
+}
+
+}  // namespace
+
+LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {
+    tau0 = std::max(0.0, tau0);
+    tau1 = std::max(0.0, tau1);
+    length = std::max(0.0, length);
+    LinearPieceIntegrals q;
+    // D(x) = alpha x + beta x^2; alpha + 2 beta = length tau1 >= 0.
+    const double alpha = length * tau0;
+    const double beta = 0.5 * length * (tau1 - tau0);
+    const double depth = 0.5 * length * (tau0 + tau1);
+    q.transmittance = std::exp(-depth);
+    q.opacity = -std::expm1(-depth);
+    double m[3];
+    if (alpha + std::abs(beta) <= 1) {
+        TaylorMoments(alpha, beta, m);
+    } else if (std::abs(beta) <= 1 || (alpha >= 128 && beta <= 0.5 * alpha)) {
+        SlopeSeriesMoments(alpha, beta, m);
+    } else {
+        // Complete the square. Here |beta| > 1 and either alpha < 128 or beta > alpha / 2,
+        // so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an absolute error of at
+        // most (1 + alpha / |beta|) ulps of I0: < 130 ulps of the emission.
+        const double s = std::sqrt(std::abs(beta));
+        const double u0 = alpha / (2 * s);
+        double i0;
+        if (beta > 0) {
+            // I0 = sqrt(pi) / (2 s) (erfcx(u0) - erfcx(u0 + s) T(1)).
+            i0 = 0.88622692545275801365 / s * (erfcx(u0) - erfcx(u0 + s) * q.transmittance);
+        } else {
+            // u1 = u0 - s >= 0 since alpha >= 2 |beta|; I0 = (F(u0) - F(u1) T(1)) / s.
+            const double u1 = std::max(0.0, u0 - s);
+            i0 = (dawson(u0) - dawson(u1) * q.transmittance) / s;
+        }
+        m[0] = i0;
+        m[1] = (q.opacity - alpha * i0) / (2 * beta);
+        m[2] = std::numeric_limits<double>::quiet_NaN();
+    }
+    q.mean = std::clamp(m[0], 0.0, 1.0);
+    q.firstMoment = std::clamp(m[1], 0.0, q.mean);
+    // P = integral x (alpha + 2 beta x) T dx; by parts P = I0 - T(1), which cancels only
+    // for small depth, where the moment form is used.
+    const double far = std::isnan(m[2]) ? q.mean - q.transmittance : alpha * m[1] + 2 * beta * m[2];
+    q.farWeight = std::clamp(far, 0.0, q.opacity);
+    return q;
+}
+
+const KronrodRule& GetKronrodRule() {
+    static const KronrodRule rule = [] {
+        KronrodRule r;
+        constexpr int n = KronrodRule::kNodes, half = n / 2;
+        using GK = boost::math::quadrature::gauss_kronrod<double, 15>;
+        using G = boost::math::quadrature::gauss<double, 7>;
+        const auto& x = GK::abscissa();  // 0, then positive nodes ascending
+        const auto& wk = GK::weights();
+        const auto& wg = G::weights();   // for the even-indexed Kronrod abscissae
+        for (int i = 0; i <= half; ++i) {
+            r.nodes[half + i] = x[i];
+            r.nodes[half - i] = -x[i];
+            r.kronrodWeights[half + i] = r.kronrodWeights[half - i] = wk[i];
+            const double g = i % 2 == 0 ? wg[i / 2] : 0.0;
+            r.gaussWeights[half + i] = r.gaussWeights[half - i] = g;
+        }
+        // Cumulative integration of the interpolant: with V[j][k] = P_k(x_j) and
+        // Q[i][k] = integral_{-1}^{x_i} P_k, cumulative = Q V^-1 (long double).
+        using LD = long double;
+        LD V[n][n], Q[n][n], inv[n][n];
+        for (int j = 0; j < n; ++j) {
+            LD p[n + 1];
+            const LD xj = r.nodes[j];
+            p[0] = 1;
+            p[1] = xj;
+            for (int k = 1; k < n; ++k) p[k + 1] = ((2 * k + 1) * xj * p[k] - k * p[k - 1]) / (k + 1);
+            for (int k = 0; k < n; ++k) V[j][k] = p[k];
+            Q[j][0] = xj + 1;
+            for (int k = 1; k < n; ++k) Q[j][k] = (p[k + 1] - p[k - 1]) / (2 * k + 1);
+        }
+        // Gauss-Jordan with partial pivoting.
+        LD a[n][2 * n];
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < 2 * n; ++j) a[i][j] = j < n ? V[i][j] : (j - n == i ? 1 : 0);
+        for (int c = 0; c < n; ++c) {
+            int pivot = c;
+            for (int i = c + 1; i < n; ++i)
+                if (std::abs(a[i][c]) > std::abs(a[pivot][c])) pivot = i;
+            for (int j = 0; j < 2 * n; ++j) std::swap(a[c][j], a[pivot][j]);
+            const LD d = a[c][c];
+            HPRAY_CHECK(d != 0);
+            for (int j = 0; j < 2 * n; ++j) a[c][j] /= d;
+            for (int i = 0; i < n; ++i) {
+                if (i == c) continue;
+                const LD f = a[i][c];
+                for (int j = 0; j < 2 * n; ++j) a[i][j] -= f * a[c][j];
+            }
+        }
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) inv[i][j] = a[i][n + j];
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) {
+                LD s = 0;
+                for (int k = 0; k < n; ++k) s += Q[i][k] * inv[k][j];
+                r.cumulative[i][j] = static_cast<double>(s);
+            }
+        return r;
+    }();
+    return rule;
+}
+
+}  // namespace hpray

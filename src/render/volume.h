@@ -1,0 +1,92 @@
+// The optical model of volume rendering (design.md "Volume semantics"): piecewise-linear
+// transfer functions, the closed-form integrals of a ray piece whose extinction is linear
+// in t, and the Gauss-Kronrod rule with its cumulative (spectral) integration matrix for
+// pieces where it is not.
+#pragma once
+
+#include <array>
+#include <vector>
+
+namespace hpray {
+
+/// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
+/// 3: colour), clamped to its first and last control values outside its control points.
+class PiecewiseLinearTf {
+public:
+    PiecewiseLinearTf() = default;
+    /// `scalars` strictly increasing (>= 1 point); `values` holds channels values per point.
+    PiecewiseLinearTf(std::vector<double> scalars, std::vector<double> values, int channels);
+
+    int Channels() const { return channels_; }
+    int Size() const { return static_cast<int>(scalars_.size()); }
+    const std::vector<double>& Scalars() const { return scalars_; }
+
+    /// The linear piece holding s: -1 left of the first control point, Size() - 1 at or
+    /// right of the last, else k with scalars[k] <= s < scalars[k + 1]. NaN maps to -1.
+    int IntervalOf(double s) const;
+    /// The affine function of piece k (constant on the clamped pieces -1 and Size() - 1)
+    /// at s, which may lie outside piece k (the piece's function extended): `out` gets
+    /// Channels() values.
+    void EvalOn(int k, double s, double* out) const;
+    void Eval(double s, double* out) const { EvalOn(IntervalOf(s), s, out); }
+
+    /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the ends
+    /// or at control points inside). `minOut`, `maxOut` get Channels() values.
+    void RangeOver(double lo, double hi, double* minOut, double* maxOut) const;
+    /// The largest value of any channel over all s.
+    double MaxValue() const;
+
+private:
+    std::vector<double> scalars_;
+    std::vector<double> values_;
+    int channels_ = 1;
+};
+
+/// Integrals of one ray piece of world length `length` over which the extinction is
+/// linear, tau(x) = tau0 (1 - x) + tau1 x for x = (t - tStart) / length in [0, 1]. With
+/// the optical depth D(x) = length * (tau0 x + (tau1 - tau0) x^2 / 2) and T(x) =
+/// exp(-D(x)):
+struct LinearPieceIntegrals {
+    double transmittance = 1;  ///< T(1) = exp(-D(1))
+    double opacity = 0;        ///< 1 - T(1), relatively accurate when small
+    double mean = 1;           ///< I0 = integral_0^1 T(x) dx
+    double firstMoment = 0.5;  ///< I1 = integral_0^1 x T(x) dx
+    /// P = integral_0^1 x (dD/dx) T(x) dx, so that the Williams-Max emission of a linear
+    /// chromaticity k(x) = k0 (1 - x) + k1 x is k0 (opacity - P) + k1 P.
+    double farWeight = 0;
+};
+
+/// The closed form of LinearPieceIntegrals, accurate to a few ulps relative in every
+/// regime: a Taylor series for small depth (including length -> 0 and zero extinction),
+/// a series in the extinction slope around the exponential for small slope (d -> 0) and
+/// for large depth, and erfcx (increasing extinction) or Dawson's integral (decreasing)
+/// otherwise; no overflow or underflow for any finite input. tau0, tau1 >= 0.
+LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length);
+
+/// Williams-Max emission of a linear piece: integral kappa tau T for chromaticity going
+/// linearly from kappa0 to kappa1 (per channel).
+inline double WilliamsMaxEmission(const LinearPieceIntegrals& q, double kappa0,
+                                  double kappa1) {
+    return kappa0 * (q.opacity - q.farWeight) + kappa1 * q.farWeight;
+}
+/// Wilhelms-Van Gelder emission of a linear piece: integral g T dt for glow going linearly
+/// from g0 to g1 (per world unit) over `length`.
+inline double GlowEmission(const LinearPieceIntegrals& q, double g0, double g1,
+                           double length) {
+    return length * (g0 * (q.mean - q.firstMoment) + g1 * q.firstMoment);
+}
+
+/// The 15-point Gauss-Kronrod rule on [-1, 1] (nodes ascending) with its embedded 7-point
+/// Gauss rule, and the matrix of cumulative integrals of the degree-14 interpolant:
+/// cumulative[i][j] = integral_{-1}^{nodes[i]} l_j(s) ds for the Lagrange basis l_j of
+/// the nodes. Built once (thread-safe).
+struct KronrodRule {
+    static constexpr int kNodes = 15;
+    std::array<double, kNodes> nodes{};
+    std::array<double, kNodes> kronrodWeights{};
+    std::array<double, kNodes> gaussWeights{};  ///< 0 at the Kronrod-only nodes
+    std::array<std::array<double, kNodes>, kNodes> cumulative{};
+};
+const KronrodRule& GetKronrodRule();
+
+}  // namespace hpray

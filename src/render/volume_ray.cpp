@@ -1,0 +1,405 @@
+// Volume integration along one ray (see volume_ray.h).
+#include "render/volume_ray.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <limits>
+
+#include "util/check.h"
+#include "util/error.h"
+
+namespace hpray {
+namespace {
+
+constexpr double kEps = std::numeric_limits<double>::epsilon();
+/// Bisections of a Kronrod piece stop here (2^-40 of the piece); the estimate stays.
+constexpr int kMaxKronrodDepth = 40;
+
+PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points) {
+    std::vector<double> s, v;
+    for (const ExtinctionControlPoint& p : points) {
+        s.push_back(p.scalar);
+        v.push_back(p.extinction);
+    }
+    return PiecewiseLinearTf(std::move(s), std::move(v), 1);
+}
+
+}  // namespace
+
+PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points) {
+    std::vector<double> s, v;
+    for (const ColorControlPoint& p : points) {
+        s.push_back(p.scalar);
+        v.insert(v.end(), p.rgb.begin(), p.rgb.end());
+    }
+    return PiecewiseLinearTf(std::move(s), std::move(v), 3);
+}
+
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                            const Scene& scene) {
+    HPRAY_CHECK(scene.volume.has_value());
+    const SceneVolume& vol = *scene.volume;
+    const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
+    VolumeSetup s;
+    s.glow = vol.glow;
+    s.colorTf = MakeColorTf(vol.colorTf);
+    s.extinctionTf = ExtinctionTf(vol.extinctionTf);
+    auto resolve = [&](const std::string& name, const std::string& key) {
+        const auto sel = SelectScalar(mesh, name);
+        if (!sel) throw InputError(source, key, "the mesh has no field '" + name + "'");
+        return *sel;
+    };
+    s.fields[0] = resolve(vol.colorField, "volume.color_field");
+    if (vol.extinctionField.empty()) {
+        s.fields[1] = s.fields[0];
+    } else {
+        s.fields[1] = resolve(vol.extinctionField, "volume.extinction_field");
+    }
+    s.sameField = s.fields[0].field == s.fields[1].field &&
+                  s.fields[0].component == s.fields[1].component;
+    const int count = s.sameField ? 1 : 2;
+    const std::int64_t cells = mesh.CellCount();
+    s.ranges.assign(count, std::vector<Interval>(cells));
+    for (int f = 0; f < count; ++f) {
+        const ScalarSelector sel = s.fields[f];
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::vector<double> nodal;
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                if (sel.field->association == Association::Cell) {
+                    const double v = ScalarValue(sel, c);
+                    s.ranges[f][c] = {v, v};
+                    continue;
+                }
+                GatherCellValues(mesh, *sel.field, sel.component, c, nodal);
+                s.ranges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
+            }
+        });
+        const auto r = sel.field->Range(sel.component);
+        s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
+    }
+    s.cellKind.assign(cells, VolumeSetup::kVarying);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            const Interval& rc = s.ranges[0][c];
+            const Interval& re = s.ranges[count - 1][c];
+            double eMin, eMax, cMin[3], cMax[3];
+            s.extinctionTf.RangeOver(re.lo, re.hi, &eMin, &eMax);
+            s.colorTf.RangeOver(rc.lo, rc.hi, cMin, cMax);
+            const bool glowZero = std::max({cMax[0], cMax[1], cMax[2]}) <= 0;
+            if (eMax <= 0 && (s.glow == GlowModel::WilliamsMax || glowZero)) {
+                s.cellKind[c] = VolumeSetup::kEmpty;
+            } else if (eMin == eMax && cMin[0] == cMax[0] && cMin[1] == cMax[1] &&
+                       cMin[2] == cMax[2]) {
+                s.cellKind[c] = VolumeSetup::kConstant;
+            }
+        }
+    });
+    s.colorMax = std::max(0.0, s.colorTf.MaxValue());
+    const SceneAccuracy& acc = scene.accuracy;
+    s.tolerance = acc.volumeTolerance;
+    s.projection.tolerance = acc.projectionTolerance;
+    if (acc.projectionOrder > 0) {
+        s.projection.startDegree = acc.projectionOrder;
+        s.projection.maxDegree = acc.projectionOrder;
+    }
+    s.roots.rootTolerance = acc.rootTolerance;
+    s.inversion.tolerance = acc.mappingTolerance;
+    return s;
+}
+
+void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double tStart,
+                                double tEnd) {
+    setup_ = &setup;
+    ray_ = ray;
+    tStart_ = tStart;
+    tEnd_ = tEnd;
+    pathLength_ = std::max(tEnd - tStart, std::numeric_limits<double>::min());
+    kronrodIntervals_ = 0;
+}
+
+bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geometry,
+                                    const Segment& seg, RenderCounters& counters) {
+    const VolumeSetup& s = *setup_;
+    seg_ = seg;
+    kind_ = s.cellKind[seg.cell];
+    crossings_.clear();
+    if (kind_ == VolumeSetup::kEmpty) return false;
+    if (kind_ == VolumeSetup::kConstant) {
+        // Both transfer functions are constant over the guaranteed ranges: any value in
+        // them gives the constants.
+        const Interval& rc = s.ranges[0][seg.cell];
+        const Interval& re = s.ranges.back()[seg.cell];
+        s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
+        constTau_ = std::max(0.0, constTau_);
+        s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
+        return true;
+    }
+    fieldCount_ = s.sameField ? 1 : 2;
+    for (int f = 0; f < fieldCount_; ++f) {
+        FieldState& st = state_[f];
+        st = FieldState{};
+        const ScalarSelector& sel = s.fields[f];
+        if (sel.field->association == Association::Cell) {
+            st.constant = st.linear = true;
+            st.valueEnter = st.valueExit = ScalarValue(sel, seg.cell);
+            continue;
+        }
+        SegmentField& sf = field_[f];
+        sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
+        pieces_[f].clear();
+        if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
+            st.linear = true;
+            st.valueEnter = sf(seg.tEnter);
+            st.valueExit = sf(seg.tExit);
+        } else if (sf.ExactAlongLine()) {
+            // A polynomial of known degree along the ray: its interpolant is the field.
+            ProjectionOptions projection = s.projection;
+            projection.scaleFloor = s.fieldScale[f];
+            projection.exactDegree = sf.LineDegree();
+            projectionStats_ = ProjectionStats{};
+            ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f], projectionStats_,
+                           scratch_);
+            st.bySeries = pieces_[f].size() == 1;
+            if (st.bySeries) {
+                // Linear data on a higher-order cell (e.g. u = x + 2y + 3z on hexes): the
+                // closed form applies.
+                const ProjectedPiece& p = pieces_[f][0];
+                double tail = 0;
+                for (std::size_t k = 2; k < p.p.c.size(); ++k) tail += std::abs(p.p.c[k]);
+                if (tail <= p.eps) {
+                    st.linear = true;
+                    st.valueEnter = p.p(seg.tEnter);
+                    st.valueExit = p.p(seg.tExit);
+                }
+            }
+        }
+        FindCrossings(f, seg, counters);
+        sf.AddCountersTo(counters);
+    }
+    std::sort(crossings_.begin(), crossings_.end());
+    crossings_.erase(std::unique(crossings_.begin(), crossings_.end()), crossings_.end());
+    return true;
+}
+
+void VolumeRayMarcher::FindCrossings(int f, const Segment& seg, RenderCounters& counters) {
+    const VolumeSetup& s = *setup_;
+    FieldState& st = state_[f];
+    if (st.constant) return;
+    const Interval& range = s.ranges[f][seg.cell];
+    // The control points of the transfer functions this field drives.
+    auto forEachBreakpoint = [&](auto&& visit) {
+        if (f == 0)
+            for (double b : s.colorTf.Scalars())
+                if (b > range.lo && b < range.hi) visit(b);
+        if (f == 1 || s.sameField)
+            for (double b : s.extinctionTf.Scalars())
+                if (b > range.lo && b < range.hi) visit(b);
+    };
+    if (st.linear) {
+        const double dv = st.valueExit - st.valueEnter;
+        if (dv == 0) return;
+        const double length = seg.tExit - seg.tEnter;
+        forEachBreakpoint([&](double b) {
+            const double x = (b - st.valueEnter) / dv;
+            if (x > 0 && x < 1) {
+                const double t = seg.tEnter + x * length;
+                if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
+            }
+        });
+        return;
+    }
+    bool any = false;
+    forEachBreakpoint([&](double) { any = true; });
+    if (!any) return;
+    SegmentField& sf = field_[f];
+    if (pieces_[f].empty()) {
+        ProjectionOptions projection = s.projection;
+        projection.scaleFloor = s.fieldScale[f];
+        projectionStats_ = ProjectionStats{};
+        ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f], projectionStats_,
+                       scratch_);
+    }
+    forEachBreakpoint([&](double b) {
+        counters.rootFailures += FindRoots(sf, pieces_[f], b, s.roots, scratch_,
+                                           [&](const RootResult& r) {
+            if (r.t > seg.tEnter && r.t < seg.tExit) crossings_.push_back(r.t);
+            return false;
+        });
+    });
+}
+
+double VolumeRayMarcher::FieldAt(int f, double t) {
+    const FieldState& st = state_[f];
+    if (st.linear) {
+        if (st.constant) return st.valueEnter;
+        const double x = (t - seg_.tEnter) / (seg_.tExit - seg_.tEnter);
+        return (1 - x) * st.valueEnter + x * st.valueExit;
+    }
+    if (st.bySeries) return pieces_[f][0].p(t);
+    return field_[f](t);
+}
+
+void VolumeRayMarcher::Sample(double t, double& tau, double emission[3]) {
+    const VolumeSetup& s = *setup_;
+    const double vc = FieldAt(0, t);
+    const double ve = s.sameField ? vc : FieldAt(1, t);
+    s.extinctionTf.Eval(ve, &tau);
+    tau = std::max(0.0, tau);
+    s.colorTf.Eval(vc, emission);
+    for (int c = 0; c < 3; ++c) {
+        emission[c] = std::max(0.0, emission[c]);
+        if (s.glow == GlowModel::WilliamsMax) emission[c] *= tau;
+    }
+}
+
+void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    double tau0, tau1, c0[3], c1[3];
+    const double length = p1 - p0;
+    if (kind_ == VolumeSetup::kConstant) {
+        tau0 = tau1 = constTau_;
+        for (int c = 0; c < 3; ++c) c0[c] = c1[c] = constColor_[c];
+    } else {
+        // Each transfer function is affine on the piece: its piece is the one holding the
+        // field at the midpoint, extended to both ends (the ends are breakpoints up to
+        // rounding).
+        const double mid = 0.5 * (p0 + p1);
+        const double vc0 = FieldAt(0, p0), vc1 = FieldAt(0, p1), vcm = FieldAt(0, mid);
+        const int kc = s.colorTf.IntervalOf(vcm);
+        s.colorTf.EvalOn(kc, vc0, c0);
+        s.colorTf.EvalOn(kc, vc1, c1);
+        const int fe = s.sameField ? 0 : 1;
+        const double ve0 = s.sameField ? vc0 : FieldAt(fe, p0);
+        const double ve1 = s.sameField ? vc1 : FieldAt(fe, p1);
+        const double vem = s.sameField ? vcm : FieldAt(fe, mid);
+        const int ke = s.extinctionTf.IntervalOf(vem);
+        s.extinctionTf.EvalOn(ke, ve0, &tau0);
+        s.extinctionTf.EvalOn(ke, ve1, &tau1);
+    }
+    const LinearPieceIntegrals q = IntegrateLinearPiece(tau0, tau1, length);
+    const double T = composite.transmittance;
+    double rgb[3];
+    for (int c = 0; c < 3; ++c) {
+        const double e = s.glow == GlowModel::WilliamsMax
+                             ? WilliamsMaxEmission(q, std::max(0.0, c0[c]), std::max(0.0, c1[c]))
+                             : GlowEmission(q, std::max(0.0, c0[c]), std::max(0.0, c1[c]), length);
+        rgb[c] = T * e;
+        // Rounding of the closed form (a few ulps; see IntegrateLinearPiece).
+        composite.error[c] += 256 * kEps * rgb[c];
+    }
+    composite.AddColor(rgb);
+    composite.rgba[3] += T * q.opacity;
+    composite.transmittance = T * q.transmittance;
+}
+
+void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    const KronrodRule& rule = GetKronrodRule();
+    constexpr int n = KronrodRule::kNodes;
+    const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
+    stack_.clear();
+    stack_.push_back({p0, p1, 0});
+    while (!stack_.empty()) {
+        const Work w = stack_.back();
+        stack_.pop_back();
+        const double half = 0.5 * (w.hi - w.lo), mid = 0.5 * (w.lo + w.hi);
+        double tau[n], emission[n][3];
+        for (int i = 0; i < n; ++i) Sample(mid + half * rule.nodes[i], tau[i], emission[i]);
+        double dK = 0, dG = 0, cK[3] = {0, 0, 0}, cG[3] = {0, 0, 0};
+        for (int i = 0; i < n; ++i) {
+            dK += rule.kronrodWeights[i] * tau[i];
+            dG += rule.gaussWeights[i] * tau[i];
+            // Optical depth from w.lo to node i: the interpolant of tau integrated.
+            double phi = 0;
+            for (int j = 0; j < n; ++j) phi += rule.cumulative[i][j] * tau[j];
+            const double att = std::exp(-half * phi);
+            for (int c = 0; c < 3; ++c) {
+                const double v = emission[i][c] * att;
+                cK[c] += rule.kronrodWeights[i] * v;
+                cG[c] += rule.gaussWeights[i] * v;
+            }
+        }
+        dK *= half;
+        dG *= half;
+        const double errD = std::abs(dK - dG);
+        double errC = 0, cMax = 0;
+        for (int c = 0; c < 3; ++c) {
+            cK[c] *= half;
+            cG[c] *= half;
+            errC = std::max(errC, std::abs(cK[c] - cG[c]));
+            cMax = std::max(cMax, std::abs(cK[c]));
+        }
+        // The depth error also shifts the attenuation inside this interval.
+        errC += cMax * errD;
+        const double T = composite.transmittance;
+        const double behind = s.glow == GlowModel::WilliamsMax
+                                  ? 1.0
+                                  : 1.0 + s.colorMax * std::max(0.0, tEnd_ - w.hi);
+        const double estimate = T * (errC + errD * behind);
+        if (estimate > budgetPerLength * (w.hi - w.lo) && w.depth < kMaxKronrodDepth) {
+            stack_.push_back({mid, w.hi, w.depth + 1});
+            stack_.push_back({w.lo, mid, w.depth + 1});
+            continue;
+        }
+        ++kronrodIntervals_;
+        double rgb[3];
+        for (int c = 0; c < 3; ++c) {
+            rgb[c] = T * cK[c];
+            composite.error[c] += T * errC;
+        }
+        composite.AddColor(rgb);
+        composite.rgba[3] += T * -std::expm1(-dK);
+        composite.transmittance = T * std::exp(-dK);
+        composite.depthError += errD;
+    }
+}
+
+bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    // What lies behind t changes the pixel by at most T times this per channel: a convex
+    // combination of chromaticities and surface colours (<= 1) for Williams-Max, glow
+    // times the remaining length plus surfaces for Wilhelms-Van Gelder.
+    const double behind = s.glow == GlowModel::WilliamsMax
+                              ? 1.0
+                              : 1.0 + s.colorMax * std::max(0.0, tEnd_ - t);
+    const double bound = composite.transmittance * behind;
+    if (bound > 0.1 * s.tolerance) return false;
+    for (double& e : composite.error) e += bound;
+    return true;
+}
+
+bool VolumeRayMarcher::Integrate(double a, double b, RayComposite& composite,
+                                 RenderCounters& counters) {
+    if (!(b > a)) return Terminate(b, composite);
+    bounds_.clear();
+    bounds_.push_back(a);
+    for (double t : crossings_)
+        if (t > a && t < b) bounds_.push_back(t);
+    bounds_.push_back(b);
+    bool linear = kind_ == VolumeSetup::kConstant;
+    if (!linear) {
+        linear = state_[0].linear && (fieldCount_ == 1 || state_[1].linear);
+    }
+    bool stop = false;
+    for (std::size_t k = 0; k + 1 < bounds_.size(); ++k) {
+        const double p0 = bounds_[k], p1 = bounds_[k + 1];
+        if (linear) {
+            LinearPiece(p0, p1, composite);
+        } else {
+            KronrodPiece(p0, p1, composite);
+        }
+        if (Terminate(p1, composite)) {
+            stop = true;
+            break;
+        }
+    }
+    if (kind_ == VolumeSetup::kVarying)
+        for (int f = 0; f < fieldCount_; ++f)
+            if (!state_[f].constant) field_[f].AddCountersTo(counters);
+    return stop;
+}
+
+}  // namespace hpray

@@ -1,0 +1,136 @@
+// Volume integration along one ray: per-cell classification (empty / constant / varying)
+// from guaranteed field ranges, transfer-function breakpoints found on the true field,
+// closed forms where the fields are linear along the ray and adaptive Gauss-Kronrod with
+// an error estimate elsewhere, early ray termination.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "elements/bounds.h"
+#include "elements/mesh_geometry.h"
+#include "render/ray_field.h"
+#include "render/ray_roots.h"
+#include "render/stats.h"
+#include "render/volume.h"
+#include "scene/scene.h"
+#include "trace/ray.h"
+
+namespace hpray {
+
+/// The volume of a scene prepared for one brick; built once, shared read-only by threads.
+struct VolumeSetup {
+    GlowModel glow = GlowModel::WilliamsMax;
+    PiecewiseLinearTf colorTf;       ///< 3 channels: chromaticity or glow per world unit
+    PiecewiseLinearTf extinctionTf;  ///< 1 channel: extinction per world unit
+    /// fields[0] drives colour, fields[1] extinction; sameField: both are fields[0].
+    ScalarSelector fields[2];
+    bool sameField = true;
+    /// Guaranteed range of each field per cell ([field][cell]; one entry when sameField).
+    std::vector<std::vector<Interval>> ranges;
+    std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
+
+    /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
+    /// Wilhelms-Van Gelder, glow zero), both transfer functions constant over the range
+    /// (closed form without evaluating the field), or general.
+    enum CellKind : std::uint8_t { kEmpty = 0, kConstant = 1, kVarying = 2 };
+    std::vector<std::uint8_t> cellKind;
+
+    /// eps_V: target absolute error of a pixel's RGB.
+    double tolerance = 1e-10;
+    /// Largest colour value (chromaticity or glow): bounds what lies behind a point.
+    double colorMax = 0;
+
+    ProjectionOptions projection;
+    RootOptions roots;
+    InversionOptions inversion;
+};
+
+/// The colour transfer function of a scene (`volume.color_tf`, `slices.#.color_tf`).
+PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
+
+/// Resolves the volume fields of `scene.volume` (InputError naming the scene and the key
+/// if a field is missing), computes the per-cell ranges and classes (parallel).
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                            const Scene& scene);
+
+/// Front-to-back compositing state of one ray: premultiplied colour and opacity (rgba),
+/// transmittance, and the error bookkeeping of the volume integration.
+struct RayComposite {
+    double* rgba = nullptr;      ///< the pixel's premultiplied RGBA, updated in place
+    double transmittance = 1;
+    double error[3] = {0, 0, 0};  ///< estimated absolute error of R, G, B so far
+    /// Estimated absolute error of the optical depth integrated so far: every later
+    /// contribution c carries an error of about |c| times this.
+    double depthError = 0;
+
+    /// Adds premultiplied colour `rgb` (already times the transmittance) with its
+    /// propagated depth error.
+    void AddColor(const double rgb[3]) {
+        for (int c = 0; c < 3; ++c) {
+            rgba[c] += rgb[c];
+            error[c] += std::abs(rgb[c]) * depthError;
+        }
+    }
+};
+
+/// Per-thread volume integrator: reused across rays and segments without allocation once
+/// its buffers have grown.
+class VolumeRayMarcher {
+public:
+    /// Starts a ray whose segments inside the mesh span [tStart, tEnd] (world t).
+    void BeginRay(const VolumeSetup& setup, const Ray& ray, double tStart, double tEnd);
+
+    /// Prepares segment `seg` (cell, tEnter, tExit) of the current ray: the volume fields
+    /// along it and their transfer-function breakpoints. Returns false when the cell holds
+    /// nothing to integrate (empty-space skipping: no field is evaluated).
+    bool BeginSegment(const Mesh& mesh, const MeshGeometry& geometry, const Segment& seg,
+                      RenderCounters& counters);
+
+    /// Integrates [a, b] (inside the current segment) into `composite`. Returns true when
+    /// the ray may stop: the transmittance fell so low that everything behind changes the
+    /// pixel by less than a tenth of the tolerance (that bound is added to the error).
+    bool Integrate(double a, double b, RayComposite& composite, RenderCounters& counters);
+
+    /// Statistics of the last ray.
+    int KronrodIntervals() const { return kronrodIntervals_; }
+
+private:
+    struct FieldState {
+        bool constant = false;  ///< cell field: value fixed on the cell
+        bool linear = false;    ///< value linear in t on the segment
+        bool bySeries = false;  ///< exact Legendre series available (affine polynomial)
+        double valueEnter = 0, valueExit = 0;  ///< at tEnter and tExit (linear fields)
+    };
+    double FieldAt(int f, double t);
+    void Sample(double t, double& tau, double emission[3]);
+    void LinearPiece(double p0, double p1, RayComposite& composite);
+    void KronrodPiece(double p0, double p1, RayComposite& composite);
+    bool Terminate(double t, RayComposite& composite);
+    void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
+
+    const VolumeSetup* setup_ = nullptr;
+    Ray ray_;
+    double tStart_ = 0, tEnd_ = 0, pathLength_ = 0;
+    Segment seg_;
+    std::uint8_t kind_ = 0;
+    double constTau_ = 0, constColor_[3] = {0, 0, 0};
+    int fieldCount_ = 1;
+    FieldState state_[2];
+    SegmentField field_[2];
+    std::vector<ProjectedPiece> pieces_[2];
+    ProjectionStats projectionStats_;
+    std::vector<double> scratch_;
+    std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
+    std::vector<double> bounds_;
+    struct Work {
+        double lo, hi;
+        int depth;
+    };
+    std::vector<Work> stack_;
+    int kronrodIntervals_ = 0;
+};
+
+}  // namespace hpray
