@@ -23,10 +23,51 @@ namespace {
 
 using hpray::Mesh;
 
+// Quadratic hexes on an n^3 grid of [0,1]^3 with nodes mapped by z -> z + x^2 + y^2: curved
+// faces that the cells represent exactly (the paraboloid slab of tests/trace).
+Mesh ParaboloidHexes(int n) {
+    const int p = 2, g = n * p + 1;
+    Mesh mesh;
+    for (int k = 0; k < g; ++k)
+        for (int j = 0; j < g; ++j)
+            for (int i = 0; i < g; ++i) {
+                const double x = double(i) / (g - 1), y = double(j) / (g - 1);
+                const double z = double(k) / (g - 1);
+                mesh.points.insert(mesh.points.end(), {x, y, z + x * x + y * y});
+            }
+    std::vector<std::int64_t> nodes;
+    for (int c = 0; c < n; ++c)
+        for (int b = 0; b < n; ++b)
+            for (int a = 0; a < n; ++a) {
+                nodes.clear();
+                for (int k = 0; k <= p; ++k)
+                    for (int j = 0; j <= p; ++j)
+                        for (int i = 0; i <= p; ++i)
+                            nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
+                mesh.AddCell(hpray::CellShape::Hex, p, hpray::CellFamily::Lagrange, nodes.data(),
+                             int(nodes.size()));
+            }
+    return mesh;
+}
+
+// Meshes by name: "paraboloid-tets" (builtin ball-p2?n=24, 69120 quadratic tets, nodes
+// mapped by z -> (z - 1) / 2 + x^2 + y^2, every face curved but the vertical ones),
+// "paraboloid-hexes" (ParaboloidHexes(40), 64000 cells), else a file or builtin spec.
 const Mesh& GetMesh(const std::string& spec) {
     static std::map<std::string, std::unique_ptr<Mesh>> cache;
     auto& m = cache[spec];
-    if (!m) m = std::make_unique<Mesh>(hpray::ReadMesh(spec));
+    if (m) return *m;
+    if (spec == "paraboloid-tets") {
+        m = std::make_unique<Mesh>(hpray::MakeBuiltin("builtin:ball-p2?n=24"));
+        for (std::int64_t i = 0; i < m->PointCount(); ++i) {
+            double* x = &m->points[3 * i];
+            x[2] = 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1];
+        }
+    } else if (spec == "paraboloid-hexes") {
+        m = std::make_unique<Mesh>(ParaboloidHexes(40));
+    } else {
+        m = std::make_unique<Mesh>(hpray::ReadMesh(spec));
+    }
     return *m;
 }
 
@@ -61,14 +102,21 @@ std::vector<hpray::Ray> ViewRays(const Mesh& mesh, int n, unsigned seed) {
     return rays;
 }
 
+// 0, 1: straight tets (>= 1M cells); 2: the same quadratic tets as 3 but straight;
+// 3, 4: curved quadratic tets and hexes.
 std::string Spec(int index) {
-    if (index == 0) return "builtin:cube-tets-60";
-    return std::string(HPRAY_SHARED_DATA) + "/mfem_gmsh_t16_tets_1M.vtu";
+    switch (index) {
+        case 0: return "builtin:cube-tets-60";
+        case 2: return "builtin:ball-p2?n=24";
+        case 3: return "paraboloid-tets";
+        case 4: return "paraboloid-hexes";
+        default: return std::string(HPRAY_SHARED_DATA) + "/mfem_gmsh_t16_tets_1M.vtu";
+    }
 }
 
 void BM_TraceSegments(benchmark::State& state) {
     const std::string spec = Spec(int(state.range(0)));
-    if (state.range(0) != 0 && !std::filesystem::exists(spec)) {
+    if (state.range(0) == 1 && !std::filesystem::exists(spec)) {
         state.SkipWithError("data file missing");
         return;
     }
@@ -86,11 +134,11 @@ void BM_TraceSegments(benchmark::State& state) {
     state.counters["segments/ray"] = double(segments) / double(traced);
     state.SetLabel(spec);
 }
-BENCHMARK(BM_TraceSegments)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_TraceSegments)->DenseRange(0, 4)->Unit(benchmark::kMicrosecond);
 
 void BM_Build(benchmark::State& state) {
     const std::string spec = Spec(int(state.range(0)));
-    if (state.range(0) != 0 && !std::filesystem::exists(spec)) {
+    if (state.range(0) == 1 && !std::filesystem::exists(spec)) {
         state.SkipWithError("data file missing");
         return;
     }
@@ -106,9 +154,10 @@ void BM_Build(benchmark::State& state) {
     state.counters["bytes/cell"] = stats.BytesPerCell();
     state.counters["accel_bytes/cell"] = double(stats.accelBytes) / double(stats.cells);
     state.counters["boundary_faces"] = double(stats.boundaryFaces);
+    state.counters["curved_faces"] = double(stats.curvedFaces);
     state.SetLabel(spec);
 }
-BENCHMARK(BM_Build)->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_Build)->DenseRange(0, 4)->Iterations(1)->Unit(benchmark::kSecond);
 
 // ---- Alternatives, measured as lower bounds of their cost (no exact intersection). ----
 

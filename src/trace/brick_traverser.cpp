@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "trace/bilinear_patch.h"
+#include "trace/curved_face.h"
 #include "trace/face_map.h"
 #include "trace/ray_frame.h"
 #include "util/check.h"
@@ -32,6 +33,7 @@ using trace::ShearedPoint;
 using trace::TriangleCrossing;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int kMaxEdgeNodes = 11;  // order 10
 
 // Corners (lattice position in units of the order p, internal node frame of mesh/cell.h)
 // and faces (corner cycles, counter-clockwise seen from outside a positively oriented
@@ -60,7 +62,7 @@ enum class FaceKind : std::uint8_t {
     Triangle,      // planar triangle: the crossing of its plane
     PlanarQuad,    // planar quadrilateral: two triangles of one plane
     BilinearQuad,  // non-planar straight quadrilateral: Reshetov's closed form
-    Curved,        // high-order face: Newton on its face map
+    Curved,        // high-order face: exact crossings of its Bernstein net (curved_face.h)
     Degenerate     // repeated corners: never crossed
 };
 
@@ -74,11 +76,13 @@ struct FaceRec {
 };
 
 struct CurvedRec {
-    std::int64_t nodeStart = 0;  // into curvedNodes: the tessellation lattice, j-major
-    std::uint8_t order = 1;
+    std::int64_t nodeStart = 0;  // into curvedNodes: the node lattice, j-major
+    std::int64_t netStart = 0;   // into curvedNet (points): the Bernstein control net
+    std::uint8_t order = 1;      // of the net (serendipity faces: a Q_2 net)
     FaceBasis basis = FaceBasis::Triangle;
-    double size = 0;             // diagonal of the node box
-    double box[2][3] = {{0, 0, 0}, {0, 0, 0}};  // node box, padded
+    std::uint8_t straightEdges = 0;  // bit e: boundary edge e is straight
+    double size = 0;             // diagonal of the control net's box
+    double box[2][3] = {{0, 0, 0}, {0, 0, 0}};  // control net box, padded: holds the face
 };
 
 // A crossing of the ray with a face. side +1: along the face's canonical normal, i.e.
@@ -92,8 +96,7 @@ struct Crossing {
 struct Scratch {
     std::vector<Crossing> boundary;
     std::vector<Crossing> cell;
-    std::vector<ShearedPoint> sheared;
-    std::vector<double> nodes;
+    std::vector<trace::FaceCrossing> face;
 };
 thread_local Scratch tScratch;
 
@@ -247,6 +250,7 @@ struct BrickTraverser::Impl {
     std::vector<std::int32_t> cellFaces;
     std::vector<CurvedRec> curved;
     std::vector<std::int32_t> curvedNodes;
+    std::vector<double> curvedNet;  // control points of curved faces, 3 per point
     std::vector<std::int32_t> boundaryFaces;
     std::vector<float> boundaryBoxes;  // 6 per boundary face: lower, upper
     AxisBox queryBox{};                   // mesh bounds, padded for the float query ray
@@ -303,6 +307,7 @@ void BrickTraverser::Impl::Build() {
                           cellFaces.capacity() * sizeof(std::int32_t) +
                           curved.capacity() * sizeof(CurvedRec) +
                           curvedNodes.capacity() * sizeof(std::int32_t) +
+                          curvedNet.capacity() * sizeof(double) +
                           boundaryFaces.capacity() * sizeof(std::int32_t) +
                           boundaryBoxes.capacity() * sizeof(float);
 }
@@ -463,6 +468,29 @@ void BrickTraverser::Impl::BuildTopology() {
         const double* y = P(b);
         return x[0] != y[0] ? x[0] < y[0] : x[1] != y[1] ? x[1] < y[1] : x[2] < y[2];
     };
+    // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
+    // (from its lower corner by position), so that every face holding the edge sees the
+    // same sequence; returns whether that reverses the face's counter-clockwise order.
+    auto canonicalEdge = [&](const std::vector<std::int32_t>& lattice, bool tri, int p, int e,
+                             std::int32_t* ids) {
+        for (int k = 0; k <= p; ++k) ids[k] = lattice[trace::EdgeLatticeIndex(tri, p, e, k)];
+        const bool reversed = byPosition(ids[p], ids[0]);
+        if (reversed) std::reverse(ids, ids + p + 1);
+        return reversed;
+    };
+    // Whether an edge (canonical ids) is straight: a function of the edge alone, so that
+    // all faces around it count it by the same rule (curved_face.h).
+    auto edgeIsStraight = [&](const std::int32_t* ids, int p) {
+        const double* a = P(ids[0]);
+        const double* b = P(ids[p]);
+        const double tol2 = std::pow(options.straightTolerance, 2) * Dist2(a, b);
+        for (int k = 1; k < p; ++k) {
+            double lin[3];
+            for (int d = 0; d < 3; ++d) lin[d] = a[d] + (double(k) / p) * (b[d] - a[d]);
+            if (Dist2(P(ids[k]), lin) > tol2) return false;
+        }
+        return true;
+    };
     auto outwardCycle = [&](std::int64_t c, int f, std::int32_t* ids, int* local) {
         const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
         const int n = s.faceSize[f];
@@ -560,6 +588,18 @@ void BrickTraverser::Impl::BuildTopology() {
                         }
                         if (dev2 > tol * tol) straight = false;
                     }
+                // A straight face needs edges straight by the edge rule too: a curved
+                // neighbour counts the shared edge by that rule.
+                std::int32_t ids[kMaxEdgeNodes];
+                for (int e = 0; e < n && straight; ++e) {
+                    if (basis == FaceBasis::QuadSerendipity) {
+                        canonicalEdge(lattice, false, 2, e, ids);
+                        straight = edgeIsStraight(ids, 2);
+                    } else {
+                        canonicalEdge(lattice, n == 3, p, e, ids);
+                        straight = edgeIsStraight(ids, p);
+                    }
+                }
             }
             if (straight) {
                 if (n == 3) {
@@ -602,12 +642,50 @@ void BrickTraverser::Impl::BuildTopology() {
             }
             for (std::int32_t id : lattice) HPRAY_CHECK(id >= 0);
             curvedNodes.insert(curvedNodes.end(), lattice.begin(), lattice.end());
-            for (int d = 0; d < 3; ++d) {
-                lo[d] = kInf;
-                hi[d] = -kInf;
-                for (std::int32_t id : lattice) {
-                    lo[d] = std::min(lo[d], P(id)[d]);
-                    hi[d] = std::max(hi[d], P(id)[d]);
+            // The canonical face: its Bernstein net, with every boundary row replaced by the
+            // control points of the edge built from the edge's nodes in canonical order
+            // (straight edges: points on the segment), bitwise shared with its neighbours.
+            {
+                const bool tri = basis == FaceBasis::Triangle;
+                const int q = cr.order;
+                const int nNet = trace::NetSize(tri, q);
+                std::vector<double> nodal(3 * nNet), net(3 * nNet);
+                for (int k = 0; k < nNet; ++k)
+                    for (int d = 0; d < 3; ++d) nodal[3 * k + d] = P(lattice[k])[d];
+                trace::FaceBernstein(tri, q, nodal.data(), net.data());
+                std::int32_t ids[kMaxEdgeNodes];
+                double edgeNodal[3 * kMaxEdgeNodes], row[3 * kMaxEdgeNodes];
+                for (int e = 0; e < (tri ? 3 : 4); ++e) {
+                    const bool reversed = canonicalEdge(lattice, tri, q, e, ids);
+                    const double* a = P(ids[0]);
+                    const double* b = P(ids[q]);
+                    if (edgeIsStraight(ids, q)) {
+                        cr.straightEdges = std::uint8_t(cr.straightEdges | (1u << e));
+                        for (int k = 0; k <= q; ++k)
+                            for (int d = 0; d < 3; ++d)
+                                row[3 * k + d] = k == 0   ? a[d]
+                                                 : k == q ? b[d]
+                                                          : a[d] + (double(k) / q) * (b[d] - a[d]);
+                    } else {
+                        for (int k = 0; k <= q; ++k)
+                            for (int d = 0; d < 3; ++d) edgeNodal[3 * k + d] = P(ids[k])[d];
+                        trace::EdgeBernstein(q, edgeNodal, row);
+                    }
+                    for (int k = 0; k <= q; ++k) {
+                        const int idx = trace::EdgeLatticeIndex(tri, q, e, k);
+                        for (int d = 0; d < 3; ++d)
+                            net[3 * idx + d] = row[3 * (reversed ? q - k : k) + d];
+                    }
+                }
+                cr.netStart = static_cast<std::int64_t>(curvedNet.size() / 3);
+                curvedNet.insert(curvedNet.end(), net.begin(), net.end());
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = kInf;
+                    hi[d] = -kInf;
+                    for (int k = 0; k < nNet; ++k) {
+                        lo[d] = std::min(lo[d], net[3 * k + d]);
+                        hi[d] = std::max(hi[d], net[3 * k + d]);
+                    }
                 }
             }
             size = std::sqrt(Dist2(lo, hi));
@@ -640,13 +718,21 @@ void BrickTraverser::Impl::BuildTopology() {
         queryBox[0][d] = bounds[0][d] - queryPad;
         queryBox[1][d] = bounds[1][d] + queryPad;
     }
-    // Curved faces may bulge out of their node hull, but crossings are decided on the node
-    // tessellation, which the node box contains.
+    // Curved faces may bulge out of their node hull: they are boxed by their control net
+    // (which holds the face); straight faces by their corners.
     boundaryBoxes.resize(6 * boundaryFaces.size());
     std::vector<std::array<std::int32_t, 3>> tris;
     for (std::size_t b = 0; b < boundaryFaces.size(); ++b) {
-        Tessellation(boundaryFaces[b], tris);
         double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
+        const FaceRec& rec = faces[boundaryFaces[b]];
+        if (rec.kind == FaceKind::Curved) {
+            const CurvedRec& cr = curved[rec.curved];
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = cr.box[0][d];
+                hi[d] = cr.box[1][d];
+            }
+        }
+        Tessellation(boundaryFaces[b], tris);
         for (const auto& tri : tris)
             for (std::int32_t id : tri)
                 for (int d = 0; d < 3; ++d) {
@@ -859,7 +945,9 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
 void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
                                                  std::vector<Crossing>& out) const {
     const CurvedRec& cr = curved[faces[f].curved];
-    // Quick rejection against the (padded) node box, which holds the tessellation.
+    // Quick rejection against the padded control net box, which holds the face: a ray
+    // missing it by 1e-9 of the face size is far beyond rounding of every edge count, so
+    // the face's count is exactly 0 as computed in full (curved_face.h).
     {
         double lo = -kInf, hi = kInf;
         for (int d = 0; d < 3; ++d) {
@@ -875,98 +963,20 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
         }
         if (lo > hi + 1e-9 * cr.size) return;
     }
-    Scratch& s = tScratch;
-    const int p = cr.order;
-    const bool tri = cr.basis == FaceBasis::Triangle;
-    const int nLattice = tri ? (p + 1) * (p + 2) / 2 : (p + 1) * (p + 1);
-    const std::int32_t* ids = &curvedNodes[cr.nodeStart];
-    s.sheared.resize(nLattice);
-    for (int k = 0; k < nLattice; ++k) s.sheared[k] = frame.Transform(P(ids[k]));
-    bool nodesLoaded = false;
-    const int nBasis = trace::FaceNodeCount(cr.basis, p);
-    double N[trace::kMaxFaceNodes], Nu[trace::kMaxFaceNodes], Nv[trace::kMaxFaceNodes];
-
-    auto crossSub = [&](int ia, int ib, int ic, const double* pa, const double* pb,
-                        const double* pc) {
-        TriangleCrossing x;
-        if (!CrossTriangle(s.sheared[ia], s.sheared[ib], s.sheared[ic], x)) return;
-        if (!nodesLoaded) {  // basis node coordinates (serendipity: lattice minus centre)
-            s.nodes.resize(3 * nBasis);
-            for (int k = 0, m = 0; k < nLattice; ++k) {
-                if (cr.basis == FaceBasis::QuadSerendipity && k == 4) continue;
-                for (int d = 0; d < 3; ++d) s.nodes[3 * m + d] = P(ids[k])[d];
-                ++m;
-            }
-            nodesLoaded = true;
-        }
-        const double u0 = x.bary[0] * pa[0] + x.bary[1] * pb[0] + x.bary[2] * pc[0];
-        const double v0 = x.bary[0] * pa[1] + x.bary[1] * pb[1] + x.bary[2] * pc[1];
-        double u = u0, v = v0, t = x.t;
-        // Newton on face(u, v) - (origin + t dir) = 0 from the tessellated hit.
-        const double tol = options.mappingTolerance * cr.size;
-        bool converged = false;
-        for (int it = 0; it < options.maxNewtonIterations; ++it) {
-            trace::EvalFaceBasis(cr.basis, p, u, v, N, Nu, Nv);
-            double F[3] = {0, 0, 0}, Fu[3] = {0, 0, 0}, Fv[3] = {0, 0, 0};
-            for (int m = 0; m < nBasis; ++m)
-                for (int d = 0; d < 3; ++d) {
-                    F[d] += N[m] * s.nodes[3 * m + d];
-                    Fu[d] += Nu[m] * s.nodes[3 * m + d];
-                    Fv[d] += Nv[m] * s.nodes[3 * m + d];
-                }
-            double r[3];
-            for (int d = 0; d < 3; ++d) r[d] = F[d] - frame.org[d] - t * frame.dir[d];
-            const double res = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-            const double m2[3] = {-frame.dir[0], -frame.dir[1], -frame.dir[2]};
-            auto det3 = [](const double* a, const double* b, const double* c) {
-                return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                       a[2] * (b[0] * c[1] - b[1] * c[0]);
-            };
-            const double det = det3(Fu, Fv, m2);
-            if (det == 0 || !std::isfinite(det)) break;
-            const double rhs[3] = {-r[0], -r[1], -r[2]};
-            u += det3(rhs, Fv, m2) / det;
-            v += det3(Fu, rhs, m2) / det;
-            t += det3(Fu, Fv, rhs) / det;
-            if (res <= tol) {  // converged; the step just taken polishes the last digits
-                converged = true;
-                break;
-            }
-        }
-        // A root far from the tessellated hit would be another crossing of the face.
-        if (converged && std::isfinite(t) && std::hypot(u - u0, v - v0) <= 2.0 / p) {
-            out.push_back({t, f, x.side});
-        } else {
-            newtonFailures.fetch_add(1, std::memory_order_relaxed);
-            out.push_back({x.t, f, x.side});
-        }
-    };
-
-    if (tri) {
-        auto idx = [p](int i, int j) { return j * (p + 1) - j * (j - 1) / 2 + i; };
-        for (int j = 0; j < p; ++j)
-            for (int i = 0; i < p - j; ++i) {
-                const double a[2] = {double(i) / p, double(j) / p};
-                const double b[2] = {double(i + 1) / p, double(j) / p};
-                const double c[2] = {double(i) / p, double(j + 1) / p};
-                crossSub(idx(i, j), idx(i + 1, j), idx(i, j + 1), a, b, c);
-                if (i + j + 2 <= p) {
-                    const double d[2] = {double(i + 1) / p, double(j + 1) / p};
-                    crossSub(idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1), b, d, c);
-                }
-            }
-    } else {
-        auto idx = [p](int i, int j) { return j * (p + 1) + i; };
-        for (int j = 0; j < p; ++j)
-            for (int i = 0; i < p; ++i) {
-                const double a[2] = {double(i) / p, double(j) / p};
-                const double b[2] = {double(i + 1) / p, double(j) / p};
-                const double c[2] = {double(i + 1) / p, double(j + 1) / p};
-                const double d[2] = {double(i) / p, double(j + 1) / p};
-                crossSub(idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), a, b, c);
-                crossSub(idx(i, j), idx(i + 1, j + 1), idx(i, j + 1), a, c, d);
-            }
-    }
+    trace::CurvedFace face;
+    face.net = &curvedNet[3 * static_cast<std::size_t>(cr.netStart)];
+    face.triangle = cr.basis == FaceBasis::Triangle;
+    face.order = cr.order;
+    face.straightEdges = cr.straightEdges;
+    face.size = cr.size;
+    trace::CurvedFaceOptions opts;
+    opts.tolerance = options.mappingTolerance * cr.size;
+    opts.maxNewtonIterations = options.maxNewtonIterations;
+    std::vector<trace::FaceCrossing>& xs = tScratch.face;
+    xs.clear();
+    const int failures = trace::CrossCurvedFace(face, frame, opts, xs);
+    if (failures > 0) newtonFailures.fetch_add(failures, std::memory_order_relaxed);
+    for (const auto& x : xs) out.push_back({x.t, f, x.side});
 }
 
 // ---------------------------------------------------------------------------------------

@@ -1,0 +1,684 @@
+// Bernstein nets of curved faces and their exact ray crossings (see curved_face.h).
+#include "trace/curved_face.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <vector>
+
+#include "util/check.h"
+
+namespace hpray::trace {
+namespace {
+
+constexpr int kMaxOrder = 10;
+constexpr int kMaxNet = (kMaxOrder + 1) * (kMaxOrder + 1);
+// Bisection depth of an edge count; sub-patch sides stay far below it, which keeps the
+// counts of a side and of its halves exactly additive.
+constexpr int kMaxCurveDepth = 60;
+// Subdivision depth of a face: about 2^-20 of its parameter range per direction.
+constexpr int kMaxPatchDepth = 40;
+
+inline int TriIndex(int p, int i, int j) { return j * (p + 1) - j * (j - 1) / 2 + i; }
+inline int QuadIndex(int p, int i, int j) { return j * (p + 1) + i; }
+
+// Inverse of a dense n x n matrix (row-major) by Gauss-Jordan with partial pivoting in
+// long double; the matrices are the well-conditioned Bernstein collocation matrices.
+std::vector<double> Invert(int n, const std::vector<long double>& m) {
+    std::vector<long double> a(m), inv(std::size_t(n) * n, 0.0L);
+    for (int i = 0; i < n; ++i) inv[std::size_t(i) * n + i] = 1;
+    for (int c = 0; c < n; ++c) {
+        int piv = c;
+        for (int r = c + 1; r < n; ++r)
+            if (std::fabs(a[std::size_t(r) * n + c]) > std::fabs(a[std::size_t(piv) * n + c]))
+                piv = r;
+        HPRAY_CHECK(a[std::size_t(piv) * n + c] != 0);
+        for (int k = 0; k < n; ++k) {
+            std::swap(a[std::size_t(c) * n + k], a[std::size_t(piv) * n + k]);
+            std::swap(inv[std::size_t(c) * n + k], inv[std::size_t(piv) * n + k]);
+        }
+        const long double d = a[std::size_t(c) * n + c];
+        for (int k = 0; k < n; ++k) {
+            a[std::size_t(c) * n + k] /= d;
+            inv[std::size_t(c) * n + k] /= d;
+        }
+        for (int r = 0; r < n; ++r) {
+            if (r == c) continue;
+            const long double f = a[std::size_t(r) * n + c];
+            if (f == 0) continue;
+            for (int k = 0; k < n; ++k) {
+                a[std::size_t(r) * n + k] -= f * a[std::size_t(c) * n + k];
+                inv[std::size_t(r) * n + k] -= f * inv[std::size_t(c) * n + k];
+            }
+        }
+    }
+    return std::vector<double>(inv.begin(), inv.end());
+}
+
+long double PowL(long double x, int k) {
+    long double r = 1;
+    for (int i = 0; i < k; ++i) r *= x;
+    return r;
+}
+
+struct Tables {
+    double binom[kMaxOrder + 1][kMaxOrder + 1] = {};
+    std::vector<double> edgeInv[kMaxOrder + 1];  // Bernstein from nodal values, 1-D
+    std::vector<double> triInv[kMaxOrder + 1];   // Bernstein from nodal values, triangle
+
+    Tables() {
+        for (int n = 0; n <= kMaxOrder; ++n) {
+            binom[n][0] = binom[n][n] = 1;
+            for (int k = 1; k < n; ++k) binom[n][k] = binom[n - 1][k - 1] + binom[n - 1][k];
+        }
+        for (int p = 1; p <= kMaxOrder; ++p) {
+            std::vector<long double> m(std::size_t(p + 1) * (p + 1));
+            for (int k = 0; k <= p; ++k) {
+                const long double s = (long double)k / p;
+                for (int i = 0; i <= p; ++i)
+                    m[std::size_t(k) * (p + 1) + i] = binom[p][i] * PowL(s, i) * PowL(1 - s, p - i);
+            }
+            edgeInv[p] = Invert(p + 1, m);
+            const int n = NetSize(true, p);
+            std::vector<long double> t(std::size_t(n) * n);
+            for (int jn = 0; jn <= p; ++jn)
+                for (int in = 0; in <= p - jn; ++in) {
+                    const long double u = (long double)in / p, v = (long double)jn / p;
+                    const long double w = 1 - u - v;
+                    const int row = TriIndex(p, in, jn);
+                    for (int j = 0; j <= p; ++j)
+                        for (int i = 0; i <= p - j; ++i)
+                            t[std::size_t(row) * n + TriIndex(p, i, j)] =
+                                binom[p][i] * binom[p - i][j] * PowL(u, i) * PowL(v, j) *
+                                PowL(w, p - i - j);
+                }
+            triInv[p] = Invert(n, t);
+        }
+    }
+};
+
+const Tables& GetTables() {
+    static const Tables tables;
+    return tables;
+}
+
+// ---------------------------------------------------------------------------------------
+// Edge counts
+
+struct P2 {
+    double x, y;
+};
+
+// Signed crossing of the straight segment a -> b with the perturbed half-line (exact).
+int SegmentCount(const P2& a, const P2& b) {
+    const bool ua = a.y > 0, ub = b.y > 0;
+    if (ua == ub) return 0;
+    const int up = ub ? 1 : -1;
+    const int s = EdgeSign(ShearedPoint{a.x, a.y, 0}, ShearedPoint{b.x, b.y, 0});
+    return s == up ? up : 0;
+}
+
+// De Casteljau at 1/2. Every new point is (a + b) * 0.5, which is symmetric in a and b, so
+// halving the reversed polygon gives bitwise the reversed halves.
+void Halve(const P2* c, int n, P2* left, P2* right) {
+    P2 w[kMaxOrder + 1];
+    std::copy(c, c + n + 1, w);
+    left[0] = w[0];
+    right[n] = w[n];
+    for (int r = 1; r <= n; ++r) {
+        for (int i = 0; i + r <= n; ++i) {
+            w[i].x = (w[i].x + w[i + 1].x) * 0.5;
+            w[i].y = (w[i].y + w[i + 1].y) * 0.5;
+        }
+        left[r] = w[0];
+        right[n - r] = w[n - r];
+    }
+}
+
+// Signed number of crossings of the Bezier curve c[0..n] with the half-line from the
+// perturbed origin towards +x (+1 upwards). Exactly antisymmetric under reversal of c and
+// exactly additive over halving (CurveCount(c, d) = CurveCount(left, d + 1) +
+// CurveCount(right, d + 1) for d < kMaxCurveDepth): every deciding test is exact for the
+// curve under the perturbation and stays decided, with the same total, on both halves.
+int CurveCount(const P2* c, int n, int depth) {
+    bool yPos = true, yNonPos = true, xPos = true, xNonPos = true;
+    for (int k = 0; k <= n; ++k) {
+        yPos = yPos && c[k].y > 0;
+        yNonPos = yNonPos && !(c[k].y > 0);
+        xPos = xPos && c[k].x > 0;
+        xNonPos = xNonPos && !(c[k].x > 0);
+    }
+    if (yPos || yNonPos || xNonPos) return 0;
+    if (xPos) return int(c[n].y > 0) - int(c[0].y > 0);
+    if (n == 1 || depth >= kMaxCurveDepth) return SegmentCount(c[0], c[n]);
+    P2 left[kMaxOrder + 1], right[kMaxOrder + 1];
+    Halve(c, n, left, right);
+    return CurveCount(left, n, depth + 1) + CurveCount(right, n, depth + 1);
+}
+
+// ---------------------------------------------------------------------------------------
+// Sub-patches
+
+// A sub-patch of the face: its control net in the ray plane, its parameter region, and for
+// each side the number of halvings since that side's curve was created (a face edge, or
+// the cut between two siblings), so that side counts add up exactly to the whole curve's.
+// Triangles: corners (A, B, C), net point (i, j) = blossom(A^(p-i-j) B^i C^j), sides
+// A->B, B->C, C->A; refined by newest-vertex bisection of A->B. Quadrilaterals: the box
+// [u0, u1] x [v0, v1], sides bottom, right, top, left counter-clockwise.
+struct Patch {
+    P2 b[kMaxNet];
+    double corner[3][2];  // triangle: A, B, C; quad: (u0, v0), (u1, v1)
+    std::uint8_t sideDepth[4];
+    std::uint8_t depth;
+};
+
+struct Scratch {
+    std::vector<Patch> stack;
+    std::vector<FaceCrossing> found;
+};
+thread_local Scratch tScratch;
+
+void Side(const Patch& q, bool tri, int p, int s, P2* out) {
+    for (int k = 0; k <= p; ++k) {
+        int i, j;
+        if (tri) {
+            switch (s) {
+                case 0: i = k, j = 0; break;
+                case 1: i = p - k, j = k; break;
+                default: i = 0, j = p - k; break;
+            }
+            out[k] = q.b[TriIndex(p, i, j)];
+        } else {
+            switch (s) {
+                case 0: i = k, j = 0; break;
+                case 1: i = p, j = k; break;
+                case 2: i = p - k, j = p; break;
+                default: i = 0, j = p - k; break;
+            }
+            out[k] = q.b[QuadIndex(p, i, j)];
+        }
+    }
+}
+
+int PatchCount(const Patch& q, bool tri, int p) {
+    int w = 0;
+    P2 c[kMaxOrder + 1];
+    for (int s = 0; s < (tri ? 3 : 4); ++s) {
+        Side(q, tri, p, s, c);
+        w += CurveCount(c, p, q.sideDepth[s]);
+    }
+    return w;
+}
+
+// Does the control net's box exclude the perturbed origin? Then every side count is
+// decided by the same test and the patch's count is exactly 0.
+bool Excluded(const Patch& q, int n) {
+    double x0 = q.b[0].x, x1 = x0, y0 = q.b[0].y, y1 = y0;
+    for (int k = 1; k < n; ++k) {
+        x0 = std::min(x0, q.b[k].x);
+        x1 = std::max(x1, q.b[k].x);
+        y0 = std::min(y0, q.b[k].y);
+        y1 = std::max(y1, q.b[k].y);
+    }
+    return x0 > 0 || !(x1 > 0) || y0 > 0 || !(y1 > 0);
+}
+
+// Sufficient test for injectivity on the patch: every pair of control points of the two
+// directional derivative nets has a cross product of one strict sign (then the mean
+// derivatives along any segment of the parameter region are never parallel). Cross
+// products within rounding of zero fail the test.
+bool Injective(const Patch& q, bool tri, int p) {
+    P2 d1[kMaxNet], d2[kMaxNet];
+    int n = 0;
+    for (int j = 0; j <= (tri ? p - 1 : p); ++j)
+        for (int i = 0; i <= (tri ? p - 1 - j : p - 1); ++i) {
+            const P2 a = q.b[tri ? TriIndex(p, i, j) : QuadIndex(p, i, j)];
+            const P2 b = q.b[tri ? TriIndex(p, i + 1, j) : QuadIndex(p, i + 1, j)];
+            d1[n++] = {b.x - a.x, b.y - a.y};
+        }
+    int m = 0;
+    for (int j = 0; j <= p - 1; ++j)
+        for (int i = 0; i <= (tri ? p - 1 - j : p); ++i) {
+            const P2 a = q.b[tri ? TriIndex(p, i, j) : QuadIndex(p, i, j)];
+            const P2 b = q.b[tri ? TriIndex(p, i, j + 1) : QuadIndex(p, i, j + 1)];
+            d2[m++] = {b.x - a.x, b.y - a.y};
+        }
+    int sign = 0;
+    for (int a = 0; a < n; ++a)
+        for (int b = 0; b < m; ++b) {
+            const double px = d1[a].x * d2[b].y, py = d1[a].y * d2[b].x;
+            const double c = px - py;
+            if (!(std::fabs(c) > 1e-12 * (std::fabs(px) + std::fabs(py)))) return false;
+            const int s = c > 0 ? 1 : -1;
+            if (sign == 0) sign = s;
+            else if (s != sign) return false;
+        }
+    return sign != 0;
+}
+
+void SplitQuad(const Patch& q, int p, bool alongU, Patch& lo, Patch& hi) {
+    P2 row[kMaxOrder + 1], l[kMaxOrder + 1], r[kMaxOrder + 1];
+    for (int a = 0; a <= p; ++a) {
+        for (int k = 0; k <= p; ++k) row[k] = q.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)];
+        Halve(row, p, l, r);
+        for (int k = 0; k <= p; ++k) {
+            lo.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)] = l[k];
+            hi.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)] = r[k];
+        }
+    }
+    const double u0 = q.corner[0][0], v0 = q.corner[0][1], u1 = q.corner[1][0],
+                 v1 = q.corner[1][1];
+    lo.depth = hi.depth = std::uint8_t(q.depth + 1);
+    for (int s = 0; s < 4; ++s) lo.sideDepth[s] = hi.sideDepth[s] = q.sideDepth[s];
+    if (alongU) {
+        const double um = 0.5 * (u0 + u1);
+        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = um, lo.corner[1][1] = v1;
+        hi.corner[0][0] = um, hi.corner[0][1] = v0, hi.corner[1][0] = u1, hi.corner[1][1] = v1;
+        // bottom (0) and top (2) halved; lo's right (1) and hi's left (3) are the new cut.
+        lo.sideDepth[0] = hi.sideDepth[0] = std::uint8_t(q.sideDepth[0] + 1);
+        lo.sideDepth[2] = hi.sideDepth[2] = std::uint8_t(q.sideDepth[2] + 1);
+        lo.sideDepth[1] = 0;
+        hi.sideDepth[3] = 0;
+    } else {
+        const double vm = 0.5 * (v0 + v1);
+        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = u1, lo.corner[1][1] = vm;
+        hi.corner[0][0] = u0, hi.corner[0][1] = vm, hi.corner[1][0] = u1, hi.corner[1][1] = v1;
+        lo.sideDepth[1] = hi.sideDepth[1] = std::uint8_t(q.sideDepth[1] + 1);
+        lo.sideDepth[3] = hi.sideDepth[3] = std::uint8_t(q.sideDepth[3] + 1);
+        lo.sideDepth[2] = 0;
+        hi.sideDepth[0] = 0;
+    }
+}
+
+// Newest-vertex bisection of (A, B, C) at the midpoint M of A->B into (C, A, M) and
+// (B, C, M) (both keep the orientation; their refinement edges are opposite M). Rows of
+// the net parallel to A->B are Bezier curves whose halves are the children's rows.
+void SplitTriangle(const Patch& q, int p, Patch& t1, Patch& t2) {
+    P2 row[kMaxOrder + 1], l[kMaxOrder + 1][kMaxOrder + 1], r[kMaxOrder + 1][kMaxOrder + 1];
+    for (int j = 0; j <= p; ++j) {
+        for (int i = 0; i <= p - j; ++i) row[i] = q.b[TriIndex(p, i, j)];
+        Halve(row, p - j, l[j], r[j]);
+    }
+    // (A, M, C): l[j][i] = blossom(A^(p-i-j) M^i C^j); relabelled (C, A, M).
+    // (M, B, C): r[j][i] = blossom(M^(p-i-j) B^i C^j); relabelled (B, C, M).
+    for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p - j; ++i) {
+            t1.b[TriIndex(p, i, j)] = l[p - i - j][j];
+            t2.b[TriIndex(p, i, j)] = r[i][p - i - j];
+        }
+    const double* A = q.corner[0];
+    const double* B = q.corner[1];
+    const double* C = q.corner[2];
+    const double M[2] = {0.5 * (A[0] + B[0]), 0.5 * (A[1] + B[1])};
+    for (int d = 0; d < 2; ++d) {
+        t1.corner[0][d] = C[d], t1.corner[1][d] = A[d], t1.corner[2][d] = M[d];
+        t2.corner[0][d] = B[d], t2.corner[1][d] = C[d], t2.corner[2][d] = M[d];
+    }
+    t1.depth = t2.depth = std::uint8_t(q.depth + 1);
+    const std::uint8_t half = std::uint8_t(q.sideDepth[0] + 1);
+    t1.sideDepth[0] = q.sideDepth[2], t1.sideDepth[1] = half, t1.sideDepth[2] = 0;
+    t2.sideDepth[0] = q.sideDepth[1], t2.sideDepth[1] = 0, t2.sideDepth[2] = half;
+    t1.sideDepth[3] = t2.sideDepth[3] = 0;
+}
+
+// Is (u, v) in the patch's parameter region grown by `margin` (parameter units)?
+bool InPatch(const Patch& q, bool tri, double u, double v, double margin) {
+    if (!tri)
+        return u >= q.corner[0][0] - margin && u <= q.corner[1][0] + margin &&
+               v >= q.corner[0][1] - margin && v <= q.corner[1][1] + margin;
+    const double* A = q.corner[0];
+    const double* B = q.corner[1];
+    const double* C = q.corner[2];
+    const double e1[2] = {B[0] - A[0], B[1] - A[1]}, e2[2] = {C[0] - A[0], C[1] - A[1]};
+    const double det = e1[0] * e2[1] - e1[1] * e2[0];
+    const double x = u - A[0], y = v - A[1];
+    const double l1 = (x * e2[1] - y * e2[0]) / det, l2 = (e1[0] * y - e1[1] * x) / det;
+    const double len = std::sqrt(std::max(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
+    const double m = margin / len;
+    return l1 >= -m && l2 >= -m && 1 - l1 - l2 >= -m;
+}
+
+void Centre(const Patch& q, bool tri, double& u, double& v) {
+    if (tri) {
+        u = (q.corner[0][0] + q.corner[1][0] + q.corner[2][0]) / 3;
+        v = (q.corner[0][1] + q.corner[1][1] + q.corner[2][1]) / 3;
+    } else {
+        u = 0.5 * (q.corner[0][0] + q.corner[1][0]);
+        v = 0.5 * (q.corner[0][1] + q.corner[1][1]);
+    }
+}
+
+double Diameter(const Patch& q, bool tri) {
+    if (!tri) return std::max(q.corner[1][0] - q.corner[0][0], q.corner[1][1] - q.corner[0][1]);
+    double d = 0;
+    for (int a = 0; a < 3; ++a) {
+        const double* x = q.corner[a];
+        const double* y = q.corner[(a + 1) % 3];
+        d = std::max(d, std::hypot(x[0] - y[0], x[1] - y[1]));
+    }
+    return d;
+}
+
+// Newton on G(u, v) = 0 (the ray plane part of the face map) from (u, v).
+bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& options,
+            double& u, double& v, double& t) {
+    double f[3], fu[3], fv[3];
+    bool converged = false;
+    for (int it = 0; it < options.maxNewtonIterations; ++it) {
+        EvalNet(tri, p, net, u, v, f, fu, fv);
+        const double det = fu[0] * fv[1] - fu[1] * fv[0];
+        if (det == 0 || !std::isfinite(det)) return false;
+        const double res = std::sqrt(f[0] * f[0] + f[1] * f[1]);
+        u -= (f[0] * fv[1] - f[1] * fv[0]) / det;
+        v -= (fu[0] * f[1] - fu[1] * f[0]) / det;
+        if (!(std::fabs(u) < 4 && std::fabs(v) < 4)) return false;
+        if (res <= options.tolerance) {  // converged; the step just taken polishes it
+            converged = true;
+            break;
+        }
+    }
+    if (!converged) return false;
+    EvalNet(tri, p, net, u, v, f, fu, fv);
+    t = f[2];
+    return std::isfinite(t);
+}
+
+// Distance in parameter space of (u, v) from boundary edge e of the face.
+double EdgeDistance(bool tri, int e, double u, double v) {
+    if (tri) {
+        switch (e) {
+            case 0: return std::fabs(v);
+            case 1: return std::fabs(1 - u - v) / std::sqrt(2.0);
+            default: return std::fabs(u);
+        }
+    }
+    switch (e) {
+        case 0: return std::fabs(v);
+        case 1: return std::fabs(1 - u);
+        case 2: return std::fabs(1 - v);
+        default: return std::fabs(u);
+    }
+}
+
+}  // namespace
+
+int NetSize(bool triangle, int order) {
+    return triangle ? (order + 1) * (order + 2) / 2 : (order + 1) * (order + 1);
+}
+
+int EdgeLatticeIndex(bool triangle, int p, int e, int k) {
+    if (triangle) {
+        switch (e) {
+            case 0: return TriIndex(p, k, 0);
+            case 1: return TriIndex(p, p - k, k);
+            default: return TriIndex(p, 0, p - k);
+        }
+    }
+    switch (e) {
+        case 0: return QuadIndex(p, k, 0);
+        case 1: return QuadIndex(p, p, k);
+        case 2: return QuadIndex(p, p - k, p);
+        default: return QuadIndex(p, 0, p - k);
+    }
+}
+
+void EdgeBernstein(int p, const double* nodal, double* net) {
+    HPRAY_CHECK(p >= 1 && p <= kMaxOrder);
+    const std::vector<double>& inv = GetTables().edgeInv[p];
+    for (int i = 0; i <= p; ++i)
+        for (int d = 0; d < 3; ++d) {
+            double s = 0;
+            for (int k = 0; k <= p; ++k) s += inv[std::size_t(i) * (p + 1) + k] * nodal[3 * k + d];
+            net[3 * i + d] = s;
+        }
+    for (int d = 0; d < 3; ++d) {
+        net[d] = nodal[d];
+        net[3 * p + d] = nodal[3 * p + d];
+    }
+}
+
+void FaceBernstein(bool triangle, int p, const double* nodal, double* net) {
+    HPRAY_CHECK(p >= 1 && p <= kMaxOrder);
+    const Tables& tab = GetTables();
+    const int n = NetSize(triangle, p);
+    if (triangle) {
+        const std::vector<double>& inv = tab.triInv[p];
+        for (int m = 0; m < n; ++m)
+            for (int d = 0; d < 3; ++d) {
+                double s = 0;
+                for (int k = 0; k < n; ++k) s += inv[std::size_t(m) * n + k] * nodal[3 * k + d];
+                net[3 * m + d] = s;
+            }
+    } else {
+        const std::vector<double>& inv = tab.edgeInv[p];
+        std::vector<double> tmp(3 * std::size_t(n));
+        for (int j = 0; j <= p; ++j)  // along u
+            for (int i = 0; i <= p; ++i)
+                for (int d = 0; d < 3; ++d) {
+                    double s = 0;
+                    for (int k = 0; k <= p; ++k)
+                        s += inv[std::size_t(i) * (p + 1) + k] * nodal[3 * QuadIndex(p, k, j) + d];
+                    tmp[3 * QuadIndex(p, i, j) + d] = s;
+                }
+        for (int j = 0; j <= p; ++j)  // along v
+            for (int i = 0; i <= p; ++i)
+                for (int d = 0; d < 3; ++d) {
+                    double s = 0;
+                    for (int k = 0; k <= p; ++k)
+                        s += inv[std::size_t(j) * (p + 1) + k] * tmp[3 * QuadIndex(p, i, k) + d];
+                    net[3 * QuadIndex(p, i, j) + d] = s;
+                }
+    }
+    for (int c = 0; c < (triangle ? 3 : 4); ++c) {
+        const int idx = EdgeLatticeIndex(triangle, p, c, 0);
+        for (int d = 0; d < 3; ++d) net[3 * idx + d] = nodal[3 * idx + d];
+    }
+}
+
+void EvalNet(bool triangle, int p, const ShearedPoint* net, double u, double v,
+             double value[3], double dU[3], double dV[3]) {
+    const Tables& tab = GetTables();
+    for (int d = 0; d < 3; ++d) value[d] = dU[d] = dV[d] = 0;
+    auto add = [](double* acc, double w, const ShearedPoint& q) {
+        acc[0] += w * q.x;
+        acc[1] += w * q.y;
+        acc[2] += w * q.z;
+    };
+    if (triangle) {
+        const double w = 1 - u - v;
+        double pu[kMaxOrder + 1], pv[kMaxOrder + 1], pw[kMaxOrder + 1];
+        pu[0] = pv[0] = pw[0] = 1;
+        for (int k = 1; k <= p; ++k) {
+            pu[k] = pu[k - 1] * u;
+            pv[k] = pv[k - 1] * v;
+            pw[k] = pw[k - 1] * w;
+        }
+        for (int j = 0; j <= p; ++j)
+            for (int i = 0; i <= p - j; ++i)
+                add(value, tab.binom[p][i] * tab.binom[p - i][j] * pu[i] * pv[j] * pw[p - i - j],
+                    net[TriIndex(p, i, j)]);
+        // Derivatives: p * sum over the degree p-1 basis of the forward differences.
+        const int q = p - 1;
+        for (int j = 0; j <= q; ++j)
+            for (int i = 0; i <= q - j; ++i) {
+                const double b = p * tab.binom[q][i] * tab.binom[q - i][j] * pu[i] * pv[j] *
+                                 pw[q - i - j];
+                const ShearedPoint& o = net[TriIndex(p, i, j)];
+                const ShearedPoint& a = net[TriIndex(p, i + 1, j)];
+                const ShearedPoint& c = net[TriIndex(p, i, j + 1)];
+                add(dU, b, ShearedPoint{a.x - o.x, a.y - o.y, a.z - o.z});
+                add(dV, b, ShearedPoint{c.x - o.x, c.y - o.y, c.z - o.z});
+            }
+        return;
+    }
+    double bu[kMaxOrder + 1], bv[kMaxOrder + 1], du[kMaxOrder + 1], dv[kMaxOrder + 1];
+    auto basis = [&](double s, double* b, double* db) {
+        double ps[kMaxOrder + 1], qs[kMaxOrder + 1];
+        ps[0] = qs[0] = 1;
+        for (int k = 1; k <= p; ++k) {
+            ps[k] = ps[k - 1] * s;
+            qs[k] = qs[k - 1] * (1 - s);
+        }
+        for (int i = 0; i <= p; ++i) {
+            b[i] = tab.binom[p][i] * ps[i] * qs[p - i];
+            // d/ds B_i^p = p (B_{i-1}^{p-1} - B_i^{p-1})
+            const double lo = i > 0 ? tab.binom[p - 1][i - 1] * ps[i - 1] * qs[p - i] : 0;
+            const double hi = i < p ? tab.binom[p - 1][i] * ps[i] * qs[p - 1 - i] : 0;
+            db[i] = p * (lo - hi);
+        }
+    };
+    basis(u, bu, du);
+    basis(v, bv, dv);
+    for (int j = 0; j <= p; ++j)
+        for (int i = 0; i <= p; ++i) {
+            const ShearedPoint& q = net[QuadIndex(p, i, j)];
+            add(value, bu[i] * bv[j], q);
+            add(dU, du[i] * bv[j], q);
+            add(dV, bu[i] * dv[j], q);
+        }
+}
+
+int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
+                    const CurvedFaceOptions& options, std::vector<FaceCrossing>& out) {
+    const bool tri = face.triangle;
+    const int p = face.order;
+    HPRAY_CHECK(p >= 1 && p <= kMaxOrder);
+    const int n = NetSize(tri, p);
+    ShearedPoint net[kMaxNet];
+    for (int k = 0; k < n; ++k) net[k] = frame.Transform(face.net + 3 * k);
+
+    Scratch& s = tScratch;
+    s.stack.reserve(2 * kMaxPatchDepth + 4);
+    s.stack.clear();
+    s.found.clear();
+    // The whole face as the first patch; triangles start from their hypotenuse:
+    // (A, B, C) = ((1, 0), (0, 1), (0, 0)), so that net point (i, j) = face point
+    // (p - i - j, i), and patch sides 0, 1, 2 are face edges 1, 2, 0.
+    s.stack.emplace_back();
+    {
+        Patch& root = s.stack.back();
+        if (tri) {
+            for (int j = 0; j <= p; ++j)
+                for (int i = 0; i <= p - j; ++i) {
+                    const ShearedPoint& q = net[TriIndex(p, p - i - j, i)];
+                    root.b[TriIndex(p, i, j)] = {q.x, q.y};
+                }
+            const double corners[3][2] = {{1, 0}, {0, 1}, {0, 0}};
+            for (int a = 0; a < 3; ++a)
+                for (int d = 0; d < 2; ++d) root.corner[a][d] = corners[a][d];
+        } else {
+            for (int k = 0; k < n; ++k) root.b[k] = {net[k].x, net[k].y};
+            root.corner[0][0] = root.corner[0][1] = 0;
+            root.corner[1][0] = root.corner[1][1] = 1;
+        }
+        for (auto& d : root.sideDepth) d = 0;
+        root.depth = 0;
+        if (Excluded(root, n)) return 0;
+    }
+    int failures = 0;
+    auto emit = [&](const Patch& q, int w, bool atLimit) {
+        double u, v, t = 0;
+        Centre(q, tri, u, v);
+        const double u0 = u, v0 = v;
+        const bool ok = Newton(tri, p, net, options, u, v, t);
+        const double margin = 1e-6 * Diameter(q, tri) + 1e-13;
+        if (ok && InPatch(q, tri, u, v, margin)) {
+            for (int k = 0; k < std::abs(w); ++k) s.found.push_back({t, u, v, w > 0 ? 1 : -1});
+            return true;
+        }
+        if (!atLimit) return false;
+        // Depth limit: keep a converged root anyway, else the face point at the centre.
+        if (!ok) {
+            double f[3], fu[3], fv[3];
+            EvalNet(tri, p, net, u0, v0, f, fu, fv);
+            t = f[2];
+            u = u0;
+            v = v0;
+            failures += std::abs(w);
+        }
+        for (int k = 0; k < std::abs(w); ++k) s.found.push_back({t, u, v, w > 0 ? 1 : -1});
+        return true;
+    };
+    while (!s.stack.empty()) {
+        const Patch q = s.stack.back();
+        s.stack.pop_back();
+        if (q.depth > 0 && Excluded(q, n)) continue;
+        const int w = PatchCount(q, tri, p);
+        const bool atLimit = q.depth >= kMaxPatchDepth;
+        if (Injective(q, tri, p) && std::abs(w) <= 1) {
+            if (w == 0 || emit(q, w, atLimit)) continue;
+        } else if (atLimit) {
+            if (w != 0) emit(q, w, true);
+            continue;
+        }
+        // Split: two children on the stack.
+        s.stack.emplace_back();
+        s.stack.emplace_back();
+        Patch& a = s.stack[s.stack.size() - 2];
+        Patch& b = s.stack[s.stack.size() - 1];
+        if (tri) {
+            SplitTriangle(q, p, a, b);
+        } else {
+            const bool alongU =
+                q.corner[1][0] - q.corner[0][0] >= q.corner[1][1] - q.corner[0][1];
+            SplitQuad(q, p, alongU, a, b);
+        }
+    }
+
+    // Straight edges are counted by the exact segment predicate (as the planar or bilinear
+    // face on their other side counts them), the sub-patches by their snapped control
+    // points: where the two disagree, the ray passes within rounding of the edge; add the
+    // crossing at the edge, or drop the one found next to it.
+    const int nEdges = tri ? 3 : 4;
+    for (int e = 0; e < nEdges; ++e) {
+        if (!(face.straightEdges & (1u << e))) continue;
+        P2 c[kMaxOrder + 1];
+        for (int k = 0; k <= p; ++k) {
+            const ShearedPoint& q = net[EdgeLatticeIndex(tri, p, e, k)];
+            c[k] = {q.x, q.y};
+        }
+        int delta = SegmentCount(c[0], c[p]) - CurveCount(c, p, 0);
+        while (delta != 0) {
+            const int sgn = delta > 0 ? 1 : -1;
+            delta -= sgn;
+            int best = -1;
+            double bestDist = 1e-6;
+            for (int r = 0; r < int(s.found.size()); ++r) {
+                if (s.found[r].side != -sgn) continue;
+                const double dist = EdgeDistance(tri, e, s.found[r].u, s.found[r].v);
+                if (dist <= bestDist) {
+                    bestDist = dist;
+                    best = r;
+                }
+            }
+            if (best >= 0) {
+                s.found.erase(s.found.begin() + best);
+                continue;
+            }
+            // The crossing of the straight edge itself: where the projected edge passes
+            // the origin, t linear along it.
+            const ShearedPoint& a = net[EdgeLatticeIndex(tri, p, e, 0)];
+            const ShearedPoint& b = net[EdgeLatticeIndex(tri, p, e, p)];
+            const double ex = b.x - a.x, ey = b.y - a.y, len2 = ex * ex + ey * ey;
+            double lambda = len2 > 0 ? -(a.x * ex + a.y * ey) / len2 : 0.5;
+            lambda = std::min(1.0, std::max(0.0, lambda));
+            const double t = a.z + lambda * (b.z - a.z);
+            // Face parameters of the edge point (for later proximity tests only).
+            double u, v;
+            if (tri) {
+                const double cu[3][2] = {{0, 0}, {1, 0}, {0, 1}};
+                u = cu[e][0] + lambda * (cu[(e + 1) % 3][0] - cu[e][0]);
+                v = cu[e][1] + lambda * (cu[(e + 1) % 3][1] - cu[e][1]);
+            } else {
+                const double cu[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+                u = cu[e][0] + lambda * (cu[(e + 1) % 4][0] - cu[e][0]);
+                v = cu[e][1] + lambda * (cu[(e + 1) % 4][1] - cu[e][1]);
+            }
+            s.found.push_back({t, u, v, sgn});
+        }
+    }
+    out.insert(out.end(), s.found.begin(), s.found.end());
+    return failures;
+}
+
+}  // namespace hpray::trace
