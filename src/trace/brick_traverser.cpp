@@ -93,10 +93,23 @@ struct Crossing {
     std::int32_t side;
 };
 
+// The crossings of a curved face for one ray, kept for the face's other cell (the walk
+// visits every interior face twice): a pure function of face and ray, so reusing it is
+// bitwise the same as recomputing it.
+struct CurvedCacheEntry {
+    std::uint64_t ray = 0;
+    std::int32_t face = -1;
+    std::int32_t count = 0;
+    Crossing x[4];
+};
+
 struct Scratch {
     std::vector<Crossing> boundary;
     std::vector<Crossing> cell;
     std::vector<trace::FaceCrossing> face;
+    std::uint64_t ray = 0;  // id of the current Trace call on this thread
+    CurvedCacheEntry cache[8];
+    int cacheNext = 0;
 };
 thread_local Scratch tScratch;
 
@@ -963,6 +976,12 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
         }
         if (lo > hi + 1e-9 * cr.size) return;
     }
+    Scratch& s = tScratch;
+    for (const CurvedCacheEntry& e : s.cache)
+        if (e.ray == s.ray && e.face == f) {
+            out.insert(out.end(), e.x, e.x + e.count);
+            return;
+        }
     trace::CurvedFace face;
     face.net = &curvedNet[3 * static_cast<std::size_t>(cr.netStart)];
     face.triangle = cr.basis == FaceBasis::Triangle;
@@ -972,11 +991,19 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
     trace::CurvedFaceOptions opts;
     opts.tolerance = options.mappingTolerance * cr.size;
     opts.maxNewtonIterations = options.maxNewtonIterations;
-    std::vector<trace::FaceCrossing>& xs = tScratch.face;
+    std::vector<trace::FaceCrossing>& xs = s.face;
     xs.clear();
     const int failures = trace::CrossCurvedFace(face, frame, opts, xs);
     if (failures > 0) newtonFailures.fetch_add(failures, std::memory_order_relaxed);
     for (const auto& x : xs) out.push_back({x.t, f, x.side});
+    if (xs.size() <= 4) {
+        CurvedCacheEntry& e = s.cache[s.cacheNext];
+        s.cacheNext = (s.cacheNext + 1) % 8;
+        e.ray = s.ray;
+        e.face = f;
+        e.count = static_cast<std::int32_t>(xs.size());
+        for (std::size_t k = 0; k < xs.size(); ++k) e.x[k] = {xs[k].t, f, xs[k].side};
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1122,6 +1149,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     double q0 = -kInf, q1 = tHi;
     if (!ClipRayToBox(ray, im.queryBox, q0, q1)) return;
     const RayFrame frame(ray);
+    ++tScratch.ray;  // a new ray for the curved-face cache
 
     // 1. Every crossing of the mesh boundary up to tHi.
     std::vector<Crossing>& hits = tScratch.boundary;

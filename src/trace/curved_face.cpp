@@ -135,11 +135,29 @@ void Halve(const P2* c, int n, P2* left, P2* right) {
     }
 }
 
+// Is the origin separated from every control point by a margin along direction (a, b)?
+// The margin (1e-10 of the points' extent) is far above the rounding that halving adds, so
+// halves of a separated curve are still counted exactly (see CurveCount).
+bool Separated(const P2* c, int n, double a, double b) {
+    double lo = INFINITY, hi = -INFINITY, scale = 0;
+    for (int k = 0; k <= n; ++k) {
+        const double s = a * c[k].x + b * c[k].y;
+        lo = std::min(lo, s);
+        hi = std::max(hi, s);
+        scale = std::max(scale, std::fabs(a * c[k].x) + std::fabs(b * c[k].y));
+    }
+    const double margin = 1e-10 * scale;
+    return lo > margin || hi < -margin;
+}
+
 // Signed number of crossings of the Bezier curve c[0..n] with the half-line from the
 // perturbed origin towards +x (+1 upwards). Exactly antisymmetric under reversal of c and
 // exactly additive over halving (CurveCount(c, d) = CurveCount(left, d + 1) +
-// CurveCount(right, d + 1) for d < kMaxCurveDepth): every deciding test is exact for the
-// curve under the perturbation and stays decided, with the same total, on both halves.
+// CurveCount(right, d + 1) for d < kMaxCurveDepth): every deciding test gives the exact
+// count of the curve under the perturbation, and the halves of a decided curve are
+// decided, by some test, with the same total. The axis tests are exact as they stand;
+// when a line separates the origin from the control polygon by a wide margin the curve
+// is homotopic to its chord away from the origin and counts as the chord.
 int CurveCount(const P2* c, int n, int depth) {
     bool yPos = true, yNonPos = true, xPos = true, xNonPos = true;
     for (int k = 0; k <= n; ++k) {
@@ -151,6 +169,10 @@ int CurveCount(const P2* c, int n, int depth) {
     if (yPos || yNonPos || xNonPos) return 0;
     if (xPos) return int(c[n].y > 0) - int(c[0].y > 0);
     if (n == 1 || depth >= kMaxCurveDepth) return SegmentCount(c[0], c[n]);
+    // Separating lines: normal to the chord, and normal to the direction of its middle.
+    const double ex = c[n].x - c[0].x, ey = c[n].y - c[0].y;
+    if (Separated(c, n, -ey, ex) || Separated(c, n, c[0].x + c[n].x, c[0].y + c[n].y))
+        return SegmentCount(c[0], c[n]);
     P2 left[kMaxOrder + 1], right[kMaxOrder + 1];
     Halve(c, n, left, right);
     return CurveCount(left, n, depth + 1) + CurveCount(right, n, depth + 1);
@@ -170,7 +192,16 @@ struct Patch {
     double corner[3][2];  // triangle: A, B, C; quad: (u0, v0), (u1, v1)
     std::uint8_t sideDepth[4];
     std::uint8_t depth;
+    Patch() {}  // left uninitialised: only the first NetSize points are ever used
 };
+
+// Copies a patch's used part.
+void CopyPatch(const Patch& from, int n, Patch& to) {
+    std::copy(from.b, from.b + n, to.b);
+    for (int a = 0; a < 3; ++a) to.corner[a][0] = from.corner[a][0], to.corner[a][1] = from.corner[a][1];
+    for (int k = 0; k < 4; ++k) to.sideDepth[k] = from.sideDepth[k];
+    to.depth = from.depth;
+}
 
 struct Scratch {
     std::vector<Patch> stack;
@@ -346,6 +377,61 @@ void Centre(const Patch& q, bool tri, double& u, double& v) {
         u = 0.5 * (q.corner[0][0] + q.corner[1][0]);
         v = 0.5 * (q.corner[0][1] + q.corner[1][1]);
     }
+}
+
+// Newton's start in a patch: the point whose corner-interpolant (the flat triangle of the
+// corners; for quadrilaterals the half, split on the diagonal, that holds the origin best)
+// maps to the origin, clamped into the patch.
+void StartPoint(const Patch& q, bool tri, int p, double& u, double& v) {
+    auto solve = [](const P2& a, const P2& b, const P2& c, double& beta, double& gamma) {
+        const double e1x = b.x - a.x, e1y = b.y - a.y, e2x = c.x - a.x, e2y = c.y - a.y;
+        const double det = e1x * e2y - e1y * e2x;
+        if (det == 0 || !std::isfinite(det)) return false;
+        beta = (-a.x * e2y + a.y * e2x) / det;
+        gamma = (-e1x * a.y + e1y * a.x) / det;
+        return std::isfinite(beta) && std::isfinite(gamma);
+    };
+    auto clampBary = [](double& beta, double& gamma) {
+        beta = std::max(0.0, beta);
+        gamma = std::max(0.0, gamma);
+        const double sum = beta + gamma;
+        if (sum > 1) {
+            beta /= sum;
+            gamma /= sum;
+        }
+    };
+    double beta, gamma;
+    if (tri) {
+        const P2 a = q.b[TriIndex(p, 0, 0)], b = q.b[TriIndex(p, p, 0)], c = q.b[TriIndex(p, 0, p)];
+        if (!solve(a, b, c, beta, gamma)) return Centre(q, tri, u, v);
+        clampBary(beta, gamma);
+        const double* A = q.corner[0];
+        const double* B = q.corner[1];
+        const double* C = q.corner[2];
+        u = A[0] + beta * (B[0] - A[0]) + gamma * (C[0] - A[0]);
+        v = A[1] + beta * (B[1] - A[1]) + gamma * (C[1] - A[1]);
+        return;
+    }
+    const P2 c00 = q.b[QuadIndex(p, 0, 0)], c10 = q.b[QuadIndex(p, p, 0)];
+    const P2 c11 = q.b[QuadIndex(p, p, p)], c01 = q.b[QuadIndex(p, 0, p)];
+    double b1, g1, b2, g2;
+    const bool ok1 = solve(c00, c10, c11, b1, g1), ok2 = solve(c00, c11, c01, b2, g2);
+    if (!ok1 && !ok2) return Centre(q, tri, u, v);
+    auto outside = [](double beta, double gamma) {
+        return std::max({0.0, -beta, -gamma, beta + gamma - 1});
+    };
+    double s, t;  // position in the unit square
+    if (ok1 && (!ok2 || outside(b1, g1) <= outside(b2, g2))) {
+        clampBary(b1, g1);
+        s = b1 + g1;  // (0,0) + b1 (1,0) + g1 (1,1)
+        t = g1;
+    } else {
+        clampBary(b2, g2);
+        s = b2;       // (0,0) + b2 (1,1) + g2 (0,1)
+        t = b2 + g2;
+    }
+    u = q.corner[0][0] + s * (q.corner[1][0] - q.corner[0][0]);
+    v = q.corner[0][1] + t * (q.corner[1][1] - q.corner[0][1]);
 }
 
 double Diameter(const Patch& q, bool tri) {
@@ -578,7 +664,7 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
     int failures = 0;
     auto emit = [&](const Patch& q, int w, bool atLimit) {
         double u, v, t = 0;
-        Centre(q, tri, u, v);
+        StartPoint(q, tri, p, u, v);
         const double u0 = u, v0 = v;
         const bool ok = Newton(tri, p, net, options, u, v, t);
         const double margin = 1e-6 * Diameter(q, tri) + 1e-13;
@@ -599,8 +685,9 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
         for (int k = 0; k < std::abs(w); ++k) s.found.push_back({t, u, v, w > 0 ? 1 : -1});
         return true;
     };
+    Patch q;
     while (!s.stack.empty()) {
-        const Patch q = s.stack.back();
+        CopyPatch(s.stack.back(), n, q);
         s.stack.pop_back();
         if (q.depth > 0 && Excluded(q, n)) continue;
         const int w = PatchCount(q, tri, p);
