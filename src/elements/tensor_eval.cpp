@@ -1,32 +1,46 @@
 // Sum-factorised hexahedron field evaluation (see tensor_eval.h).
 #include "elements/tensor_eval.h"
 
-#include <Eigen/Core>
+#include <algorithm>
 
 #include "mesh/cell.h"
 
 namespace hpray {
 
+namespace {
+// 1 / (m + 1): the Silvester factors divide by these; a table keeps divisions out of the
+// innermost loops.
+constexpr double kInverse[kMaxOrder + 1] = {1.0,       1.0 / 2, 1.0 / 3, 1.0 / 4,
+                                            1.0 / 5,   1.0 / 6, 1.0 / 7, 1.0 / 8,
+                                            1.0 / 9,   1.0 / 10, 1.0 / 11};
+}  // namespace
+
 void LagrangeEquispaced1D(int p, double x, double* l, double* dl) {
-    // Silvester factors s_m(x) = prod_{q<m} (p x - q)/(q + 1) of x and of 1 - x.
-    double a[kMaxOrder + 1], da[kMaxOrder + 1], b[kMaxOrder + 1], db[kMaxOrder + 1];
-    const double xs[2] = {x, 1.0 - x};
-    double* s[2] = {a, b};
-    double* ds[2] = {da, db};
-    for (int w = 0; w < 2; ++w) {
-        const double px = p * xs[w];
-        s[w][0] = 1;
-        ds[w][0] = 0;
+    // Silvester factors s_m(x) = prod_{q<m} (p x - q)/(q + 1) of x and of 1 - x:
+    // l_i(x) = s_i(x) s_{p-i}(1 - x).
+    double a[kMaxOrder + 1], b[kMaxOrder + 1];
+    const double px = p * x, py = p * (1.0 - x);
+    a[0] = b[0] = 1;
+    if (!dl) {
         for (int m = 0; m < p; ++m) {
-            const double inv = 1.0 / (m + 1);
-            const double f = (px - m) * inv;
-            ds[w][m + 1] = ds[w][m] * f + s[w][m] * (p * inv);
-            s[w][m + 1] = s[w][m] * f;
+            a[m + 1] = a[m] * ((px - m) * kInverse[m]);
+            b[m + 1] = b[m] * ((py - m) * kInverse[m]);
         }
+        for (int i = 0; i <= p; ++i) l[i] = a[i] * b[p - i];
+        return;
+    }
+    double da[kMaxOrder + 1], db[kMaxOrder + 1];
+    da[0] = db[0] = 0;
+    for (int m = 0; m < p; ++m) {
+        const double fa = (px - m) * kInverse[m], fb = (py - m) * kInverse[m];
+        da[m + 1] = da[m] * fa + a[m] * (p * kInverse[m]);
+        db[m + 1] = db[m] * fb + b[m] * (p * kInverse[m]);
+        a[m + 1] = a[m] * fa;
+        b[m + 1] = b[m] * fb;
     }
     for (int i = 0; i <= p; ++i) {
         l[i] = a[i] * b[p - i];
-        if (dl) dl[i] = da[i] * b[p - i] - a[i] * db[p - i];
+        dl[i] = da[i] * b[p - i] - a[i] * db[p - i];
     }
 }
 
@@ -77,33 +91,113 @@ double HexFieldValueGradient(int p, const double* u, const double ref[3], double
     return f;
 }
 
+namespace {
+
+// The contractions of HexFieldValuesAlongLine for N = p + 1 nodes per direction and S
+// samples (a multiple of 4), with sizes known at compile time so that the per-row sums over
+// samples stay in vector registers.
+template <int N, int S>
+void ContractLine(const double* u, const double* L0, const double* L1, const double* L2,
+                  double* out) {
+    double f[S] = {};
+    for (int k = 0; k < N; ++k) {
+        double fk[S] = {};
+        for (int j = 0; j < N; ++j) {
+            const double* row = u + N * (j + N * k);
+            double fj[S] = {};
+            for (int i = 0; i < N; ++i) {
+                const double c = row[i];
+                const double* l0 = L0 + i * S;
+                for (int s = 0; s < S; ++s) fj[s] += c * l0[s];
+            }
+            const double* l1 = L1 + j * S;
+            for (int s = 0; s < S; ++s) fk[s] += fj[s] * l1[s];
+        }
+        const double* l2 = L2 + k * S;
+        for (int s = 0; s < S; ++s) f[s] += fk[s] * l2[s];
+    }
+    for (int s = 0; s < S; ++s) out[s] = f[s];
+}
+
+void ContractLineGeneric(int n, int S, const double* u, const double* L0, const double* L1,
+                         const double* L2, double* out, double* fj, double* fk) {
+    for (int s = 0; s < S; ++s) out[s] = 0;
+    for (int k = 0; k < n; ++k) {
+        for (int s = 0; s < S; ++s) fk[s] = 0;
+        for (int j = 0; j < n; ++j) {
+            const double* row = u + n * (j + n * k);
+            for (int s = 0; s < S; ++s) fj[s] = 0;
+            for (int i = 0; i < n; ++i) {
+                const double c = row[i];
+                const double* l0 = L0 + i * S;
+                for (int s = 0; s < S; ++s) fj[s] += c * l0[s];
+            }
+            const double* l1 = L1 + j * S;
+            for (int s = 0; s < S; ++s) fk[s] += fj[s] * l1[s];
+        }
+        const double* l2 = L2 + k * S;
+        for (int s = 0; s < S; ++s) out[s] += fk[s] * l2[s];
+    }
+}
+
+// Compile-time kernels for the exact projections (3p + 1 samples, padded to a multiple
+// of 4) of every order.
+using Kernel = void (*)(const double*, const double*, const double*, const double*, double*);
+template <int P>
+constexpr Kernel ExactKernel() {
+    return &ContractLine<P + 1, ((3 * P + 1) + 3) / 4 * 4>;
+}
+constexpr Kernel kExactKernels[kMaxOrder + 1] = {
+    nullptr,          ExactKernel<1>(), ExactKernel<2>(), ExactKernel<3>(),
+    ExactKernel<4>(), ExactKernel<5>(), ExactKernel<6>(), ExactKernel<7>(),
+    ExactKernel<8>(), ExactKernel<9>(), ExactKernel<10>()};
+
+}  // namespace
+
 void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
                              const double dref[3], const double* t, int count, double* out,
                              double* scratch) {
     const int n = p + 1;
-    // L_d(i, s): 1-D polynomials of each direction at every sample.
-    double* L[3] = {scratch, scratch + n * count, scratch + 2 * n * count};
-    for (int s = 0; s < count; ++s)
-        for (int d = 0; d < 3; ++d)
-            LagrangeEquispaced1D(p, ref0[d] + t[s] * dref[d], L[d] + n * s, nullptr);
-    // A(jk, s) = sum_i u(i, jk) L_0(i, s): one matrix product, U^T (n^2 x n) * L_0 (n x S).
-    using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic>;
-    Eigen::Map<const Mat> U(u, n, n * n);
-    Eigen::Map<const Mat> L0(L[0], n, count);
-    Eigen::Map<Mat> A(scratch + 3 * n * count, n * n, count);
-    A.noalias() = U.transpose() * L0;
-    for (int s = 0; s < count; ++s) {
-        const double* a = A.data() + static_cast<std::size_t>(n) * n * s;
-        const double* l1 = L[1] + n * s;
-        const double* l2 = L[2] + n * s;
-        double f = 0;
-        for (int k = 0; k < n; ++k) {
-            double fk = 0;
-            for (int j = 0; j < n; ++j) fk += a[j + n * k] * l1[j];
-            f += fk * l2[k];
+    const int padded = (count + 3) / 4 * 4;
+    // L_d(i, s) stored sample-fastest (i * padded + s); padding samples repeat the last one.
+    double* L[3] = {scratch, scratch + n * padded, scratch + 2 * n * padded};
+    double* result = scratch + 3 * n * padded;
+    // The Silvester factors of x and 1 - x for all samples at once (vectorised over s):
+    // L_d(i, s) = A_i(s) B_{p-i}(s), built in place: B in `L_d`, A in a rolling row.
+    double* a = result;             // A_m(s), one row, reused as m grows
+    double* tmp = result + padded;  // x(s)
+    for (int d = 0; d < 3; ++d) {
+        double* Ld = L[d];
+        for (int s = 0; s < padded; ++s) tmp[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
+        // B_m(s) = prod_{q<m} (p (1 - x) - q) / (q + 1), stored in row m of Ld for now.
+        for (int s = 0; s < padded; ++s) Ld[s] = 1;
+        for (int m = 0; m < p; ++m) {
+            const double inv = kInverse[m];
+            const double* prev = Ld + m * padded;
+            double* next = Ld + (m + 1) * padded;
+            for (int s = 0; s < padded; ++s) next[s] = prev[s] * ((p * (1 - tmp[s]) - m) * inv);
         }
-        out[s] = f;
+        // Reverse the rows so row i holds B_{p-i}, then multiply by A_i row by row.
+        for (int i = 0; i < (p + 1) / 2; ++i)
+            for (int s = 0; s < padded; ++s)
+                std::swap(Ld[i * padded + s], Ld[(p - i) * padded + s]);
+        for (int s = 0; s < padded; ++s) a[s] = 1;
+        for (int i = 0; i <= p; ++i) {
+            double* row = Ld + i * padded;
+            for (int s = 0; s < padded; ++s) row[s] *= a[s];
+            if (i < p) {
+                const double inv = kInverse[i];
+                for (int s = 0; s < padded; ++s) a[s] *= (p * tmp[s] - i) * inv;
+            }
+        }
     }
+    if (count == 3 * p + 1) {
+        kExactKernels[p](u, L[0], L[1], L[2], result);
+    } else {
+        ContractLineGeneric(n, padded, u, L[0], L[1], L[2], result, result + padded,
+                            result + 2 * padded);
+    }
+    for (int s = 0; s < count; ++s) out[s] = result[s];
 }
 
 }  // namespace hpray

@@ -15,10 +15,13 @@ double HexFieldValue(int p, const double* u, const double ref[3]);
 double HexFieldValueGradient(int p, const double* u, const double ref[3], double dRef[3]);
 
 /// f at the n points ref0 + t[s] * dref (a straight line in reference space), into out[s].
-/// `scratch` must hold (p + 1)^2 * n + 3 * (p + 1) * n doubles (see HexLineScratchSize).
+/// `scratch` must hold HexLineScratchSize(p, n) doubles.
 void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
                              const double dref[3], const double* t, int n, double* out,
                              double* scratch);
-inline int HexLineScratchSize(int p, int n) { return (p + 1) * (p + 1) * n + 3 * (p + 1) * n; }
+inline int HexLineScratchSize(int p, int n) {
+    const int padded = (n + 3) / 4 * 4;
+    return 3 * (p + 1) * padded + 3 * padded;
+}
 
 }  // namespace hpray
