@@ -5,7 +5,8 @@
 // Memory: with B = the memory limit, the point cache of the scan holds B/4, stream
 // buffers and spill buffers a few MiB, the tree builder collects at most B/8 of
 // centroids per level, and one brick is assembled at a time; a brick that would need
-// more than B is an input error (ask for more bricks). Everything else lives in
+// more than B is an input error (ask for more bricks). A gmsh input's tag -> index maps
+// take at most B/8 each (gmsh_stream.h), in the scan only. Everything else lives in
 // DIR/.spill-PID-N/ (removed at the end, and by the next run if this one dies).
 #include "partition.h"
 
@@ -28,6 +29,7 @@
 #include "cost_model.h"
 #include "elements/basis.h"
 #include "elements/bounds.h"
+#include "gmsh_stream.h"
 #include "io/output_file.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
@@ -507,7 +509,17 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     ScanSink scan(spill.Path(), budget);
     const std::size_t streamBuffer =
         std::clamp<std::size_t>(budget / 64, 64 << 10, 4 << 20);
-    const StreamStats stats = StreamMesh(meshPath, readOptions, streamBuffer, scan);
+    StreamStats stats;
+    if (IsGmshPath(meshPath)) {
+        // Gmsh: its own streaming reader; the tag maps take a budget of B/8 each.
+        GmshStreamOptions gmshOptions;
+        gmshOptions.bufferBytes = streamBuffer;
+        gmshOptions.mapBytes = budget / 8;
+        gmshOptions.spillDir = spill.Path();
+        stats = StreamGmsh(meshPath, readOptions, gmshOptions, scan);
+    } else {
+        stats = StreamMesh(meshPath, readOptions, streamBuffer, scan);
+    }
     scan.Close();
     if (stats.wholeMeshBytes > budget)
         log::Warn(meshPath + ": this format is read whole (" +

@@ -193,9 +193,10 @@ void CheckNodeTag(R& r, const NodesHeader& h, std::uint64_t tag) {
                std::to_string(h.minTag) + ", " + std::to_string(h.maxTag) + "]");
 }
 
-/// The header of $Elements: numBlocks numElements (the tag range is read and ignored).
+/// The header of $Elements: numBlocks numElements minTag maxTag (the tag range is not
+/// checked: ReadGmsh does not rely on it).
 struct ElementsHeader {
-    std::uint64_t numBlocks = 0, numElements = 0;
+    std::uint64_t numBlocks = 0, numElements = 0, minTag = 0, maxTag = 0;
 };
 
 template <class R>
@@ -205,8 +206,8 @@ ElementsHeader ReadElementsHeader(R& r) {
     r.CheckCount(h.numBlocks, r.MinBytes(1, 3, 0), "element entity block");
     h.numElements = r.Size("the element count");
     r.CheckCount(h.numElements, r.MinBytes(2, 0, 0), "element");
-    r.Size("the minimum element tag");
-    r.Size("the maximum element tag");
+    h.minTag = r.Size("the minimum element tag");
+    h.maxTag = r.Size("the maximum element tag");
     return h;
 }
 
