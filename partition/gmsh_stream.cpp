@@ -92,7 +92,8 @@ class MshCursor {
     MshCursor(const std::string& path, std::size_t bufferBytes) : path_(path) {
         fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
         if (fd_ < 0)
-            throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
+            throw InputError(path, "",
+                             std::string("cannot open: ") + std::strerror(errno));
         struct stat st {};
         if (::fstat(fd_, &st) != 0) {
             ::close(fd_);
@@ -140,9 +141,8 @@ class MshCursor {
                 static_cast<std::size_t>(std::min<std::uint64_t>(chunk.size(), end - at)),
                 at);
             if (n == 0) break;
-            lines += static_cast<std::uint64_t>(
-                std::count(chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(n),
-                           '\n'));
+            lines += static_cast<std::uint64_t>(std::count(
+                chunk.begin(), chunk.begin() + static_cast<std::ptrdiff_t>(n), '\n'));
             at += n;
         }
         return "line " + std::to_string(lines);
@@ -305,7 +305,8 @@ class MshCursor {
                 bufPos_ = bufEnd_;
                 continue;
             }
-            const std::size_t off = static_cast<std::size_t>(static_cast<const char*>(hit) - b);
+            const std::size_t off =
+                static_cast<std::size_t>(static_cast<const char*>(hit) - b);
             if (off > 0) prev = b[off - 1];
             bufPos_ += off;
             if (prev == '\n') {
@@ -354,11 +355,11 @@ class MshCursor {
         while (bufEnd_ < buf_.size()) {
             const std::uint64_t at = bufStart_ + bufEnd_;
             if (at >= size_) break;
-            const std::size_t n = PreadSome(
-                fd_, path_, buf_.data() + bufEnd_,
-                static_cast<std::size_t>(
-                    std::min<std::uint64_t>(buf_.size() - bufEnd_, size_ - at)),
-                at);
+            const std::size_t n =
+                PreadSome(fd_, path_, buf_.data() + bufEnd_,
+                          static_cast<std::size_t>(
+                              std::min<std::uint64_t>(buf_.size() - bufEnd_, size_ - at)),
+                          at);
             if (n == 0) break;
             bufEnd_ += n;
         }
@@ -390,10 +391,10 @@ class ValueFile {
         capacity_ = std::max<std::size_t>(
             1, bufferBytes / (sizeof(double) * static_cast<std::size_t>(components)));
         // NaN marks an entity without a value (input values are finite).
-        std::vector<double> nan(std::min<std::uint64_t>(
-                                    capacity_ * components,
+        std::vector<double> nan(
+            std::min<std::uint64_t>(capacity_ * components,
                                     static_cast<std::uint64_t>(entities) * components),
-                                std::numeric_limits<double>::quiet_NaN());
+            std::numeric_limits<double>::quiet_NaN());
         const std::uint64_t total = static_cast<std::uint64_t>(entities) * components;
         for (std::uint64_t at = 0; at < total; at += nan.size())
             PwriteAll(fd_, path_, nan.data(),
@@ -429,8 +430,8 @@ class ValueFile {
         const std::uint64_t total = static_cast<std::uint64_t>(entities_) * components_;
         std::int64_t given = 0;
         for (std::uint64_t at = 0; at < total;) {
-            const std::size_t want =
-                static_cast<std::size_t>(std::min<std::uint64_t>(chunk.size(), total - at));
+            const std::size_t want = static_cast<std::size_t>(
+                std::min<std::uint64_t>(chunk.size(), total - at));
             if (PreadSome(fd_, path_, chunk.data(), sizeof(double) * want,
                           sizeof(double) * at) != sizeof(double) * want)
                 throw InternalError("spill file " + path_ + " is shorter than written");
@@ -495,7 +496,8 @@ class TagIndexMap {
             return TablePut(tag, index);
         }
         if (runs_.size() == runs_.capacity())
-            runs_.reserve(std::min(maxRuns_, std::max<std::size_t>(64, 2 * runs_.size())));
+            runs_.reserve(
+                std::min(maxRuns_, std::max<std::size_t>(64, 2 * runs_.size())));
         runs_.push_back({tag, index, 1});
     }
 
@@ -529,8 +531,9 @@ class TagIndexMap {
                 hint_ = k;
                 return runs_[k].index + static_cast<std::int64_t>(tag - runs_[k].tag);
             }
-        auto it = std::upper_bound(runs_.begin(), runs_.end(), tag,
-                                   [](std::uint64_t t, const Run& r) { return t < r.tag; });
+        auto it =
+            std::upper_bound(runs_.begin(), runs_.end(), tag,
+                             [](std::uint64_t t, const Run& r) { return t < r.tag; });
         if (it == runs_.begin()) return -1;
         --it;
         if (tag - it->tag >= it->length) return -1;
@@ -738,7 +741,8 @@ class GmshStreamer {
             const gmsh::NodeBlockHeader block = gmsh::ReadNodeBlockHeader(in_, h, total);
             for (std::uint64_t i = 0; i < block.count; ++i)
                 if (in_.Size("a node tag") == tag) {
-                    if (seen) in_.Fail("node tag " + std::to_string(tag) + " is defined twice");
+                    if (seen)
+                        in_.Fail("node tag " + std::to_string(tag) + " is defined twice");
                     seen = true;
                 }
             const std::uint64_t values = block.count * (3 + block.extra);
@@ -780,9 +784,8 @@ class GmshStreamer {
         const bool isNode = section == "NodeData";
         const gmsh::DataHeader header = gmsh::ReadDataHeader(in_);
         if (in_.Binary()) in_.EndOfTextLine();
-        const std::uint64_t itemBytes = in_.Binary()
-                                            ? 4 + 8ull * header.components
-                                            : 2ull * (1 + header.components);
+        const std::uint64_t itemBytes =
+            in_.Binary() ? 4 + 8ull * header.components : 2ull * (1 + header.components);
         if (!haveNodes_ || (!isNode && !haveElements_))
             in_.FailAt(sectionPos, "$" + section + " before the " +
                                        (isNode ? "$Nodes" : "$Elements") +
@@ -872,7 +875,8 @@ class GmshStreamer {
     void FillFields() {
         if (!cellSelected_.empty()) BuildElementMap();
         for (FieldPlan* plan : pointSelected_)
-            pointFiles_.push_back(Fill(*plan, static_cast<std::int64_t>(nodes_.numNodes)));
+            pointFiles_.push_back(
+                Fill(*plan, static_cast<std::int64_t>(nodes_.numNodes)));
         for (FieldPlan* plan : cellSelected_) cellFiles_.push_back(Fill(*plan, cells_));
         elementMap_.reset();
     }
@@ -911,7 +915,8 @@ class GmshStreamer {
         for (const DataSection& s : plan.sections) {
             in_.Seek(s.dataPos);
             for (long long i = 0; i < s.header.count; ++i) {
-                const long long tag = in_.Int(plan.point ? "a node tag" : "an element tag");
+                const long long tag =
+                    in_.Int(plan.point ? "a node tag" : "an element tag");
                 const std::uint64_t tagPos = in_.Last();
                 std::int64_t index = -1;
                 if (plan.point) {
@@ -926,7 +931,8 @@ class GmshStreamer {
                 for (int k = 0; k < plan.components; ++k) {
                     values[k] = in_.Double("a value");
                     if (!std::isfinite(values[k]))
-                        in_.Fail("'" + plan.name + "' has a NaN or infinite value at tag " +
+                        in_.Fail("'" + plan.name +
+                                 "' has a NaN or infinite value at tag " +
                                  std::to_string(tag));
                 }
                 if (index >= 0) file->Put(index, values.data());
@@ -1007,7 +1013,8 @@ class GmshStreamer {
                     if (!std::isfinite(x)) FailCoordinate(tagsPos, i, in_.Last());
                     xyz.push_back(x);
                 }
-                for (int c = 0; c < block.extra; ++c) in_.Double("a parametric coordinate");
+                for (int c = 0; c < block.extra; ++c)
+                    in_.Double("a parametric coordinate");
                 ReadValues(readers, pointFiles_, one.data());
                 values.insert(values.end(), one.begin(), one.end());
                 if (xyz.size() / 3 >= batch) flush();
@@ -1023,8 +1030,8 @@ class GmshStreamer {
         in_.Seek(tagsPos);
         in_.SkipSizes(i, "a node tag");
         const std::uint64_t tag = in_.Size("a node tag");
-        in_.FailAt(where,
-                   "node tag " + std::to_string(tag) + " has a NaN or infinite coordinate");
+        in_.FailAt(where, "node tag " + std::to_string(tag) +
+                              " has a NaN or infinite coordinate");
     }
 
     void DeliverCells() {
@@ -1094,7 +1101,8 @@ class GmshStreamer {
 bool IsGmshPath(const std::string& path) {
     if (path.size() < 4) return false;
     std::string ext = path.substr(path.size() - 4);
-    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    for (char& c : ext)
+        c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
     return ext == ".msh";
 }
 

@@ -16,11 +16,16 @@
 // Tag -> index maps (node tags, and element tags when cell fields are selected) may be
 // sparse and in any order. They are kept as runs of consecutive tags with consecutive
 // indices (24 bytes per run; gmsh numbers nodes in runs, usually one per entity block or
-// one in all), as long as the runs fit in `mapBytes`. Beyond that the map moves to a
-// table on disk with one 8-byte slot per tag of the declared range [minTag, maxTag] (a
-// sparse file: only the slots written take space), read through an LRU block cache of
-// `mapBytes`. A tag range above 2^36 that does not fit the runs is an input error.
-// Element tags defined twice are an error here (ReadGmsh keeps the first).
+// one in all), as long as the runs fit in `mapBytes` (64 runs always do). Beyond that
+// the map moves to a table on disk with one 8-byte slot per tag of the declared range
+// [minTag, maxTag] (a sparse file: only the slots written take space), read through an
+// LRU block cache of `mapBytes` (at least 1 MiB). A tag range wider than 2^36 whose
+// runs do not fit is an input error (renumber the mesh or raise the limit).
+// Element tags are mapped only when cell fields are selected; then a tag defined twice
+// among the 3-D elements is an error (ReadGmsh keeps the first).
+//
+// Errors name the file and the byte offset (binary) or the line (ASCII, counted only
+// when an error is reported), at the same place ReadGmsh reports them.
 #pragma once
 
 #include <cstddef>

@@ -144,7 +144,8 @@ struct NodesHeader {
     std::uint64_t numBlocks = 0, numNodes = 0, minTag = 0, maxTag = 0;
 };
 
-/// Reads and checks the $Nodes header (after the section line; binary: after its newline).
+/// Reads and checks the $Nodes header (after the section line; binary: after its
+/// newline).
 template <class R>
 NodesHeader ReadNodesHeader(R& r) {
     NodesHeader h;

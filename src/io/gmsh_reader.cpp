@@ -288,7 +288,8 @@ void MshParser::ParseNodes() {
     std::vector<std::uint64_t> tags;
     std::uint64_t total = 0;
     for (std::uint64_t b = 0; b < numBlocks; ++b) {
-        const gmsh::NodeBlockHeader block = gmsh::ReadNodeBlockHeader(*this, header, total);
+        const gmsh::NodeBlockHeader block =
+            gmsh::ReadNodeBlockHeader(*this, header, total);
         const std::uint64_t count = block.count;
         const int extra = block.extra;
         tags.resize(count);

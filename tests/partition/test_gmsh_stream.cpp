@@ -60,11 +60,11 @@ struct MshLayout {
 
 /// Byte offsets WriteMsh reports (binary files).
 struct MshOffsets {
-    std::uint64_t nodeCount = 0;        ///< numNodes in the $Nodes header
-    std::uint64_t firstCell = 0;        ///< tag of the first 3-D element
-    std::uint64_t secondCell = 0;       ///< tag of the second 3-D element
-    std::uint64_t firstNodeData = 0;    ///< tag of the first $NodeData entry
-    std::uint64_t secondNodeTag = 0;    ///< the second node tag of the first block
+    std::uint64_t nodeCount = 0;      ///< numNodes in the $Nodes header
+    std::uint64_t firstCell = 0;      ///< tag of the first 3-D element
+    std::uint64_t secondCell = 0;     ///< tag of the second 3-D element
+    std::uint64_t firstNodeData = 0;  ///< tag of the first $NodeData entry
+    std::uint64_t secondNodeTag = 0;  ///< the second node tag of the first block
 };
 
 /// Gmsh type of an internal cell kind.
@@ -233,8 +233,8 @@ MshOffsets WriteMsh(const std::string& path, const Mesh& mesh, const MshLayout& 
         }
     }
     for (const auto& [first, last] : runs) {
-        const int type =
-            GmshTypeOf(mesh.cellShape[first], mesh.cellOrder[first], mesh.cellFamily[first]);
+        const int type = GmshTypeOf(mesh.cellShape[first], mesh.cellOrder[first],
+                                    mesh.cellFamily[first]);
         const std::vector<int>& perm = GmshToInternal(type);
         o.Int(3);
         o.Int(1);
@@ -352,7 +352,8 @@ void ExpectSinkEquals(const CollectSink& sink, const Mesh& ref) {
             ASSERT_EQ(fields[i].components, r.components);
             for (std::int64_t e = 0; e < n; ++e)
                 for (int k = 0; k < r.components; ++k)
-                    ASSERT_EQ(values[e * stride + offset + k], r.values[e * r.components + k])
+                    ASSERT_EQ(values[e * stride + offset + k],
+                              r.values[e * r.components + k])
                         << r.name << " entity " << e;
             offset += r.components;
         }
@@ -419,10 +420,12 @@ TEST(GmshStream, EqualsReadGmshOnTheSharedAsciiFiles) {
         const double x = sink.mesh.points[3 * i], y = sink.mesh.points[3 * i + 1],
                      z = sink.mesh.points[3 * i + 2];
         EXPECT_NEAR(sink.pointValues[i],
-                    std::sin(3 * x) * std::cos(2 * y) + 0.5 * std::sin(4 * z + x * y), 1e-12);
+                    std::sin(3 * x) * std::cos(2 * y) + 0.5 * std::sin(4 * z + x * y),
+                    1e-12);
     }
     // The gmsh-written partitioned binary file (entities, partitioned entities).
-    const std::string part = std::string(HPRAY_TEST_DATA) + "/gmsh_partitioned_binary.msh";
+    const std::string part =
+        std::string(HPRAY_TEST_DATA) + "/gmsh_partitioned_binary.msh";
     CollectSink psink;
     Stream(part, psink, dir.str());
     ExpectSinkEquals(psink, ReadGmsh(part, {}));
@@ -455,7 +458,8 @@ TEST(GmshStream, WrittenLayoutsEqualReadGmshAndTheMesh) {
         const Mesh mesh = WithMoreFields(file);
         for (std::size_t i = 0; i < layouts.size(); ++i) {
             // The hybrid file is larger: only the two tag-scrambling layouts.
-            if (std::string(file) == "gmsh_hybrid_pyr_p3.msh" && i != 2 && i != 3) continue;
+            if (std::string(file) == "gmsh_hybrid_pyr_p3.msh" && i != 2 && i != 3)
+                continue;
             SCOPED_TRACE(std::string(file) + " layout " + std::to_string(i));
             const std::string path = dir / ("l" + std::to_string(i) + ".msh");
             WriteMsh(path, mesh, layouts[i], static_cast<unsigned>(i));
@@ -491,10 +495,10 @@ TEST(GmshStream, FieldSelection) {
         std::set<std::string> want;
         std::vector<std::string> point, cell;
     };
-    for (const Case& c : {Case{{"analytic"}, {"analytic"}, {}},
-                          Case{{"grad.y"}, {"grad"}, {}},
-                          Case{{"grad[2]", "region"}, {"grad"}, {"region"}},
-                          Case{{"region"}, {}, {"region"}}}) {
+    for (const Case& c :
+         {Case{{"analytic"}, {"analytic"}, {}}, Case{{"grad.y"}, {"grad"}, {}},
+          Case{{"grad[2]", "region"}, {"grad"}, {"region"}},
+          Case{{"region"}, {}, {"region"}}}) {
         ReadOptions o;
         o.fields = c.want;
         CollectSink sink;
@@ -623,8 +627,9 @@ struct ChildResult {
 
 /// Runs hpray with `args`; exit status, peak RSS and output of the child.
 ChildResult RunHpray(const std::vector<std::string>& args) {
-    const std::string log = fs::temp_directory_path() /
-                            ("hpray_test_gmsh_child_" + std::to_string(::getpid()) + ".log");
+    const std::string log =
+        fs::temp_directory_path() /
+        ("hpray_test_gmsh_child_" + std::to_string(::getpid()) + ".log");
     const pid_t pid = ::fork();
     if (pid == 0) {
         const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -712,7 +717,8 @@ std::string StreamError(const std::string& path, const std::string& spill,
 
 std::string ReadBytes(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return std::string((std::istreambuf_iterator<char>(in)),
+                       std::istreambuf_iterator<char>());
 }
 
 void WriteBytes(const std::string& path, const std::string& bytes) {
@@ -749,14 +755,16 @@ TEST(GmshStream, MalformedBinaryFilesNameTheFileAndByte) {
                          "left in the file", "byte"});
     }
     cases.push_back({"huge_count", patch(off.nodeCount, 1000000000000ull, 8),
-                     "node count 1000000000000", "byte " + std::to_string(off.nodeCount)});
+                     "node count 1000000000000",
+                     "byte " + std::to_string(off.nodeCount)});
     // The first cell's first node: an undefined tag (reported at the element's tag).
     cases.push_back({"undefined_node", patch(off.firstCell + 8, 4, 8),
                      "references undefined node tag 4",
                      "byte " + std::to_string(off.firstCell)});
     // The first $NodeData entry names an undefined node.
     cases.push_back({"undefined_data_node", patch(off.firstNodeData, 3, 4),
-                     "undefined node tag 3", "byte " + std::to_string(off.firstNodeData)});
+                     "undefined node tag 3",
+                     "byte " + std::to_string(off.firstNodeData)});
     // The second node repeats the first node's tag (17).
     cases.push_back({"duplicate_node", patch(off.secondNodeTag, 17, 8),
                      "node tag 17 is defined twice",
@@ -789,8 +797,9 @@ TEST(GmshStream, MalformedBinaryFilesNameTheFileAndByte) {
         std::memcpy(&first, &bytes[off.firstCell], 8);
         WriteBytes(path, patch(off.secondCell, first, 8));
         const std::string error = StreamError(path, spill);
-        EXPECT_NE(error.find("element tag " + std::to_string(first) + " is defined twice"),
-                  std::string::npos)
+        EXPECT_NE(
+            error.find("element tag " + std::to_string(first) + " is defined twice"),
+            std::string::npos)
             << error;
         ReadOptions pointOnly;
         pointOnly.fields = std::set<std::string>{"analytic"};
