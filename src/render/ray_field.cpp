@@ -1,6 +1,7 @@
 // SegmentField: the true field along a ray inside one cell.
 #include "render/ray_field.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -24,7 +25,7 @@ void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
     affine_ = cell_->affine && cell_->linearInvertible;
     exact_ = affine_ && cell_->basis->polynomial;
     lineDegree_ = scalar_.nodal ? cell_->basis->lineDegree : 0;
-    haveGuess_ = false;
+    guessCount_ = 0;
     if (affine_) {
         // ref(t) = L^-1 (o + t d - origin): linear in t.
         const auto& inv = cell_->inverseLinear;
@@ -46,15 +47,27 @@ void SegmentField::RefAt(double t, double ref[3]) {
     double world[3];
     for (int i = 0; i < 3; ++i) world[i] = ray_.origin[i] + t * ray_.dir[i];
     InversionOptions options = inversion_;
-    options.initialGuess = haveGuess_ ? guess_ : nullptr;
+    // Start Newton from the secant prediction through the last two inverted points along
+    // the ray (the reference path is smooth), else from the last point.
+    double start[3];
+    if (guessCount_ >= 2 && guessT_[1] != guessT_[0]) {
+        const double w = (t - guessT_[1]) / (guessT_[1] - guessT_[0]);
+        for (int i = 0; i < 3; ++i) start[i] = guessRef_[1][i] + w * (guessRef_[1][i] - guessRef_[0][i]);
+        options.initialGuess = start;
+    } else if (guessCount_ == 1) {
+        options.initialGuess = guessRef_[1];
+    }
     const InversionResult r = RefFromWorld(*cell_, world, ws_, options);
     inversions_ += 1;
     iterations_ += r.iterations;
     if (!r.converged) failures_ += 1;
     for (int i = 0; i < 3; ++i) ref[i] = r.ref[i];
     if (r.converged) {
-        for (int i = 0; i < 3; ++i) guess_[i] = r.ref[i];
-        haveGuess_ = true;
+        guessT_[0] = guessT_[1];
+        for (int i = 0; i < 3; ++i) guessRef_[0][i] = guessRef_[1][i];
+        guessT_[1] = t;
+        for (int i = 0; i < 3; ++i) guessRef_[1][i] = r.ref[i];
+        guessCount_ = std::min(guessCount_ + 1, 2);
     }
 }
 

@@ -49,8 +49,10 @@ private:
     bool exact_ = false;
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
-    double guess_[3] = {0, 0, 0};
-    bool haveGuess_ = false;
+    // The last two converged inversions (t, ref) along the ray: Newton's predictor.
+    double guessT_[2] = {0, 0};
+    double guessRef_[2][3] = {{0, 0, 0}, {0, 0, 0}};
+    int guessCount_ = 0;
     EvalWorkspace ws_;
     std::vector<double> batchScratch_;
     double inversions_ = 0, iterations_ = 0, failures_ = 0, evaluations_ = 0;
