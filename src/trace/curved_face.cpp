@@ -450,18 +450,27 @@ bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& o
             double& u, double& v, double& t) {
     double f[3], fu[3], fv[3];
     bool converged = false;
+    // Once the residual is within the tolerance, polish on while the steps still shrink
+    // fast (quadratic convergence): near tangency the Jacobian is nearly singular and a
+    // residual at the tolerance still leaves t off by residual / sin(angle to the face).
+    double lastStep = INFINITY;
     for (int it = 0; it < options.maxNewtonIterations; ++it) {
         EvalNet(tri, p, net, u, v, f, fu, fv);
         const double det = fu[0] * fv[1] - fu[1] * fv[0];
         if (det == 0 || !std::isfinite(det)) return false;
         const double res = std::sqrt(f[0] * f[0] + f[1] * f[1]);
-        u -= (f[0] * fv[1] - f[1] * fv[0]) / det;
-        v -= (fu[0] * f[1] - fu[1] * f[0]) / det;
+        const double du = (f[0] * fv[1] - f[1] * fv[0]) / det;
+        const double dv = (fu[0] * f[1] - fu[1] * f[0]) / det;
+        const double step = std::fabs(du) + std::fabs(dv);
+        if (converged && !(step < 0.25 * lastStep)) break;  // at rounding: keep (u, v)
+        u -= du;
+        v -= dv;
         if (!(std::fabs(u) < 4 && std::fabs(v) < 4)) return false;
-        if (res <= options.tolerance) {  // converged; the step just taken polishes it
+        if (res <= options.tolerance) {
+            if (converged && step < 1e-15) break;
             converged = true;
-            break;
         }
+        lastStep = step;
     }
     if (!converged) return false;
     EvalNet(tri, p, net, u, v, f, fu, fv);

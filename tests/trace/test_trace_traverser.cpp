@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <random>
 #include <string>
 
@@ -541,29 +542,40 @@ TEST(BrickTraverser, StraightHighOrderCellsHaveStraightFaces) {
 }
 
 // ---------------------------------------------------------------------------------------
-// Curved cells: the map (x, y, z) -> (x, y, s (z - z0) + x^2 + y^2) is quadratic, so
-// quadratic cells with mapped nodes represent its image exactly: the region between two
-// paraboloids, g = z - x^2 - y^2 in [gLo, gHi], over a square.
+// Curved cells. A map (x, y, z) -> (x, y, s z + z0 + q(x, y)) with a quadratic q is exact in
+// quadratic tets and hexes, so cells with mapped nodes represent its image exactly: the
+// region between two level sets of g = z - q(x, y), q = cx (x - xc)^2 + cy (y - yc)^2, over
+// a square. The chords of that region are analytic.
 
-struct ParaboloidSlab {
-    double xy[2];    // |x|, |y| range: [xy0, xy1]
-    double g[2];     // [gLo, gHi]
+struct QuadricSlab {
+    double xy[2];  // |x|, |y| range: [xy0, xy1]
+    double g[2];   // [gLo, gHi]
+    double cx = 1, cy = 1, xc = 0, yc = 0;
+
+    double G(const double* x) const {
+        return x[2] - cx * (x[0] - xc) * (x[0] - xc) - cy * (x[1] - yc) * (x[1] - yc);
+    }
+    // g(origin + t dir) - level = a t^2 + b t + c.
+    void Coefficients(const Ray& ray, double level, double& a, double& b, double& c) const {
+        const double *o = ray.origin, *d = ray.dir;
+        a = -(cx * d[0] * d[0] + cy * d[1] * d[1]);
+        b = d[2] - 2 * (cx * (o[0] - xc) * d[0] + cy * (o[1] - yc) * d[1]);
+        c = G(o) - level;
+    }
 };
 
 // The analytic intervals of the ray inside the slab: breakpoints are the square's slab
 // planes and the roots of g(t) = gLo and g(t) = gHi; between breakpoints, test the middle.
-std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const ParaboloidSlab& s) {
+std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const QuadricSlab& s) {
     std::vector<double> br;
     double t0 = -INFINITY, t1 = INFINITY;
     const AxisBox square = {{{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}}};
     if (!ClipRayToBox(ray, square, t0, t1)) return {};
     br.push_back(t0);
     br.push_back(t1);
-    const double *o = ray.origin, *d = ray.dir;
-    const double a = -(d[0] * d[0] + d[1] * d[1]);
-    const double b = d[2] - 2 * (o[0] * d[0] + o[1] * d[1]);
     for (double level : {s.g[0], s.g[1]}) {
-        const double c = o[2] - o[0] * o[0] - o[1] * o[1] - level;
+        double a, b, c;
+        s.Coefficients(ray, level, a, b, c);
         if (a == 0) {
             if (b != 0) br.push_back(-c / b);
             continue;
@@ -580,8 +592,9 @@ std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const Paraboloi
         const double lo = std::max(br[k], t0), hi = std::min(br[k + 1], t1);
         if (!(lo < hi)) continue;
         const double tm = 0.5 * (lo + hi);
-        const double x = o[0] + tm * d[0], y = o[1] + tm * d[1], z = o[2] + tm * d[2];
-        const double g = z - x * x - y * y;
+        const double x[3] = {ray.origin[0] + tm * ray.dir[0], ray.origin[1] + tm * ray.dir[1],
+                             ray.origin[2] + tm * ray.dir[2]};
+        const double g = s.G(x);
         if (g < s.g[0] || g > s.g[1]) continue;
         if (!out.empty() && out.back()[1] == lo) out.back()[1] = hi;
         else out.push_back({lo, hi});
@@ -589,33 +602,101 @@ std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const Paraboloi
     return out;
 }
 
-// Rays that cross or miss a paraboloid nearly tangentially are excluded: there the node
-// tessellation (which decides crossings) and the true surface can disagree by a chord as
-// long as the tessellation's deviation allows (documented in brick_traverser.h).
-bool WellAway(const Ray& ray, const ParaboloidSlab& s) {
-    const double *o = ray.origin, *d = ray.dir;
-    const double a = d[0] * d[0] + d[1] * d[1];
-    if (a < 1e-6) return true;
-    const double b = d[2] - 2 * (o[0] * d[0] + o[1] * d[1]);
+// The tangency tolerance: a ray is excluded when it comes within kTangency (in g, i.e.
+// vertical distance) of touching either bounding surface tangentially, i.e. when the
+// extremum of g(t) - level lies in (-kTangency, kTangency). Such a ray's two crossings
+// are closer than 2 sqrt(kTangency / curvature) and the chord depends on them to within
+// rounding / |dg/dt| = rounding / (2 sqrt(curvature kTangency)).
+constexpr double kTangency = 1e-8;
+
+bool WellAway(const Ray& ray, const QuadricSlab& s) {
     for (double level : {s.g[0], s.g[1]}) {
-        const double c = o[2] - o[0] * o[0] - o[1] * o[1] - level;
-        // g(t) - level = -a t^2 + b t + c peaks at b^2 / (4a) + c.
-        const double peak = b * b / (4 * a) + c;
-        if (std::fabs(peak) < 0.05) return false;
+        double a, b, c;
+        s.Coefficients(ray, level, a, b, c);
+        if (a > -1e-12) continue;  // (nearly) along the parabolas' axis: no tangency
+        const double peak = c - b * b / (4 * a);
+        if (std::fabs(peak) < kTangency) return false;
     }
     return true;
 }
 
-void CheckParaboloid(const Mesh& mesh, const ParaboloidSlab& slab, int rays,
-                     const std::string& what) {
+// Rays touching a bounding surface at a random point of the square, lifted by a signed
+// vertical offset 10^-7.5 .. 10^-1 (peak of g(t) - level = the offset, just outside the
+// tangency tolerance and beyond).
+std::vector<Ray> NearTangentRays(const QuadricSlab& s, int n, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Ray> rays;
+    for (int i = 0; i < n; ++i) {
+        const double level = s.g[i % 2];
+        const double x = s.xy[0] + (s.xy[1] - s.xy[0]) * uni(rng);
+        const double y = s.xy[0] + (s.xy[1] - s.xy[0]) * uni(rng);
+        const double z = level + s.cx * (x - s.xc) * (x - s.xc) + s.cy * (y - s.yc) * (y - s.yc);
+        // Tangent plane: dz = 2 cx (x - xc) dx + 2 cy (y - yc) dy.
+        const double phi = 2 * M_PI * uni(rng);
+        const double dx = std::cos(phi), dy = std::sin(phi);
+        if (s.cx * dx * dx + s.cy * dy * dy < 1e-3) continue;
+        const double dz = 2 * s.cx * (x - s.xc) * dx + 2 * s.cy * (y - s.yc) * dy;
+        const double offset = (uni(rng) < 0.5 ? -1 : 1) * std::pow(10.0, -1 - 6.5 * uni(rng));
+        rays.push_back(MakeRayDir({x, y, z + offset}, {dx, dy, dz}, 3));
+    }
+    return rays;
+}
+
+struct CurvedStats {
+    int tested = 0, excluded = 0, multi = 0;
+};
+
+// Every ray well away from tangency gives the analytic intervals to 1e-10: the same number
+// of runs of touching segments (no gap, no overlap), each run's ends within 1e-10.
+CurvedStats CheckSlabRays(const BrickTraverser& tr, const QuadricSlab& slab,
+                          const std::vector<Ray>& rays, const std::string& what) {
+    CurvedStats st;
+    std::vector<Segment> segs;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+        const Ray& ray = rays[i];
+        if (!WellAway(ray, slab)) {
+            ++st.excluded;
+            continue;
+        }
+        ++st.tested;
+        tr.Trace(ray, -INFINITY, INFINITY, segs);
+        const std::string rayText =
+            what + " ray " + std::to_string(i) + " origin " +
+            ::testing::PrintToString(std::vector<double>(ray.origin, ray.origin + 3)) + " dir " +
+            ::testing::PrintToString(std::vector<double>(ray.dir, ray.dir + 3));
+        // Rays through a boundary edge or vertex can meet the domain in a point: intervals
+        // shorter than 1e-9 (rounding) are dropped on both sides.
+        std::vector<std::array<double, 2>> runs, expect;
+        for (const auto& x : Runs(segs, rayText))
+            if (x[1] - x[0] > 1e-9) runs.push_back(x);
+        for (const auto& x : SlabIntervals(ray, slab))
+            if (x[1] - x[0] > 1e-9) expect.push_back(x);
+        st.multi += expect.size() > 1;
+        EXPECT_EQ(runs.size(), expect.size())
+            << rayText << " first run " << (runs.empty() ? 0.0 : runs[0][1] - runs[0][0])
+            << " first interval " << (expect.empty() ? 0.0 : expect[0][1] - expect[0][0]);
+        for (std::size_t k = 0; k < std::min(runs.size(), expect.size()); ++k) {
+            EXPECT_NEAR(runs[k][0], expect[k][0], 1e-10) << rayText << " run " << k;
+            EXPECT_NEAR(runs[k][1], expect[k][1], 1e-10) << rayText << " run " << k;
+        }
+        if (::testing::Test::HasFailure()) return st;
+    }
+    return st;
+}
+
+// Random rays through the slab's square (one in ten nearly vertical), near-tangent rays,
+// and rays in random directions through `targets` (points on curved edges, vertices and
+// faces of the mesh).
+void CheckCurvedMesh(const Mesh& mesh, const QuadricSlab& slab, int rays,
+                     const std::vector<Vec3>& targets, const std::string& what) {
     const BrickTraverser tr(Brick::WholeMesh(mesh));
     EXPECT_GT(tr.Stats().curvedFaces, 0) << what;
     std::mt19937_64 rng(17);
     std::uniform_real_distribution<double> uni(0, 1);
-    std::vector<Segment> segs;
-    int tested = 0, multi = 0, exactCount = 0;
+    std::normal_distribution<double> gauss;
     const double lo = slab.xy[0], w = slab.xy[1] - slab.xy[0];
-    for (int i = 0; tested < rays; ++i) {
+    std::vector<Ray> random;
+    for (int i = 0; i < rays; ++i) {
         Vec3 from, to;
         for (int d = 0; d < 2; ++d) {
             from[d] = lo + w * (3 * uni(rng) - 1);
@@ -623,58 +704,94 @@ void CheckParaboloid(const Mesh& mesh, const ParaboloidSlab& slab, int rays,
         }
         from[2] = -3 + 7 * uni(rng);
         to[2] = -1 + 3 * uni(rng);
-        Ray ray = MakeRay(from, to);
-        if (i % 10 == 0) ray = MakeRayDir(to, {0.05 * (uni(rng) - 0.5), 0, -1}, 5);
-        if (!WellAway(ray, slab)) continue;
-        ++tested;
-        tr.Trace(ray, -INFINITY, INFINITY, segs);
-        const std::string rayText = " ray " + std::to_string(i) + " origin " +
-                                    ::testing::PrintToString(std::vector<double>(ray.origin, ray.origin + 3)) +
-                                    " dir " +
-                                    ::testing::PrintToString(std::vector<double>(ray.dir, ray.dir + 3));
-        const auto runs = Runs(segs, what);
-        const auto expect = SlabIntervals(ray, slab);
-        multi += expect.size() > 1;
-        // Exact (1e-10) unless the ray passes within the tessellation's deviation of a
-        // curved edge, where crossings decided on the node tessellation can pick the
-        // neighbouring face (see brick_traverser.h): then the chord error is bounded by
-        // the ray's path through the gap between tessellation and surface.
-        bool exact = runs.size() == expect.size();
-        for (std::size_t k = 0; exact && k < runs.size(); ++k)
-            exact = std::fabs(runs[k][0] - expect[k][0]) <= 1e-10 &&
-                    std::fabs(runs[k][1] - expect[k][1]) <= 1e-10;
-        double sumExpect = 0;
-        for (const auto& x : expect) sumExpect += x[1] - x[0];
-        EXPECT_NEAR(Sum(segs), sumExpect, 0.1) << what << rayText;
-        exactCount += exact;
-        if (::testing::Test::HasFailure()) return;
+        random.push_back(i % 10 == 0 ? MakeRayDir(to, {0.05 * (uni(rng) - 0.5), 0, -1}, 5)
+                                     : MakeRay(from, to));
     }
-    EXPECT_GE(exactCount, 0.9 * rays) << what;
-    std::printf("%s: %d of %d rays exact to 1e-10\n", what.c_str(), exactCount, rays);
-    EXPECT_GT(multi, 0) << what;
-    EXPECT_EQ(tr.Counters().walkFailures, 0);
+    std::vector<Ray> through;
+    for (std::size_t i = 0; i < targets.size(); ++i) {
+        const Vec3 dir = {gauss(rng), gauss(rng), gauss(rng)};
+        through.push_back(MakeRayDir(targets[i], dir, 3));
+    }
+    const CurvedStats a = CheckSlabRays(tr, slab, random, what + " random");
+    const CurvedStats b = CheckSlabRays(tr, slab, NearTangentRays(slab, rays / 3, rng),
+                                        what + " near-tangent");
+    const CurvedStats c = CheckSlabRays(tr, slab, through, what + " through edges");
+    std::printf("%s: %d random, %d near-tangent, %d through nodes/edges/faces rays exact to "
+                "1e-10; %d excluded within the tangency tolerance\n",
+                what.c_str(), a.tested, b.tested, c.tested, a.excluded + b.excluded + c.excluded);
+    EXPECT_GT(a.multi, 0) << what;
+    EXPECT_GT(b.tested, rays / 4) << what;
+    EXPECT_LT(a.excluded + c.excluded, (rays + int(targets.size())) / 100) << what;
+    const TraceCounters counters = tr.Counters();
+    EXPECT_EQ(counters.newtonFailures, 0) << what;
+    EXPECT_EQ(counters.walkRepairs, 0) << what;
+    EXPECT_EQ(counters.walkFailures, 0) << what;
+}
+
+// Points on the (mapped) corners, edges and faces of the cells of a straight mesh: the
+// image under `map` of points on the straight reference cells' edges and faces.
+std::vector<Vec3> MappedTargets(const Mesh& straight, const std::function<Vec3(Vec3)>& map,
+                                int n, unsigned seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Vec3> out;
+    for (int i = 0; i < n; ++i) {
+        const std::int64_t c = std::int64_t(uni(rng) * straight.CellCount()) % straight.CellCount();
+        const int nv = VertexCount(straight.cellShape[c]);
+        auto corner = [&](int k) {
+            const auto lat = VertexLattice(straight.cellShape[c], straight.cellOrder[c])[k];
+            const int node = InternalNodeIndex(straight.cellShape[c], straight.cellOrder[c],
+                                               straight.cellFamily[c], lat);
+            const double* x = &straight.points[3 * straight.CellNodes(c)[node]];
+            return Vec3{x[0], x[1], x[2]};
+        };
+        const int a = int(uni(rng) * nv) % nv, b = (a + 1 + int(uni(rng) * (nv - 1))) % nv;
+        const Vec3 A = corner(a), B = corner(b);
+        Vec3 X;
+        switch (i % 3) {
+            case 0: X = A; break;  // a vertex
+            case 1: {              // a point on an edge (or a diagonal of a hex)
+                const double s = uni(rng);
+                for (int d = 0; d < 3; ++d) X[d] = A[d] + s * (B[d] - A[d]);
+                break;
+            }
+            default: {  // a point on a triangle of three corners (a face of a tet)
+                const int e = (b + 1 + int(uni(rng) * (nv - 1))) % nv;
+                const Vec3 C = corner(e == a ? (e + 1) % nv : e);
+                double l1 = uni(rng), l2 = uni(rng);
+                if (l1 + l2 > 1) l1 = 1 - l1, l2 = 1 - l2;
+                for (int d = 0; d < 3; ++d) X[d] = A[d] + l1 * (B[d] - A[d]) + l2 * (C[d] - A[d]);
+            }
+        }
+        out.push_back(map(X));
+    }
+    return out;
 }
 
 TEST(BrickTraverser, QuadraticTetsReproduceParaboloidChords) {
     // Straight quadratic tets on [-1,1]^3 mapped by z -> (z - 1) / 2 + x^2 + y^2: the slab
     // x^2 + y^2 - 1 <= z <= x^2 + y^2 over the square [-1,1]^2.
-    Mesh mesh = MakeBuiltin("builtin:ball-p2?n=3");
+    const Mesh straight = MakeBuiltin("builtin:ball-p2?n=3");
+    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1]}; };
+    Mesh mesh = straight;
     for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
         double* x = &mesh.points[3 * i];
-        x[2] = 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1];
+        const Vec3 y = map({x[0], x[1], x[2]});
+        std::copy(y.begin(), y.end(), x);
     }
-    CheckParaboloid(mesh, ParaboloidSlab{{-1, 1}, {-1, 0}}, 3000, "p2 tets");
+    CheckCurvedMesh(mesh, QuadricSlab{{-1, 1}, {-1, 0}}, 6000, MappedTargets(straight, map, 3000, 5),
+                    "p2 tets");
 }
 
-TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
-    // Order-2 hexes on a 3^3 grid of [0,1]^3, nodes mapped by z -> z + x^2 + y^2.
-    const int n = 3, p = 2, g = n * p + 1;
+// Order-2 hexes on an n^3 grid of [0,1]^3 (nodes of the straight grid, then `map`).
+Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map) {
+    const int p = 2, g = n * p + 1;
     Mesh mesh;
     for (int k = 0; k < g; ++k)
         for (int j = 0; j < g; ++j)
             for (int i = 0; i < g; ++i) {
-                const double x = double(i) / (g - 1), y = double(j) / (g - 1), z = double(k) / (g - 1);
-                mesh.points.insert(mesh.points.end(), {x, y, z + x * x + y * y});
+                const Vec3 y = map({double(i) / (g - 1), double(j) / (g - 1), double(k) / (g - 1)});
+                mesh.points.insert(mesh.points.end(), y.begin(), y.end());
             }
     for (int c = 0; c < n; ++c)
         for (int b = 0; b < n; ++b)
@@ -686,7 +803,68 @@ TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
                             nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
                 mesh.AddCell(CellShape::Hex, p, CellFamily::Lagrange, nodes.data(), int(nodes.size()));
             }
-    CheckParaboloid(mesh, ParaboloidSlab{{0, 1}, {0, 1}}, 3000, "q2 hexes");
+    return mesh;
+}
+
+TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
+    // z -> z + x^2 + y^2 on [0,1]^3: the slab 0 <= z - x^2 - y^2 <= 1 over [0,1]^2.
+    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]}; };
+    const Mesh straight = GridHexes(3, [](Vec3 x) { return x; });
+    CheckCurvedMesh(GridHexes(3, map), QuadricSlab{{0, 1}, {0, 1}}, 6000,
+                    MappedTargets(straight, map, 3000, 6), "q2 hexes");
+}
+
+// Rays that leave a curved cell and re-enter it: the valley 0 <= z - 4 (x - 1/2)^2 <= 1
+// over [0,1]^2 as ONE quadratic hex, and as quadratic tets. A ray above the valley floor's
+// rim runs inside near x = 0, outside over the middle, inside again near x = 1.
+TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
+    const QuadricSlab valley{{0, 1}, {0, 1}, 4, 0, 0.5, 0};
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], x[2] + 4 * (x[0] - 0.5) * (x[0] - 0.5)};
+    };
+    std::mt19937_64 rng(29);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Ray> rays;
+    for (int i = 0; i < 3000; ++i) {
+        // Through the top surface's valley: height in (1, 2), a direction mostly along x.
+        const Vec3 at = {0.5, uni(rng), 1 + uni(rng)};
+        rays.push_back(MakeRayDir(at, {1, 0.3 * (uni(rng) - 0.5), 0.4 * (uni(rng) - 0.5)}, 2));
+    }
+    {
+        const Mesh hex = GridHexes(1, map);
+        const BrickTraverser tr(Brick::WholeMesh(hex));
+        EXPECT_EQ(tr.Stats().cells, 1);
+        const CurvedStats st = CheckSlabRays(tr, valley, rays, "valley hex");
+        EXPECT_GT(st.tested, 2900);
+        // The single cell is left and re-entered: two runs, both of cell 0.
+        std::vector<Segment> segs;
+        int twice = 0;
+        for (const Ray& ray : rays) {
+            if (!WellAway(ray, valley) || SlabIntervals(ray, valley).size() != 2) continue;
+            tr.Trace(ray, -INFINITY, INFINITY, segs);
+            ASSERT_EQ(segs.size(), 2u);
+            EXPECT_EQ(segs[0].cell, 0);
+            EXPECT_EQ(segs[1].cell, 0);
+            EXPECT_LT(segs[0].tExit, segs[1].tEnter);
+            ++twice;
+        }
+        EXPECT_GT(twice, 1000);
+        EXPECT_EQ(tr.Counters().newtonFailures, 0);
+        EXPECT_EQ(tr.Counters().walkFailures, 0);
+    }
+    {
+        Mesh tets = MakeBuiltin("builtin:cube-tets-2?order=2");
+        for (std::int64_t i = 0; i < tets.PointCount(); ++i) {
+            double* x = &tets.points[3 * i];
+            const Vec3 y = map({x[0], x[1], x[2]});
+            std::copy(y.begin(), y.end(), x);
+        }
+        const BrickTraverser tr(Brick::WholeMesh(tets));
+        const CurvedStats st = CheckSlabRays(tr, valley, rays, "valley tets");
+        EXPECT_GT(st.multi, 1000);
+        EXPECT_EQ(tr.Counters().newtonFailures, 0);
+        EXPECT_EQ(tr.Counters().walkFailures, 0);
+    }
 }
 
 }  // namespace
