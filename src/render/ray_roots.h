@@ -35,6 +35,8 @@ struct ProjectionOptions {
     int startDegree = 8;
     int maxDegree = 48;
     /// Pieces are halved when maxDegree does not reach the tolerance, down to this length.
+    /// startDegree == maxDegree pins the degree (order studies): it then also overrides
+    /// exactDegree, and pieces are not split.
     int maxSplits = 6;
     /// The scale the tolerance is relative to is at least this (e.g. the magnitude of the
     /// field over the whole mesh), so pieces where the field is nearly zero converge.
@@ -61,6 +63,10 @@ struct RootOptions {
     double rootTolerance = 1e-14;
     /// A tangent (double) root is accepted where |f - C| <= this + the piece's eps.
     double tangentTolerance = 0;
+    /// Polish roots on the true field (TOMS 748 on f - C). false: report the root of the
+    /// projection p - C in the bracket (for order studies); the residual is still that of
+    /// the true field there.
+    bool polish = true;
 };
 
 enum class RootKind : std::uint8_t { None = 0, Simple = 1, Tangent = 2 };
@@ -153,7 +159,8 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
             return InterpolateLgl(scratch.data(), n, w.lo, w.hi);
         };
         ProjectedPiece piece;
-        if (options.exactDegree > 0) {
+        const bool pinned = options.startDegree == options.maxDegree;
+        if (options.exactDegree > 0 && !pinned) {
             const int n = std::min(options.exactDegree, kMaxLegendreDegree);
             piece.p = sample(n);
             // The interpolant is exact up to rounding in the samples and the transform.
@@ -185,7 +192,7 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                 }
                 n = std::min(2 * n, options.maxDegree);
             }
-            if (!piece.converged && w.depth < options.maxSplits && top + 2 <= 64) {
+            if (!piece.converged && !pinned && w.depth < options.maxSplits && top + 2 <= 64) {
                 stack[top++] = {mid, w.hi, w.depth + 1};
                 stack[top++] = {w.lo, mid, w.depth + 1};
                 continue;
@@ -299,6 +306,24 @@ int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                     if (glo == 0 || ghi == 0) {
                         const double t = glo == 0 ? lo : hi;
                         result = {RootKind::Simple, t, 0.0, result.failures};
+                        return stop = onRoot(result);
+                    }
+                    if (!options.polish) {
+                        const double plo = piece.p(lo) - C, phi = piece.p(hi) - C;
+                        double t = lo;
+                        if ((plo < 0) != (phi < 0) && plo != 0 && phi != 0) {
+                            auto q = [&](double x) { return piece.p(x) - C; };
+                            auto tol = [&](double x, double y) {
+                                return std::abs(y - x) <= minWidth;
+                            };
+                            std::uintmax_t iterations = 200;
+                            auto r = boost::math::tools::toms748_solve(q, lo, hi, plo, phi,
+                                                                       tol, iterations);
+                            t = 0.5 * (r.first + r.second);
+                        } else {
+                            t = std::abs(plo) <= std::abs(phi) ? lo : hi;
+                        }
+                        result = {RootKind::Simple, t, std::abs(f(t) - C), result.failures};
                         return stop = onRoot(result);
                     }
                     auto g = [&](double t) { return f(t) - C; };

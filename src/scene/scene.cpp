@@ -72,7 +72,7 @@ const SchemaNode& Schema() {
             Leaf("background"),
             MapOf("accuracy",
                   {"mapping_tolerance", "projection_order", "projection_tolerance",
-                   "root_tolerance", "volume_tolerance"}),
+                   "root_tolerance", "volume_tolerance", "polish"}),
             MapOf("clip", {"near", "far", "box"}),
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
             Leaf("threads"),
@@ -767,6 +767,16 @@ void SceneParser::ReadAccuracy(const YAML::Node& root, Scene& scene) const {
                 Fail(path, n, "must be auto or in [1, 64], got " + std::to_string(order));
             a.projectionOrder = static_cast<int>(order);
         }
+    }
+    if (Has(acc, "polish")) {
+        const YAML::Node n = Get(acc, "polish");
+        const std::string v = n.IsScalar() ? n.Scalar() : "";
+        if (v == "true")
+            a.polish = true;
+        else if (v == "false")
+            a.polish = false;
+        else
+            Fail("accuracy.polish", n, "expected true or false, got " + Describe(n));
     }
 }
 

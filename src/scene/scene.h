@@ -102,6 +102,9 @@ struct SceneAccuracy {
     double projectionTolerance = 1e-12;  ///< eps_P
     double rootTolerance = 1e-14;        ///< eps_R: in the ray parameter t
     double volumeTolerance = 1e-10;      ///< eps_V: absolute error of pixel RGB
+    /// Polish every isosurface root on the true field (default). false reports the root
+    /// of the Legendre projection itself, as Nelson & Kirby did: for order studies only.
+    bool polish = true;
 };
 
 /// `clip:` ray parameter range and optional world box. near >= 0, far > near (may be
