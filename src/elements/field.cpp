@@ -31,7 +31,7 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     const double* d = ws.dRef.data();
     double f = 0.0, g[3] = {0.0, 0.0, 0.0};
     const bool tensor = cell.basis->kind == BasisKind::HexLagrange;
-    if (tensor && cell.affine) {
+    if (tensor) {
         f = HexFieldValueGradient(cell.basis->order, field.nodal, ref, g);
     } else {
         const double* v = ws.values.data();
@@ -48,6 +48,10 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     double jac[9], inv[9];
     if (cell.affine) {
         std::copy(cell.inverseLinear.begin(), cell.inverseLinear.end(), inv);
+    } else if (tensor) {
+        double world[3];
+        HexMapValueJacobian(cell.basis->order, cell.nodes, ref, world, jac);
+        if (Invert3x3(jac, inv) == 0.0) return false;
     } else {
         // The basis derivatives are still in ws.dRef: contract them with the nodes.
         for (double& x : jac) x = 0.0;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "elements/tensor_eval.h"
 #include "util/check.h"
 
 namespace hpray {
@@ -220,6 +221,10 @@ void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& 
         MatVec(cell.linear.data(), ref, world);
         for (int d = 0; d < 3; ++d) world[d] += cell.origin[d];
         if (jacobian) std::copy(cell.linear.begin(), cell.linear.end(), jacobian);
+        return;
+    }
+    if (cell.basis->kind == BasisKind::HexLagrange) {
+        HexMapValueJacobian(cell.basis->order, cell.nodes, ref, world, jacobian);
         return;
     }
     const int n = cell.basis->nodeCount;

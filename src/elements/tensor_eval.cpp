@@ -91,6 +91,48 @@ double HexFieldValueGradient(int p, const double* u, const double ref[3], double
     return f;
 }
 
+void HexMapValueJacobian(int p, const double* xyz, const double ref[3], double world[3],
+                         double* jacobian) {
+    double l[3][kMaxOrder + 1], dl[3][kMaxOrder + 1];
+    for (int d = 0; d < 3; ++d) LagrangeEquispaced1D(p, ref[d], l[d], jacobian ? dl[d] : nullptr);
+    const int n = p + 1;
+    double x[3] = {0, 0, 0}, dr[3] = {0, 0, 0}, ds[3] = {0, 0, 0}, dt[3] = {0, 0, 0};
+    for (int k = 0; k < n; ++k) {
+        double xk[3] = {0, 0, 0}, drk[3] = {0, 0, 0}, dsk[3] = {0, 0, 0};
+        for (int j = 0; j < n; ++j) {
+            const double* row = xyz + 3 * n * (j + n * k);
+            double xj[3] = {0, 0, 0}, drj[3] = {0, 0, 0};
+            for (int i = 0; i < n; ++i)
+                for (int c = 0; c < 3; ++c) {
+                    xj[c] += row[3 * i + c] * l[0][i];
+                    if (jacobian) drj[c] += row[3 * i + c] * dl[0][i];
+                }
+            for (int c = 0; c < 3; ++c) {
+                xk[c] += xj[c] * l[1][j];
+                if (jacobian) {
+                    drk[c] += drj[c] * l[1][j];
+                    dsk[c] += xj[c] * dl[1][j];
+                }
+            }
+        }
+        for (int c = 0; c < 3; ++c) {
+            x[c] += xk[c] * l[2][k];
+            if (jacobian) {
+                dr[c] += drk[c] * l[2][k];
+                ds[c] += dsk[c] * l[2][k];
+                dt[c] += xk[c] * dl[2][k];
+            }
+        }
+    }
+    for (int c = 0; c < 3; ++c) world[c] = x[c];
+    if (!jacobian) return;
+    for (int c = 0; c < 3; ++c) {
+        jacobian[3 * c] = dr[c];
+        jacobian[3 * c + 1] = ds[c];
+        jacobian[3 * c + 2] = dt[c];
+    }
+}
+
 namespace {
 
 // The contractions of HexFieldValuesAlongLine for N = p + 1 nodes per direction and S

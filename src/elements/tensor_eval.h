@@ -14,6 +14,11 @@ double HexFieldValue(int p, const double* u, const double ref[3]);
 /// f(ref) and its reference gradient.
 double HexFieldValueGradient(int p, const double* u, const double ref[3], double dRef[3]);
 
+/// The map of a Lagrange hexahedron with interleaved node coordinates xyz (internal order):
+/// world point and, if jacobian is not null, d world_i / d ref_j (row-major).
+void HexMapValueJacobian(int p, const double* xyz, const double ref[3], double world[3],
+                         double* jacobian);
+
 /// f at the n points ref0 + t[s] * dref (a straight line in reference space), into out[s].
 /// `scratch` must hold HexLineScratchSize(p, n) doubles.
 void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
