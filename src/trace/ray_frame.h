@@ -55,9 +55,16 @@ struct RayFrame {
         sz = 1.0 / dir[kz];
     }
 
+    /// Bitwise the same in every translation unit whatever its -ffp-contract setting: on
+    /// targets with FMA the shear is an explicit fused multiply-add (nothing left for the
+    /// compiler to fuse differently), elsewhere nothing can be fused.
     ShearedPoint Transform(const double* p) const {
         const double a[3] = {p[0] - org[0], p[1] - org[1], p[2] - org[2]};
+#if defined(__FMA__) || defined(__ARM_FEATURE_FMA)
+        return {std::fma(-sx, a[kz], a[kx]), std::fma(-sy, a[kz], a[ky]), sz * a[kz]};
+#else
         return {a[kx] - sx * a[kz], a[ky] - sy * a[kz], sz * a[kz]};
+#endif
     }
 };
 

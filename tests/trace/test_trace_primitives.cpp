@@ -1,11 +1,16 @@
 // Tests of the traversal primitives: exact edge signs, the watertight triangle test, the
-// ray-bilinear patch closed form and the face bases.
+// ray-bilinear patch closed form, the face bases, and curved faces (Bernstein nets, exact
+// crossings and their edge rule).
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <functional>
 #include <random>
+#include <vector>
 
 #include "trace/bilinear_patch.h"
+#include "trace/curved_face.h"
 #include "trace/face_map.h"
 #include "trace/ray_frame.h"
 
@@ -194,6 +199,300 @@ TEST(FaceBasis, KroneckerPartitionOfUnityAndDerivatives) {
                 EXPECT_NEAR(Nv[k], (Np[k] - Nm[k]) / (2 * h), 1e-5 * (1 + std::fabs(Nv[k])));
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Curved faces
+
+// A polynomial map of degree p (total degree for triangles, per variable for quads).
+struct PolyMap {
+    bool triangle;
+    int p;
+    std::vector<std::array<double, 3>> c;  // coefficient of u^a v^b, a, b <= p
+
+    PolyMap(bool tri, int order, std::mt19937_64& rng) : triangle(tri), p(order) {
+        std::uniform_real_distribution<double> uni(-1, 1);
+        c.resize((p + 1) * (p + 1));
+        for (int b = 0; b <= p; ++b)
+            for (int a = 0; a <= p; ++a)
+                for (int d = 0; d < 3; ++d)
+                    c[b * (p + 1) + a][d] = (tri && a + b > p) ? 0 : uni(rng) / (1 + a + b);
+    }
+    void Eval(double u, double v, double* f, double* fu, double* fv) const {
+        for (int d = 0; d < 3; ++d) f[d] = fu[d] = fv[d] = 0;
+        for (int b = 0; b <= p; ++b)
+            for (int a = 0; a <= p; ++a)
+                for (int d = 0; d < 3; ++d) {
+                    const double k = c[b * (p + 1) + a][d];
+                    f[d] += k * std::pow(u, a) * std::pow(v, b);
+                    if (a > 0) fu[d] += k * a * std::pow(u, a - 1) * std::pow(v, b);
+                    if (b > 0) fv[d] += k * b * std::pow(u, a) * std::pow(v, b - 1);
+                }
+    }
+};
+
+TEST(CurvedFace, BernsteinNetsReproducePolynomialMaps) {
+    std::mt19937_64 rng(19);
+    std::uniform_real_distribution<double> uni(0, 1);
+    for (bool tri : {true, false})
+        for (int p = 1; p <= 10; ++p) {
+            const PolyMap map(tri, p, rng);
+            const int n = NetSize(tri, p);
+            std::vector<double> nodal(3 * n), net(3 * n);
+            const FaceBasis basis = tri ? FaceBasis::Triangle : FaceBasis::Quad;
+            ASSERT_EQ(n, FaceNodeCount(basis, p));
+            for (int m = 0; m < n; ++m) {
+                const auto ij = FaceNodeLattice(basis, p, m);
+                double f[3], fu[3], fv[3];
+                map.Eval(double(ij[0]) / p, double(ij[1]) / p, f, fu, fv);
+                for (int d = 0; d < 3; ++d) nodal[3 * m + d] = f[d];
+            }
+            FaceBernstein(tri, p, nodal.data(), net.data());
+            std::vector<ShearedPoint> pts(n);
+            for (int m = 0; m < n; ++m) pts[m] = {net[3 * m], net[3 * m + 1], net[3 * m + 2]};
+            const double tol = p <= 4 ? 1e-13 : 1e-10;
+            for (int i = 0; i < 50; ++i) {
+                double u = uni(rng), v = uni(rng);
+                if (tri && u + v > 1) u = 1 - u, v = 1 - v;
+                double f[3], fu[3], fv[3], g[3], gu[3], gv[3];
+                map.Eval(u, v, f, fu, fv);
+                EvalNet(tri, p, pts.data(), u, v, g, gu, gv);
+                for (int d = 0; d < 3; ++d) {
+                    EXPECT_NEAR(g[d], f[d], tol) << tri << " p " << p;
+                    EXPECT_NEAR(gu[d], fu[d], 20 * tol) << tri << " p " << p;
+                    EXPECT_NEAR(gv[d], fv[d], 20 * tol) << tri << " p " << p;
+                }
+            }
+            // The boundary rows are the edges' own Bernstein points (what neighbouring
+            // faces are given for a shared edge), and the corners are the corner nodes.
+            for (int e = 0; e < (tri ? 3 : 4); ++e) {
+                std::vector<double> en(3 * (p + 1)), eb(3 * (p + 1));
+                for (int k = 0; k <= p; ++k)
+                    for (int d = 0; d < 3; ++d)
+                        en[3 * k + d] = nodal[3 * EdgeLatticeIndex(tri, p, e, k) + d];
+                EdgeBernstein(p, en.data(), eb.data());
+                for (int k = 0; k <= p; ++k)
+                    for (int d = 0; d < 3; ++d)
+                        EXPECT_NEAR(eb[3 * k + d], net[3 * EdgeLatticeIndex(tri, p, e, k) + d], tol);
+                for (int d = 0; d < 3; ++d) {
+                    EXPECT_EQ(eb[d], en[d]);
+                    EXPECT_EQ(net[3 * EdgeLatticeIndex(tri, p, e, 0) + d], en[d]);
+                }
+            }
+        }
+}
+
+// A surface z = h(x, y) cut into faces over a fan of parameter-plane polygons around a
+// centre, built as the traversal builds them: nodes on the surface, Bernstein nets, every
+// boundary row replaced by the edge's points computed from its nodes in a canonical order
+// (straight edges: points on the segment).
+struct Fan {
+    std::vector<std::vector<double>> nets;
+    std::vector<CurvedFace> faces;
+    std::vector<bool> planar;  // a planar triangle: crossed by CrossTriangle instead
+    std::vector<std::array<std::array<double, 3>, 3>> triangles;
+};
+
+void AddFace(Fan& fan, const std::function<double(double, double)>& h,
+             const std::vector<std::array<double, 2>>& corners, int p) {
+    const bool tri = corners.size() == 3;
+    const int n = NetSize(tri, p);
+    const FaceBasis basis = tri ? FaceBasis::Triangle : FaceBasis::Quad;
+    std::vector<double> nodal(3 * n), net(3 * n);
+    for (int m = 0; m < n; ++m) {
+        const auto ij = FaceNodeLattice(basis, p, m);
+        const double u = double(ij[0]) / p, v = double(ij[1]) / p;
+        double xy[2];
+        for (int d = 0; d < 2; ++d)
+            xy[d] = tri ? corners[0][d] + u * (corners[1][d] - corners[0][d]) +
+                              v * (corners[2][d] - corners[0][d])
+                        : (1 - u) * (1 - v) * corners[0][d] + u * (1 - v) * corners[1][d] +
+                              u * v * corners[2][d] + (1 - u) * v * corners[3][d];
+        nodal[3 * m] = xy[0];
+        nodal[3 * m + 1] = xy[1];
+    }
+    // Nodes on an edge are computed from the edge's end points in a canonical order, so
+    // the faces sharing it hold bitwise the same nodes, as merged mesh nodes are.
+    const int nc = tri ? 3 : 4;
+    for (int e = 0; e < nc; ++e) {
+        std::array<double, 2> a = corners[e], b = corners[(e + 1) % nc];
+        const bool flip = b < a;
+        if (flip) std::swap(a, b);
+        for (int k = 0; k <= p; ++k) {
+            const int m = EdgeLatticeIndex(tri, p, e, flip ? p - k : k);
+            for (int d = 0; d < 2; ++d)
+                nodal[3 * m + d] = k == 0 ? a[d] : k == p ? b[d] : a[d] + (double(k) / p) * (b[d] - a[d]);
+        }
+    }
+    for (int m = 0; m < n; ++m) nodal[3 * m + 2] = h(nodal[3 * m], nodal[3 * m + 1]);
+    FaceBernstein(tri, p, nodal.data(), net.data());
+    std::uint8_t straight = 0;
+    for (int e = 0; e < (tri ? 3 : 4); ++e) {
+        std::vector<std::array<double, 3>> en(p + 1);
+        for (int k = 0; k <= p; ++k)
+            for (int d = 0; d < 3; ++d) en[k][d] = nodal[3 * EdgeLatticeIndex(tri, p, e, k) + d];
+        const bool reversed = en[p] < en[0];
+        if (reversed) std::reverse(en.begin(), en.end());
+        std::vector<double> row(3 * (p + 1));
+        bool isStraight = true;
+        for (int k = 1; k < p; ++k)
+            for (int d = 0; d < 3; ++d)
+                isStraight = isStraight &&
+                             std::fabs(en[k][d] - (en[0][d] + (double(k) / p) * (en[p][d] - en[0][d]))) < 1e-13;
+        if (isStraight) {
+            straight = std::uint8_t(straight | (1u << e));
+            for (int k = 0; k <= p; ++k)
+                for (int d = 0; d < 3; ++d)
+                    row[3 * k + d] = k == 0 ? en[0][d] : k == p ? en[p][d]
+                                     : en[0][d] + (double(k) / p) * (en[p][d] - en[0][d]);
+        } else {
+            EdgeBernstein(p, en[0].data(), row.data());
+        }
+        for (int k = 0; k <= p; ++k)
+            for (int d = 0; d < 3; ++d)
+                net[3 * EdgeLatticeIndex(tri, p, e, k) + d] = row[3 * (reversed ? p - k : k) + d];
+    }
+    fan.nets.push_back(net);
+    CurvedFace face;
+    face.triangle = tri;
+    face.order = p;
+    face.straightEdges = straight;
+    face.size = 1;
+    fan.faces.push_back(face);
+    fan.planar.push_back(false);
+    fan.triangles.push_back({});
+}
+
+void AddPlanarTriangle(Fan& fan, const std::function<double(double, double)>& h,
+                       const std::vector<std::array<double, 2>>& corners) {
+    std::array<std::array<double, 3>, 3> t;
+    for (int k = 0; k < 3; ++k) t[k] = {corners[k][0], corners[k][1], h(corners[k][0], corners[k][1])};
+    fan.nets.emplace_back();
+    fan.faces.emplace_back();
+    fan.planar.push_back(true);
+    fan.triangles.push_back(t);
+}
+
+// Crossings of the ray with all faces of the fan: count, t and side of the last one.
+int CrossFan(const Fan& fan, const Ray& ray, double& t, int& side) {
+    const RayFrame frame(ray);
+    int count = 0;
+    for (std::size_t f = 0; f < fan.faces.size(); ++f) {
+        if (fan.planar[f]) {
+            TriangleCrossing x;
+            if (CrossTriangle(frame.Transform(fan.triangles[f][0].data()),
+                              frame.Transform(fan.triangles[f][1].data()),
+                              frame.Transform(fan.triangles[f][2].data()), x)) {
+                ++count;
+                t = x.t;
+                side = x.side;
+            }
+            continue;
+        }
+        CurvedFace face = fan.faces[f];
+        face.net = fan.nets[f].data();
+        std::vector<FaceCrossing> xs;
+        EXPECT_EQ(CrossCurvedFace(face, frame, CurvedFaceOptions{}, xs), 0);
+        for (const auto& x : xs) {
+            ++count;
+            t = x.t;
+            side = x.side;
+        }
+    }
+    return count;
+}
+
+// Rays through points of the surface on the fan's shared edges and vertices (and inside
+// faces) must cross the fan exactly once, at t = 3 (the ray starts 3 before the point),
+// on the side of the upward normal.
+void CheckFan(const Fan& fan, const std::function<double(double, double)>& h,
+              const std::function<std::array<double, 2>(std::mt19937_64&)>& target,
+              const std::string& what) {
+    std::mt19937_64 rng(23);
+    std::uniform_real_distribution<double> uni(-1, 1);
+    for (int i = 0; i < 4000; ++i) {
+        const auto xy = target(rng);
+        const double X[3] = {xy[0], xy[1], h(xy[0], xy[1])};
+        double dir[3] = {0.5 * uni(rng), 0.5 * uni(rng), i % 2 ? 1.0 : -1.0}, len = 0;
+        for (double d : dir) len += d * d;
+        Ray ray;
+        for (int d = 0; d < 3; ++d) {
+            ray.dir[d] = dir[d] / std::sqrt(len);
+            ray.origin[d] = X[d] - 3 * ray.dir[d];
+        }
+        double t = 0;
+        int side = 0;
+        ASSERT_EQ(CrossFan(fan, ray, t, side), 1) << what << " ray " << i;
+        EXPECT_NEAR(t, 3, 1e-12) << what << " ray " << i;
+        // Upward normal (-h_x, -h_y, 1); h's slopes here are below 1 while |dir_z| > 0.8.
+        EXPECT_EQ(side, ray.dir[2] > 0 ? 1 : -1) << what << " ray " << i;
+    }
+}
+
+// Fans on dyadic parameter-plane corners, so that every node a face computes (corners,
+// and lattice points at multiples of 1/2 or 1/4 along edges) is bitwise the node its
+// neighbour computes, as merged mesh nodes are.
+TEST(CurvedFace, FansAroundCurvedVerticesAreCrossedExactlyOnce) {
+    const double cx = 0.125, cy = -0.1875, r = 0.25;
+    const auto paraboloid = [](double x, double y) { return x * x + y * y; };
+    const auto cubic = [](double x, double y) { return x * x + 0.5 * y * y + 0.4 * x * x * x; };
+    // The ring of 8 corners around the centre, counter-clockwise.
+    const double ring[8][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 1}, {-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
+    // Points on the fan: the centre, a random point on a spoke (a shared curved edge), or
+    // anywhere inside.
+    auto target = [&](int step) {
+        return [=](std::mt19937_64& rng) {
+            std::uniform_real_distribution<double> uni(0, 1);
+            const int kind = int(3 * uni(rng));
+            if (kind == 0) return std::array<double, 2>{cx, cy};
+            const double s = 0.95 * uni(rng);
+            if (kind == 1) {
+                const int k = step * (int(8 * uni(rng)) / step);
+                return std::array<double, 2>{cx + s * r * ring[k][0], cy + s * r * ring[k][1]};
+            }
+            const double ang = 2 * M_PI * uni(rng);
+            return std::array<double, 2>{cx + s * r * std::cos(ang), cy + s * r * std::sin(ang)};
+        };
+    };
+    for (int p : {2, 4}) {
+        const auto h = p == 2 ? std::function<double(double, double)>(paraboloid)
+                              : std::function<double(double, double)>(cubic);
+        Fan tris;  // eight triangles around the centre
+        for (int k = 0; k < 8; ++k)
+            AddFace(tris, h, {{cx, cy}, {cx + r * ring[k][0], cy + r * ring[k][1]},
+                              {cx + r * ring[(k + 1) % 8][0], cy + r * ring[(k + 1) % 8][1]}}, p);
+        CheckFan(tris, h, target(1), "triangles p" + std::to_string(p));
+        Fan quads;  // four quadrilaterals around the centre
+        for (int k = 0; k < 8; k += 2)
+            AddFace(quads, h, {{cx, cy}, {cx + r * ring[k][0], cy + r * ring[k][1]},
+                               {cx + r * ring[k + 1][0], cy + r * ring[k + 1][1]},
+                               {cx + r * ring[(k + 2) % 8][0], cy + r * ring[(k + 2) % 8][1]}}, p);
+        CheckFan(quads, h, target(2), "quads p" + std::to_string(p));
+    }
+}
+
+TEST(CurvedFace, StraightEdgeSharedWithPlanarFacesIsCrossedExactlyOnce) {
+    // A tilted plane for y <= 0 (planar triangles), the same plus y^2 for y >= 0 (curved
+    // faces whose edges on y = 0 are straight), on non-dyadic corners: rays through the
+    // straight shared edges and their vertices pass within rounding of them.
+    const auto h = [](double x, double y) { return 0.3 * x + 0.1 * y + (y > 0 ? y * y : 0.0); };
+    const double xs[4] = {-0.6, -0.1, 0.35, 0.7};
+    Fan fan;
+    for (int k = 0; k + 1 < 4; ++k) {
+        const double x0 = xs[k], x1 = xs[k + 1];
+        AddPlanarTriangle(fan, h, {{x0, 0}, {x0, -0.5}, {x1, 0}});
+        AddPlanarTriangle(fan, h, {{x1, 0}, {x0, -0.5}, {x1, -0.5}});
+        AddFace(fan, h, {{x0, 0}, {x1, 0}, {x1, 0.5}}, 2);
+        AddFace(fan, h, {{x0, 0}, {x1, 0.5}, {x0, 0.5}}, 2);
+    }
+    for (std::size_t f = 0; f < fan.faces.size(); f += 4) EXPECT_EQ(fan.faces[f + 2].straightEdges, 1);
+    CheckFan(fan, h,
+             [&](std::mt19937_64& rng) {
+                 std::uniform_real_distribution<double> uni(0, 1);
+                 const double x = uni(rng) < 0.3 ? xs[1 + int(2 * uni(rng))] : -0.5 + 1.1 * uni(rng);
+                 return std::array<double, 2>{x, uni(rng) < 0.7 ? 0.0 : 0.4 * uni(rng) - 0.2};
+             },
+             "planar and curved");
 }
 
 }  // namespace
