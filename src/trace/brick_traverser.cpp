@@ -1086,9 +1086,9 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
 }
 
 // Exit search when the exact one found none: this happens only where two cells represent
-// a shared edge differently (a straight face next to a curved face whose edge nodes are
-// within straightTolerance of the straight edge). Takes the leaving tessellation
-// triangle the ray misses by the least, if it misses by a relative 1e-6 at most.
+// a shared edge differently (non-conforming meshes: an edge with nodes on one side only).
+// Takes the leaving tessellation triangle the ray misses by the least, if it misses by a
+// relative 1e-6 at most.
 bool BrickTraverser::Impl::TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
                                         Crossing& exit) const {
     std::vector<std::array<std::int32_t, 3>> tris;

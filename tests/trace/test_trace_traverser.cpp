@@ -783,8 +783,9 @@ TEST(BrickTraverser, QuadraticTetsReproduceParaboloidChords) {
                     "p2 tets");
 }
 
-// Order-2 hexes on an n^3 grid of [0,1]^3 (nodes of the straight grid, then `map`).
-Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map) {
+// Order-2 hexes on an n^3 grid of [0,1]^3 (nodes of the straight grid, then `map`);
+// serendipity: the 20-node hexes (no face or body centres).
+Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map, bool serendipity = false) {
     const int p = 2, g = n * p + 1;
     Mesh mesh;
     for (int k = 0; k < g; ++k)
@@ -799,9 +800,13 @@ Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map) {
                 std::vector<std::int64_t> nodes;
                 for (int k = 0; k <= p; ++k)
                     for (int j = 0; j <= p; ++j)
-                        for (int i = 0; i <= p; ++i)
+                        for (int i = 0; i <= p; ++i) {
+                            if (serendipity && (i == 1) + (j == 1) + (k == 1) >= 2) continue;
                             nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
-                mesh.AddCell(CellShape::Hex, p, CellFamily::Lagrange, nodes.data(), int(nodes.size()));
+                        }
+                mesh.AddCell(CellShape::Hex, p,
+                             serendipity ? CellFamily::Serendipity : CellFamily::Lagrange,
+                             nodes.data(), int(nodes.size()));
             }
     return mesh;
 }
@@ -812,6 +817,14 @@ TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
     const Mesh straight = GridHexes(3, [](Vec3 x) { return x; });
     CheckCurvedMesh(GridHexes(3, map), QuadricSlab{{0, 1}, {0, 1}}, 6000,
                     MappedTargets(straight, map, 3000, 6), "q2 hexes");
+}
+
+TEST(BrickTraverser, SerendipityHexesReproduceParaboloidChords) {
+    // 20-node hexes: x^2 + y^2 lies in the serendipity space, so the same slab is exact.
+    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]}; };
+    const Mesh straight = GridHexes(3, [](Vec3 x) { return x; }, true);
+    CheckCurvedMesh(GridHexes(3, map, true), QuadricSlab{{0, 1}, {0, 1}}, 3000,
+                    MappedTargets(straight, map, 1500, 7), "hex20");
 }
 
 // Rays that leave a curved cell and re-enter it: the valley 0 <= z - 4 (x - 1/2)^2 <= 1
