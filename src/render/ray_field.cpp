@@ -5,26 +5,88 @@
 #include <cmath>
 #include <limits>
 
+#include <tbb/parallel_for.h>
+
 #include "elements/tensor_eval.h"
 
 namespace hpray {
 
-void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
+FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometry,
+                                   const ScalarSelector& field) {
+    FieldCellData d;
+    d.mesh = &mesh;
+    const std::int64_t cells = mesh.CellCount();
+    d.values.resize(mesh.connectivity.size());
+    const double inf = std::numeric_limits<double>::infinity();
+    d.refGradBound.assign(cells, {inf, inf, inf});
+    if (field.field->association != Association::Point) return d;
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 256),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        std::vector<double> nodal, deriv[3];
+        EvalWorkspace ws;
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            GatherCellValues(mesh, *field.field, field.component, c, nodal);
+            std::copy(nodal.begin(), nodal.end(), d.values.begin() + mesh.cellOffsets[c]);
+            const CellGeometry& cell = geometry.cells[c];
+            const BasisTable& basis = *cell.basis;
+            if (!cell.affine || !basis.polynomial) continue;
+            // Reference derivatives at the nodes: exact nodal interpolants of dF/dref_d.
+            const int n = basis.nodeCount;
+            for (auto& v : deriv) v.assign(n, 0.0);
+            for (int m = 0; m < n; ++m) {
+                const double ref[3] = {basis.refNodes[m][0], basis.refNodes[m][1],
+                                       basis.refNodes[m][2]};
+                EvalBasis(basis, ref, ws.values.data(), ws.dRef.data());
+                for (int q = 0; q < n; ++q)
+                    for (int a = 0; a < 3; ++a) deriv[a][m] += nodal[q] * ws.dRef[3 * q + a];
+            }
+            for (int a = 0; a < 3; ++a) {
+                const Interval i = FieldBounds(basis, deriv[a].data());
+                d.refGradBound[c][a] = std::max(std::abs(i.lo), std::abs(i.hi));
+            }
+        }
+    });
+    return d;
+}
+
+void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {
+    BeginCommon(geometry, field, c, ray, inversion);
+    scalar_.nodal = data.values.data() + data.mesh->cellOffsets[c];
+    gradBound_ = &data.refGradBound[c];
+    lineDegree_ = cell_->basis->lineDegree;
+}
+
+bool SegmentField::MayReach(const double* isovalues, int count, double t0, double t1) {
+    if (!gradBound_ || !affine_ || !scalar_.nodal) return true;
+    // |df/dt| = |grad_ref f . dref/dt| <= sum_d M_d |dref_d|.
+    double lipschitz = 0;
+    for (int a = 0; a < 3; ++a) lipschitz += (*gradBound_)[a] * std::abs(dref_[a]);
+    if (!std::isfinite(lipschitz)) return true;
+    auto excluded = [&](double value, double halfWidth) {
+        // A small relative margin covers the rounding of the evaluation.
+        const double reach = lipschitz * halfWidth * (1 + 1e-12) + 1e-13 * std::abs(value);
+        for (int k = 0; k < count; ++k)
+            if (std::abs(value - isovalues[k]) <= reach) return false;
+        return true;
+    };
+    const double h = 0.5 * (t1 - t0);
+    if (excluded((*this)(t0 + h), h)) return false;
+    return !(excluded((*this)(t0 + 0.5 * h), 0.5 * h) &&
+             excluded((*this)(t1 - 0.5 * h), 0.5 * h));
+}
+
+void SegmentField::BeginCommon(const MeshGeometry& geometry, const ScalarSelector& field,
+                               std::int64_t c, const Ray& ray,
+                               const InversionOptions& inversion) {
+    (void)field;
     cell_ = &geometry.cells[c];
     ray_ = ray;
     inversion_ = inversion;
-    if (field.field->association == Association::Point) {
-        GatherCellValues(mesh, *field.field, field.component, c, nodal_);
-        scalar_.nodal = nodal_.data();
-    } else {
-        scalar_.nodal = nullptr;
-        scalar_.constant = ScalarValue(field, c);
-    }
+    gradBound_ = nullptr;
     affine_ = cell_->affine && cell_->linearInvertible;
     exact_ = affine_ && cell_->basis->polynomial;
-    lineDegree_ = scalar_.nodal ? cell_->basis->lineDegree : 0;
     guessCount_ = 0;
     if (affine_) {
         // ref(t) = L^-1 (o + t d - origin): linear in t.
@@ -37,6 +99,20 @@ void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
                        inv[3 * i + 2] * ray.dir[2];
         }
     }
+}
+
+void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
+                         const ScalarSelector& field, std::int64_t c, const Ray& ray,
+                         const InversionOptions& inversion) {
+    BeginCommon(geometry, field, c, ray, inversion);
+    if (field.field->association == Association::Point) {
+        GatherCellValues(mesh, *field.field, field.component, c, nodal_);
+        scalar_.nodal = nodal_.data();
+    } else {
+        scalar_.nodal = nullptr;
+        scalar_.constant = ScalarValue(field, c);
+    }
+    lineDegree_ = scalar_.nodal ? cell_->basis->lineDegree : 0;
 }
 
 void SegmentField::RefAt(double t, double ref[3]) {

@@ -2,6 +2,7 @@
 // (closed form in affine cells, warm-started Newton in curved ones) -> true field value.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -12,6 +13,20 @@
 
 namespace hpray {
 
+/// Per-cell data of one scalar field, built once per brick and shared by all threads: the
+/// nodal values gathered in internal order (segments then need no gather) and, for affine
+/// cells of polynomial spaces, a guaranteed bound of |df/dref_d| over the cell (the
+/// derivatives lie in the cell's space, so their nodal interpolants are exact and the
+/// Bernstein hull bounds them), used to rule out crossings without projecting.
+struct FieldCellData {
+    const Mesh* mesh = nullptr;
+    std::vector<double> values;  ///< cell c's values start at mesh->cellOffsets[c]
+    std::vector<std::array<double, 3>> refGradBound;  ///< +inf where no bound is kept
+
+    static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
+                               const ScalarSelector& field);
+};
+
 /// Per-thread evaluator of one scalar field along a ray inside one cell. Reused across
 /// segments without allocation once its buffers have grown to the largest cell.
 class SegmentField {
@@ -20,6 +35,16 @@ public:
     /// values of `field` and, for affine cells, the linear map t -> reference point.
     void Begin(const Mesh& mesh, const MeshGeometry& geometry, const ScalarSelector& field,
                std::int64_t c, const Ray& ray, const InversionOptions& inversion);
+    /// The same with the field's pre-gathered cell data (no gather; enables MayReach).
+    void Begin(const FieldCellData& data, const MeshGeometry& geometry,
+               const ScalarSelector& field, std::int64_t c, const Ray& ray,
+               const InversionOptions& inversion);
+
+    /// False only when it is proven that f - C has no root on [t0, t1] for any of the
+    /// `count` isovalues C: by the mean value theorem with the cell's derivative bound,
+    /// from f at the midpoint and, if needed, at the quarter points. True otherwise
+    /// (including cells without a bound). Requires Begin with FieldCellData.
+    bool MayReach(const double* isovalues, int count, double t0, double t1);
 
     /// The field at ray parameter t (world distance along the ray). Counts inversions.
     double operator()(double t);
@@ -38,9 +63,12 @@ public:
     void AddCountersTo(RenderCounters& counters);
 
 private:
+    void BeginCommon(const MeshGeometry& geometry, const ScalarSelector& field,
+                     std::int64_t c, const Ray& ray, const InversionOptions& inversion);
     void RefAt(double t, double ref[3]);
 
     const CellGeometry* cell_ = nullptr;
+    const std::array<double, 3>* gradBound_ = nullptr;
     CellScalar scalar_;
     std::vector<double> nodal_;
     Ray ray_;
