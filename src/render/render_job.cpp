@@ -4,6 +4,7 @@
 #include <tbb/info.h>
 
 #include <chrono>
+#include <limits>
 #include <set>
 
 #include "elements/mesh_geometry.h"
@@ -55,47 +56,53 @@ Image RunRenderJob(const Scene& scene, RenderStats& stats) {
     return RenderMeshJob(mesh, scene, stats, Seconds(t0));
 }
 
-Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
-                    double loadSeconds) {
-    const auto start = std::chrono::steady_clock::now();
-    stats = RenderStats{};
+RenderStats StartStats(const Scene& scene) {
+    RenderStats stats;
     stats.scene = scene.sourcePath;
     stats.mesh = scene.data.mesh;
     stats.threads = scene.threads > 0 ? scene.threads : tbb::info::default_concurrency();
-    stats.timing.load = loadSeconds;
+    stats.width = scene.camera.width;
+    stats.height = scene.camera.height;
+    stats.isoFieldRange = {std::numeric_limits<double>::infinity(),
+                           -std::numeric_limits<double>::infinity()};
+    return stats;
+}
 
+void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+                    Image& image, RenderStats& stats) {
     auto t0 = std::chrono::steady_clock::now();
     const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const Brick brick = Brick::WholeMesh(mesh);
+    Brick brick{&mesh, {}};
+    if (box) {
+        brick.box = *box;
+    } else {
+        // The guaranteed boxes of the cells: curved cells may bulge beyond their nodes.
+        brick.box = {{{geometry.bounds.lo[0], geometry.bounds.lo[1], geometry.bounds.lo[2]},
+                      {geometry.bounds.hi[0], geometry.bounds.hi[1], geometry.bounds.hi[2]}}};
+    }
     TraceOptions traceOptions;
     traceOptions.mappingTolerance = scene.accuracy.mappingTolerance;
     const BrickTraverser traverser(brick, traceOptions);
     const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
-    stats.timing.accel = Seconds(t0);
-    stats.accelBytes = static_cast<double>(traverser.Stats().Bytes());
+    stats.timing.accel += Seconds(t0);
+    stats.accelBytes += static_cast<double>(traverser.Stats().Bytes());
     stats.accelBytesPerCell = traverser.Stats().BytesPerCell();
-    stats.bricksLoaded = stats.bricksTotal = 1;
-    if (!setup.fields.empty()) {
-        const Field& f = *setup.fields[0].field;
-        stats.isoFieldRange = f.Range(setup.fields[0].component);
-        for (std::size_t k = 1; k < setup.fields.size(); ++k) {
-            const auto r = setup.fields[k].field->Range(setup.fields[k].component);
-            stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),
-                                   std::max(stats.isoFieldRange[1], r[1])};
-        }
+    for (const ScalarSelector& f : setup.fields) {
+        const auto r = f.field->Range(f.component);
+        stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),
+                               std::max(stats.isoFieldRange[1], r[1])};
     }
-
     t0 = std::chrono::steady_clock::now();
     const Camera camera(scene.camera);
-    Image image;
     RenderBrick(setup, camera, scene.threads, image, stats.counters);
-    stats.timing.render = Seconds(t0);
-    stats.width = camera.Width();
-    stats.height = camera.Height();
+    stats.timing.render += Seconds(t0);
+}
+
+void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats) {
+    if (!(stats.isoFieldRange[0] <= stats.isoFieldRange[1])) stats.isoFieldRange = {0, 0};
     const double range = stats.isoFieldRange[1] - stats.isoFieldRange[0];
     stats.counters.isoResidualRelMax = range > 0 ? stats.counters.isoResidualMax / range : 0;
-
-    t0 = std::chrono::steady_clock::now();
+    const auto t0 = std::chrono::steady_clock::now();
     const SceneOutput& out = scene.output;
     const std::size_t H = image.height, W = image.width;
     if (!out.exr.empty()) WriteExr(out.exr, image);
@@ -103,8 +110,20 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
     if (!out.hits.empty()) WriteNpy(out.hits, HitsArray(image), {H, W, 5});
     if (!out.rgba.empty()) WriteNpy(out.rgba, RgbaArray(image), {H, W, 4});
     stats.timing.write = Seconds(t0);
-    stats.timing.total = Seconds(start) + loadSeconds;
+    stats.timing.total += stats.timing.write;
     if (!out.stats.empty()) WriteStats(out.stats, stats);
+}
+
+Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
+                    double loadSeconds) {
+    const auto start = std::chrono::steady_clock::now();
+    stats = StartStats(scene);
+    stats.timing.load = loadSeconds;
+    stats.bricksLoaded = stats.bricksTotal = 1;
+    Image image;
+    RenderOneBrick(mesh, std::nullopt, scene, image, stats);
+    stats.timing.total = Seconds(start) + loadSeconds;
+    WriteJobOutputs(scene, image, stats);
     return image;
 }
 

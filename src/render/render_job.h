@@ -4,6 +4,9 @@
 
 #include "io/image.h"
 #include "mesh/mesh.h"
+#include "trace/ray.h"
+
+#include <optional>
 #include "render/stats.h"
 #include "scene/scene.h"
 
@@ -18,6 +21,19 @@ Image RunRenderJob(const Scene& scene, RenderStats& stats);
 /// `loadSeconds` is reported as timing_s.load.
 Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
                     double loadSeconds = 0);
+
+/// Renders one brick — `mesh` with its rays clipped to `box` (std::nullopt: the guaranteed
+/// bounds of all its cells) — into `image` (resized to the camera), adding the accel and
+/// render times, counters, field range and accel bytes to `stats`.
+void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+                    Image& image, RenderStats& stats);
+
+/// Writes the outputs the scene names (EXR, PNG, hits, rgba; then stats), timing the
+/// writes into stats.timing.write.
+void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats);
+
+/// A fresh RenderStats for a scene (scene, mesh, threads, image size).
+RenderStats StartStats(const Scene& scene);
 
 /// The float64 (H, W, 5) hits array of design.md: t, N.X, N.Y, N.Z, residual per pixel.
 std::vector<double> HitsArray(const Image& image);
