@@ -17,6 +17,7 @@
 #include "io/mesh_io.h"
 #include "partition.h"
 #include "render/render_job.h"
+#include "scene/camera.h"
 #include "scene/scene.h"
 #include "util/error.h"
 #include "util/log.h"
@@ -163,11 +164,56 @@ bool BoxesOverlap(const AxisBox& a, const std::array<std::array<double, 3>, 2>& 
     return true;
 }
 
-/// A brick of a partition can contribute unless the clip box misses it or, in a scene of
-/// isosurfaces only, no isovalue lies in its guaranteed field ranges.
+/// True when the box lies entirely outside the camera's view: all its corners are on the
+/// outer side of one bounding plane of the view volume (perspective: the four side planes
+/// through the eye and the near/far distances along the view direction; orthographic: the
+/// four side slabs). Conservative: a box that may be seen is never reported outside.
+bool OutsideView(const Scene& scene, const AxisBox& box) {
+    const Camera camera(scene.camera);
+    const auto& f = camera.Forward();
+    const auto& r = camera.Right();
+    const auto& u = camera.TrueUp();
+    const auto& e = camera.Position();
+    const double aspect = double(scene.camera.width) / scene.camera.height;
+    std::array<std::array<double, 3>, 8> rel;
+    for (int q = 0; q < 8; ++q)
+        for (int d = 0; d < 3; ++d) rel[q][d] = box[(q >> d) & 1][d] - e[d];
+    auto dot = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+        return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    };
+    auto allOutside = [&](auto&& signedDistance) {
+        for (const auto& x : rel)
+            if (signedDistance(x) <= 0) return false;
+        return true;
+    };
+    // Behind the near limit or beyond the far one (along the forward axis; a ray's t is at
+    // least its forward component, so this is conservative for perspective too).
+    if (allOutside([&](const auto& x) { return dot(x, f) - scene.clip.far; })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, f); }) && !scene.camera.orthographic)
+        return true;
+    if (scene.camera.orthographic) {
+        const double hy = 0.5 * scene.camera.orthoHeight, hx = hy * aspect;
+        if (allOutside([&](const auto& x) { return dot(x, r) - hx; })) return true;
+        if (allOutside([&](const auto& x) { return -dot(x, r) - hx; })) return true;
+        if (allOutside([&](const auto& x) { return dot(x, u) - hy; })) return true;
+        if (allOutside([&](const auto& x) { return -dot(x, u) - hy; })) return true;
+        return false;
+    }
+    const double ty = std::tan(0.5 * scene.camera.fovYDegrees * M_PI / 180), tx = ty * aspect;
+    // Side planes through the eye: outside when |x.r| > tx (x.f), etc.
+    if (allOutside([&](const auto& x) { return dot(x, r) - tx * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, r) - tx * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return dot(x, u) - ty * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, u) - ty * dot(x, f); })) return true;
+    return false;
+}
+
+/// A brick of a partition can contribute unless it lies outside the view or the clip box
+/// or, in a scene of isosurfaces only, no isovalue lies in its guaranteed field ranges.
 bool BrickMayContribute(const Scene& scene, const partition::BrickInfo& brick,
                         const AxisBox& box) {
     if (scene.clip.box && !BoxesOverlap(box, *scene.clip.box)) return false;
+    if (OutsideView(scene, box)) return false;
     if (scene.volume || !scene.slices.empty()) return true;
     for (const SceneIsosurface& iso : scene.isosurfaces) {
         std::string name = iso.field;

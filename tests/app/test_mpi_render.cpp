@@ -170,3 +170,29 @@ TEST_F(MpiRender, CorruptBrickEndsTheJobWithAClearMessage) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Bricks outside the view or the clip box, or whose field ranges hold no isovalue, are not
+// read: fewer bricks loaded, the same image.
+TEST_F(MpiRender, BricksThatCannotContributeAreNotRead) {
+    const Camera corner{"corner", "--set camera.position=[0,0,3.5] --set camera.look_at=[0.6,0.6,0] "
+                                  "--set camera.fov_y=20"};
+    const auto reference = Render("", "builtin:ball-p2", corner, "ref_corner");
+    const auto got = Render("", (kDir / "part6").string(), corner, "part_corner");
+    ExpectSame(reference, got, "corner view");
+    std::string out;
+    std::FILE* f = std::fopen((kDir / "part_corner.json").c_str(), "r");
+    ASSERT_NE(f, nullptr);
+    std::array<char, 1 << 16> buf{};
+    const std::size_t n = std::fread(buf.data(), 1, buf.size() - 1, f);
+    std::fclose(f);
+    const std::string json(buf.data(), n);
+    const auto loaded = json.find("\"bricks_loaded\": ");
+    ASSERT_NE(loaded, std::string::npos);
+    EXPECT_LT(std::stoi(json.substr(loaded + 17)), 6) << json.substr(loaded, 40);
+}
+
+}  // namespace
+}  // namespace hpray
