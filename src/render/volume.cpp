@@ -117,11 +117,12 @@ void ExpMoments(double alpha, int count, double* e) {
     e[0] = en;
 }
 
-/// Regime "small slope or large depth": exp(-alpha x - beta x^2) = e^(-alpha x) sum_k
-/// (-beta x^2)^k / k!, so I_m = sum_k (-beta)^k / k! E_{m+2k}(alpha). Used for |beta| <= 1
-/// (term ratio <= |beta| / k) and for alpha >= 128 with beta <= alpha / 2 (term ratio about
-/// 4 k beta / alpha^2 <= 2 k / alpha, and the sum of |terms| stays within a small factor
-/// of the result); 32 terms reach 1e-19 relative in both.
+/// Regime "small slope": exp(-alpha x - beta x^2) = e^(-alpha x) sum_k (-beta x^2)^k / k!,
+/// so I_m = sum_k (-beta)^k / k! E_{m+2k}(alpha). Used for |beta| <= 1 (term ratio <=
+/// |beta| / k) and for |beta| <= alpha^2 / 200 with beta <= alpha / 2: the term ratio is
+/// then about 4 k beta / alpha^2 <= k / 50 while 2k < alpha, and the sum of |terms|,
+/// integral x^m exp(-alpha x + |beta| x^2), stays within a small factor of the result
+/// (for beta < 0 all terms are positive). 32 terms reach 1e-18 relative.
 void SlopeSeriesMoments(double alpha, double beta, double m[3]) {
     double e[kMaxExpMoment + 1];
     ExpMoments(alpha, kMaxExpMoment + 1, e);
@@ -153,12 +154,12 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
     double m[3];
     if (alpha + std::abs(beta) <= 1) {
         TaylorMoments(alpha, beta, m);
-    } else if (std::abs(beta) <= 1 || (alpha >= 128 && beta <= 0.5 * alpha)) {
+    } else if (std::abs(beta) <= 1 || (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
         SlopeSeriesMoments(alpha, beta, m);
     } else {
-        // Complete the square. Here |beta| > 1 and either alpha < 128 or beta > alpha / 2,
-        // so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an absolute error of at
-        // most (1 + alpha / |beta|) ulps of I0: < 130 ulps of the emission.
+        // Complete the square. Here |beta| > 1 and either beta > alpha / 2 or |beta| >
+        // alpha^2 / 200, so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an absolute
+        // error of at most (1 + alpha / |beta|) <= 16 ulps of I0.
         const double s = std::sqrt(std::abs(beta));
         const double u0 = alpha / (2 * s);
         double i0;
