@@ -712,6 +712,11 @@ void BrickTraverser::Impl::BuildTopology() {
             curved.push_back(cr);
         }
     }
+    // Grown face by face: give back the doubling slack.
+    xyz.shrink_to_fit();
+    curved.shrink_to_fit();
+    curvedNodes.shrink_to_fit();
+    curvedNet.shrink_to_fit();
     stats.faces = nFaces;
     stats.curvedFaces = static_cast<std::int64_t>(curved.size());
     for (std::int64_t f = 0; f < nFaces; ++f) {
