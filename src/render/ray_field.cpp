@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include "elements/tensor_eval.h"
+#include "mesh/cell.h"
 
 namespace hpray {
 
@@ -33,6 +34,27 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
             // Reference derivatives at the nodes: exact nodal interpolants of dF/dref_d.
             const int n = basis.nodeCount;
             for (auto& v : deriv) v.assign(n, 0.0);
+            if (basis.kind == BasisKind::HexLagrange) {
+                // Tensor product: the 1-D differentiation matrix along each direction.
+                const int p = basis.order, q = p + 1;
+                double D[(kMaxOrder + 1) * (kMaxOrder + 1)], l[kMaxOrder + 1];
+                for (int i = 0; i < q; ++i)
+                    LagrangeEquispaced1D(p, double(i) / p, l, D + q * i);  // D[i][j] = l_j'(x_i)
+                for (int k = 0; k < q; ++k)
+                    for (int j = 0; j < q; ++j)
+                        for (int i = 0; i < q; ++i) {
+                            double dr = 0, ds = 0, dt = 0;
+                            for (int m = 0; m < q; ++m) {
+                                dr += D[q * i + m] * nodal[m + q * (j + q * k)];
+                                ds += D[q * j + m] * nodal[i + q * (m + q * k)];
+                                dt += D[q * k + m] * nodal[i + q * (j + q * m)];
+                            }
+                            const int node = i + q * (j + q * k);
+                            deriv[0][node] = dr;
+                            deriv[1][node] = ds;
+                            deriv[2][node] = dt;
+                        }
+            } else
             for (int m = 0; m < n; ++m) {
                 const double ref[3] = {basis.refNodes[m][0], basis.refNodes[m][1],
                                        basis.refNodes[m][2]};
