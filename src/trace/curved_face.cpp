@@ -206,6 +206,7 @@ void CopyPatch(const Patch& from, int n, Patch& to) {
 struct Scratch {
     std::vector<Patch> stack;
     std::vector<FaceCrossing> found;
+    std::vector<ShearedPoint> net;  // the face's control net in the ray frame
 };
 thread_local Scratch tScratch;
 
@@ -639,10 +640,11 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
     const int p = face.order;
     HPRAY_CHECK(p >= 1 && p <= kMaxOrder);
     const int n = NetSize(tri, p);
-    ShearedPoint net[kMaxNet];
+    Scratch& s = tScratch;
+    if (s.net.size() < std::size_t(kMaxNet)) s.net.resize(kMaxNet);
+    ShearedPoint* net = s.net.data();
     for (int k = 0; k < n; ++k) net[k] = frame.Transform(face.net + 3 * k);
 
-    Scratch& s = tScratch;
     s.stack.reserve(2 * kMaxPatchDepth + 4);
     s.stack.clear();
     s.found.clear();
