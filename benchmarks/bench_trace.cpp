@@ -23,8 +23,8 @@ namespace {
 
 using hpray::Mesh;
 
-// Quadratic hexes on an n^3 grid of [0,1]^3 with nodes mapped by z -> z + x^2 + y^2: curved
-// faces that the cells represent exactly (the paraboloid slab of tests/trace).
+// Quadratic hexes on an n^3 grid of [0,1]^3 with nodes mapped by z -> z + x^2 + y^2:
+// curved faces that the cells represent exactly (the paraboloid slab of tests/trace).
 Mesh ParaboloidHexes(int n) {
     const int p = 2, g = n * p + 1;
     Mesh mesh;
@@ -43,9 +43,10 @@ Mesh ParaboloidHexes(int n) {
                 for (int k = 0; k <= p; ++k)
                     for (int j = 0; j <= p; ++j)
                         for (int i = 0; i <= p; ++i)
-                            nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
-                mesh.AddCell(hpray::CellShape::Hex, p, hpray::CellFamily::Lagrange, nodes.data(),
-                             int(nodes.size()));
+                            nodes.push_back((a * p + i) +
+                                            g * ((b * p + j) + g * (c * p + k)));
+                mesh.AddCell(hpray::CellShape::Hex, p, hpray::CellFamily::Lagrange,
+                             nodes.data(), int(nodes.size()));
             }
     return mesh;
 }
@@ -74,7 +75,9 @@ const Mesh& GetMesh(const std::string& spec) {
 const hpray::BrickTraverser& GetTraverser(const std::string& spec) {
     static std::map<std::string, std::unique_ptr<hpray::BrickTraverser>> cache;
     auto& t = cache[spec];
-    if (!t) t = std::make_unique<hpray::BrickTraverser>(hpray::Brick::WholeMesh(GetMesh(spec)));
+    if (!t)
+        t = std::make_unique<hpray::BrickTraverser>(
+            hpray::Brick::WholeMesh(GetMesh(spec)));
     return *t;
 }
 
@@ -106,11 +109,16 @@ std::vector<hpray::Ray> ViewRays(const Mesh& mesh, int n, unsigned seed) {
 // 3, 4: curved quadratic tets and hexes.
 std::string Spec(int index) {
     switch (index) {
-        case 0: return "builtin:cube-tets-60";
-        case 2: return "builtin:ball-p2?n=24";
-        case 3: return "paraboloid-tets";
-        case 4: return "paraboloid-hexes";
-        default: return std::string(HPRAY_SHARED_DATA) + "/mfem_gmsh_t16_tets_1M.vtu";
+        case 0:
+            return "builtin:cube-tets-60";
+        case 2:
+            return "builtin:ball-p2?n=24";
+        case 3:
+            return "paraboloid-tets";
+        case 4:
+            return "paraboloid-hexes";
+        default:
+            return std::string(HPRAY_SHARED_DATA) + "/mfem_gmsh_t16_tets_1M.vtu";
     }
 }
 
@@ -130,7 +138,8 @@ void BM_TraceSegments(benchmark::State& state) {
         segments += static_cast<std::int64_t>(segs.size());
         ++traced;
     }
-    state.counters["segments/s"] = benchmark::Counter(double(segments), benchmark::Counter::kIsRate);
+    state.counters["segments/s"] =
+        benchmark::Counter(double(segments), benchmark::Counter::kIsRate);
     state.counters["segments/ray"] = double(segments) / double(traced);
     state.SetLabel(spec);
 }
@@ -189,21 +198,24 @@ void BM_AltAllFacesBvh(benchmark::State& state) {
         for (const auto& t : f) {
             std::array<std::int64_t, 3> k = {n[t[0]], n[t[1]], n[t[2]]};
             std::sort(k.begin(), k.end());
-            if (seen.emplace(k, 0).second) tris.push_back({unsigned(k[0]), unsigned(k[1]), unsigned(k[2])});
+            if (seen.emplace(k, 0).second)
+                tris.push_back({unsigned(k[0]), unsigned(k[1]), unsigned(k[2])});
         }
     }
-    float* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                                           RTC_FORMAT_FLOAT3, 3 * sizeof(float),
-                                                           mesh.PointCount()));
+    float* v = static_cast<float*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                3 * sizeof(float), mesh.PointCount()));
     for (std::int64_t i = 0; i < 3 * mesh.PointCount(); ++i) v[i] = float(mesh.points[i]);
-    unsigned* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-        geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), tris.size()));
+    unsigned* idx = static_cast<unsigned*>(
+        rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                3 * sizeof(unsigned), tris.size()));
     for (std::size_t i = 0; i < tris.size(); ++i)
         for (int k = 0; k < 3; ++k) idx[3 * i + k] = tris[i][k];
-    rtcSetGeometryIntersectFilterFunction(geom, [](const RTCFilterFunctionNArguments* args) {
-        reinterpret_cast<CountContext*>(args->context)->hits++;
-        args->valid[0] = 0;
-    });
+    rtcSetGeometryIntersectFilterFunction(
+        geom, [](const RTCFilterFunctionNArguments* args) {
+            reinterpret_cast<CountContext*>(args->context)->hits++;
+            args->valid[0] = 0;
+        });
     rtcCommitGeometry(geom);
     rtcAttachGeometry(scene, geom);
     rtcReleaseGeometry(geom);
@@ -228,7 +240,8 @@ void BM_AltAllFacesBvh(benchmark::State& state) {
         rtcIntersect1(scene, &ctx.base, &rh);
         hits += ctx.hits;
     }
-    state.counters["segments/s"] = benchmark::Counter(double(hits), benchmark::Counter::kIsRate);
+    state.counters["segments/s"] =
+        benchmark::Counter(double(hits), benchmark::Counter::kIsRate);
     state.counters["accel_bytes/cell"] = double(bytes) / double(mesh.CellCount());
     rtcReleaseScene(scene);
     rtcReleaseDevice(device);
@@ -256,10 +269,12 @@ void BM_AltCellBoxBvh(benchmark::State& state) {
         geom,
         [](const RTCBoundsFunctionArguments* args) {
             const auto* m = static_cast<const Mesh*>(args->geometryUserPtr);
-            float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+            float lo[3] = {INFINITY, INFINITY, INFINITY},
+                  hi[3] = {-INFINITY, -INFINITY, -INFINITY};
             for (int k = 0; k < m->CellNodeCount(args->primID); ++k)
                 for (int d = 0; d < 3; ++d) {
-                    const float x = float(m->points[3 * m->CellNodes(args->primID)[k] + d]);
+                    const float x =
+                        float(m->points[3 * m->CellNodes(args->primID)[k] + d]);
                     lo[d] = std::min(lo[d], x);
                     hi[d] = std::max(hi[d], x);
                 }
@@ -293,7 +308,8 @@ void BM_AltCellBoxBvh(benchmark::State& state) {
         rtcIntersect1(scene, &ctx.base, &rh);
         hits += ctx.hits;
     }
-    state.counters["candidates/s"] = benchmark::Counter(double(hits), benchmark::Counter::kIsRate);
+    state.counters["candidates/s"] =
+        benchmark::Counter(double(hits), benchmark::Counter::kIsRate);
     state.counters["accel_bytes/cell"] = double(bytes) / double(mesh.CellCount());
     rtcReleaseScene(scene);
     rtcReleaseDevice(device);

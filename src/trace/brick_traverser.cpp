@@ -46,15 +46,37 @@ struct ShapeTable {
     int face[6][4];
 };
 const ShapeTable kShapes[kNumCellShapes] = {
-    {4, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, 4, {3, 3, 3, 3},
+    {4,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}},
+     4,
+     {3, 3, 3, 3},
      {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}},
     {8,
-     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}},
-     6, {4, 4, 4, 4, 4, 4},
-     {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}}},
-    {6, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}}, 5, {3, 3, 4, 4, 4},
+     {{0, 0, 0},
+      {1, 0, 0},
+      {0, 1, 0},
+      {1, 1, 0},
+      {0, 0, 1},
+      {1, 0, 1},
+      {0, 1, 1},
+      {1, 1, 1}},
+     6,
+     {4, 4, 4, 4, 4, 4},
+     {{0, 2, 3, 1},
+      {4, 5, 7, 6},
+      {0, 1, 5, 4},
+      {2, 6, 7, 3},
+      {0, 4, 6, 2},
+      {1, 3, 7, 5}}},
+    {6,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}},
+     5,
+     {3, 3, 4, 4, 4},
      {{0, 2, 1}, {3, 4, 5}, {0, 1, 4, 3}, {0, 3, 5, 2}, {1, 2, 5, 4}}},
-    {5, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}}, 5, {4, 3, 3, 3, 3},
+    {5,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}},
+     5,
+     {4, 3, 3, 3, 3},
      {{0, 2, 3, 1}, {0, 1, 4}, {1, 3, 4}, {3, 2, 4}, {2, 0, 4}}},
 };
 
@@ -62,12 +84,13 @@ enum class FaceKind : std::uint8_t {
     Triangle,      // planar triangle: the crossing of its plane
     PlanarQuad,    // planar quadrilateral: two triangles of one plane
     BilinearQuad,  // non-planar straight quadrilateral: Reshetov's closed form
-    Curved,        // high-order face: exact crossings of its Bernstein net (curved_face.h)
-    Degenerate     // repeated corners: never crossed
+    Curved,     // high-order face: exact crossings of its Bernstein net (curved_face.h)
+    Degenerate  // repeated corners: never crossed
 };
 
 // One face in its canonical representation: corners ordered by position (see
-// Canonicalize). cell[0] is the cell the canonical normal (B - A) x (C - A) points out of.
+// Canonicalize). cell[0] is the cell the canonical normal (B - A) x (C - A) points out
+// of.
 struct FaceRec {
     std::int32_t v[4] = {-1, -1, -1, -1};
     std::int32_t cell[2] = {-1, -1};
@@ -80,8 +103,8 @@ struct CurvedRec {
     std::int64_t netStart = 0;   // into curvedNet (points): the Bernstein control net
     std::uint8_t order = 1;      // of the net (serendipity faces: a Q_2 net)
     FaceBasis basis = FaceBasis::Triangle;
-    std::uint8_t straightEdges = 0;  // bit e: boundary edge e is straight
-    double size = 0;             // diagonal of the control net's box
+    std::uint8_t straightEdges = 0;             // bit e: boundary edge e is straight
+    double size = 0;                            // diagonal of the control net's box
     double box[2][3] = {{0, 0, 0}, {0, 0, 0}};  // control net box, padded: holds the face
 };
 
@@ -135,8 +158,10 @@ void Union(std::vector<std::int64_t>& parent, std::int64_t a, std::int64_t b) {
     a = Find(parent, a);
     b = Find(parent, b);
     if (a == b) return;
-    if (a < b) parent[b] = a;
-    else parent[a] = b;
+    if (a < b)
+        parent[b] = a;
+    else
+        parent[a] = b;
 }
 
 // Merges points closer than tol (world units; 0: bitwise equal) into one id; ids are
@@ -154,7 +179,8 @@ void MergePoints(const std::vector<double>& points, double tol, double diag,
     std::vector<std::array<std::int64_t, 3>> key(n);
     for (std::int64_t i = 0; i < n; ++i)
         for (int d = 0; d < 3; ++d)
-            key[i][d] = static_cast<std::int64_t>(std::floor((points[3 * i + d] - lo[d]) / cellSize));
+            key[i][d] = static_cast<std::int64_t>(
+                std::floor((points[3 * i + d] - lo[d]) / cellSize));
     std::vector<std::int64_t> order(n);
     std::iota(order.begin(), order.end(), 0);
     std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
@@ -165,14 +191,16 @@ void MergePoints(const std::vector<double>& points, double tol, double diag,
     const double tol2 = tol * tol;
     auto close = [&](std::int64_t a, std::int64_t b) {
         return tol > 0 ? Dist2(&points[3 * a], &points[3 * b]) <= tol2
-                       : (points[3 * a] == points[3 * b] && points[3 * a + 1] == points[3 * b + 1] &&
+                       : (points[3 * a] == points[3 * b] &&
+                          points[3 * a + 1] == points[3 * b + 1] &&
                           points[3 * a + 2] == points[3 * b + 2]);
     };
     auto runOf = [&](const std::array<std::int64_t, 3>& k) {
-        auto first = std::lower_bound(order.begin(), order.end(), k,
-                                      [&](std::int64_t a, const std::array<std::int64_t, 3>& kk) {
-                                          return key[a] < kk;
-                                      });
+        auto first =
+            std::lower_bound(order.begin(), order.end(), k,
+                             [&](std::int64_t a, const std::array<std::int64_t, 3>& kk) {
+                                 return key[a] < kk;
+                             });
         auto last = first;
         while (last != order.end() && key[*last] == k) ++last;
         return std::make_pair(first, last);
@@ -266,7 +294,7 @@ struct BrickTraverser::Impl {
     std::vector<double> curvedNet;  // control points of curved faces, 3 per point
     std::vector<std::int32_t> boundaryFaces;
     std::vector<float> boundaryBoxes;  // 6 per boundary face: lower, upper
-    AxisBox queryBox{};                   // mesh bounds, padded for the float query ray
+    AxisBox queryBox{};                // mesh bounds, padded for the float query ray
     double queryPad = 0;
 
     RTCDevice device = nullptr;
@@ -286,18 +314,23 @@ struct BrickTraverser::Impl {
     void BuildTopology();
     void BuildScene();
 
-    const double* P(std::int32_t id) const { return &xyz[3 * static_cast<std::size_t>(id)]; }
+    const double* P(std::int32_t id) const {
+        return &xyz[3 * static_cast<std::size_t>(id)];
+    }
 
     // Appends every crossing of the ray line with face f (any t).
-    void AppendCrossings(std::int32_t f, const RayFrame& frame, std::vector<Crossing>& out) const;
+    void AppendCrossings(std::int32_t f, const RayFrame& frame,
+                         std::vector<Crossing>& out) const;
     void AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
                                std::vector<Crossing>& out) const;
     // The crossing by which the ray leaves cell c after entering it by the crossing of
     // face entryFace at (unclamped) entryT; tIn = the walk's t there (>= entryT).
     bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
                   const RayFrame& frame, Crossing& exit) const;
-    bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame, Crossing& exit) const;
-    void Tessellation(std::int32_t f, std::vector<std::array<std::int32_t, 3>>& tris) const;
+    bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
+                      Crossing& exit) const;
+    void Tessellation(std::int32_t f,
+                      std::vector<std::array<std::int32_t, 3>>& tris) const;
     bool Leaves(const Crossing& x, std::int64_t c) const {
         return faces[x.face].cell[x.side > 0 ? 0 : 1] == c;
     }
@@ -314,8 +347,10 @@ void BrickTraverser::Impl::Build() {
     const double t2 = Now();
     stats.buildSeconds = t2 - t0;
     stats.accelSeconds = t2 - t1;
-    stats.accelBytes = static_cast<std::size_t>(std::max<std::int64_t>(0, embreeBytes.load()));
-    stats.topologyBytes = xyz.capacity() * sizeof(double) + faces.capacity() * sizeof(FaceRec) +
+    stats.accelBytes =
+        static_cast<std::size_t>(std::max<std::int64_t>(0, embreeBytes.load()));
+    stats.topologyBytes = xyz.capacity() * sizeof(double) +
+                          faces.capacity() * sizeof(FaceRec) +
                           cellFaceOffset.capacity() * sizeof(std::int64_t) +
                           cellFaces.capacity() * sizeof(std::int32_t) +
                           curved.capacity() * sizeof(CurvedRec) +
@@ -347,40 +382,47 @@ void BrickTraverser::Impl::BuildTopology() {
     // 2. Corners (merged ids) and orientation of each cell.
     std::vector<std::int32_t> corners(8 * nCells, -1);
     std::vector<std::int8_t> orient(nCells, 1);
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nCells, 4096),
-                      [&](const tbb::blocked_range<std::int64_t>& range) {
-        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-            const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
-            const int p = mesh.cellOrder[c];
-            const std::int64_t* nodes = mesh.CellNodes(c);
-            for (int k = 0; k < s.corners; ++k) {
-                const LatticeIndex ijk = {s.lattice[k][0] * p, s.lattice[k][1] * p,
-                                          s.lattice[k][2] * p};
-                const int local = InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], ijk);
-                HPRAY_CHECK(local >= 0);
-                corners[8 * c + k] = mergedOf[nodes[local]];
-            }
-            // Signed volume of the corner polyhedron (faces fanned from their first corner).
-            const double* o = &xyz[3 * std::size_t(corners[8 * c])];
-            double vol = 0;
-            for (int f = 0; f < s.faces; ++f) {
-                const double* a = &xyz[3 * std::size_t(corners[8 * c + s.face[f][0]])];
-                for (int k = 1; k + 1 < s.faceSize[f]; ++k) {
-                    const double* b = &xyz[3 * std::size_t(corners[8 * c + s.face[f][k]])];
-                    const double* d = &xyz[3 * std::size_t(corners[8 * c + s.face[f][k + 1]])];
-                    double u[3], v[3], w[3];
-                    for (int i = 0; i < 3; ++i) {
-                        u[i] = a[i] - o[i];
-                        v[i] = b[i] - o[i];
-                        w[i] = d[i] - o[i];
-                    }
-                    vol += u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
-                           u[2] * (v[0] * w[1] - v[1] * w[0]);
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, nCells, 4096),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+                const int p = mesh.cellOrder[c];
+                const std::int64_t* nodes = mesh.CellNodes(c);
+                for (int k = 0; k < s.corners; ++k) {
+                    const LatticeIndex ijk = {s.lattice[k][0] * p, s.lattice[k][1] * p,
+                                              s.lattice[k][2] * p};
+                    const int local =
+                        InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], ijk);
+                    HPRAY_CHECK(local >= 0);
+                    corners[8 * c + k] = mergedOf[nodes[local]];
                 }
+                // Signed volume of the corner polyhedron (faces fanned from their first
+                // corner).
+                const double* o = &xyz[3 * std::size_t(corners[8 * c])];
+                double vol = 0;
+                for (int f = 0; f < s.faces; ++f) {
+                    const double* a =
+                        &xyz[3 * std::size_t(corners[8 * c + s.face[f][0]])];
+                    for (int k = 1; k + 1 < s.faceSize[f]; ++k) {
+                        const double* b =
+                            &xyz[3 * std::size_t(corners[8 * c + s.face[f][k]])];
+                        const double* d =
+                            &xyz[3 * std::size_t(corners[8 * c + s.face[f][k + 1]])];
+                        double u[3], v[3], w[3];
+                        for (int i = 0; i < 3; ++i) {
+                            u[i] = a[i] - o[i];
+                            v[i] = b[i] - o[i];
+                            w[i] = d[i] - o[i];
+                        }
+                        vol += u[0] * (v[1] * w[2] - v[2] * w[1]) -
+                               u[1] * (v[0] * w[2] - v[2] * w[0]) +
+                               u[2] * (v[0] * w[1] - v[1] * w[0]);
+                    }
+                }
+                orient[c] = vol < 0 ? -1 : 1;
             }
-            orient[c] = vol < 0 ? -1 : 1;
-        }
-    });
+        });
 
     // 3. Cells around each merged corner.
     std::vector<std::int64_t> vcOffset(nMerged + 1, 0);
@@ -394,7 +436,8 @@ void BrickTraverser::Impl::BuildTopology() {
         std::vector<std::int64_t> fill(vcOffset.begin(), vcOffset.end() - 1);
         for (std::int64_t c = 0; c < nCells; ++c) {
             const int nc = kShapes[int(mesh.cellShape[c])].corners;
-            for (int k = 0; k < nc; ++k) vcCells[fill[corners[8 * c + k]]++] = std::int32_t(c);
+            for (int k = 0; k < nc; ++k)
+                vcCells[fill[corners[8 * c + k]]++] = std::int32_t(c);
         }
     }
 
@@ -404,46 +447,49 @@ void BrickTraverser::Impl::BuildTopology() {
         const int n = s.faceSize[f];
         for (int k = 0; k < n; ++k) key[k] = corners[8 * c + s.face[f][k]];
         for (int k = 1; k < n; ++k)  // insertion sort of at most 4 ids
-            for (int q = k; q > 0 && key[q] < key[q - 1]; --q) std::swap(key[q], key[q - 1]);
+            for (int q = k; q > 0 && key[q] < key[q - 1]; --q)
+                std::swap(key[q], key[q - 1]);
         return n;
     };
     constexpr std::int32_t kNone = -1, kDegenerate = -2;
     std::vector<std::int32_t> nbCell(6 * nCells, kNone);
     std::vector<std::int8_t> nbFace(6 * nCells, -1);
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nCells, 1024),
-                      [&](const tbb::blocked_range<std::int64_t>& range) {
-        std::int32_t key[4], key2[4];
-        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-            const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
-            for (int f = 0; f < s.faces; ++f) {
-                const int n = sortedKey(c, f, key);
-                if (std::adjacent_find(key, key + n) != key + n) {
-                    nbCell[6 * c + f] = kDegenerate;
-                    continue;
-                }
-                int matches = 0;
-                for (std::int64_t i = vcOffset[key[0]]; i < vcOffset[key[0] + 1]; ++i) {
-                    const std::int64_t c2 = vcCells[i];
-                    if (c2 == c) continue;
-                    const ShapeTable& s2 = kShapes[int(mesh.cellShape[c2])];
-                    for (int f2 = 0; f2 < s2.faces; ++f2) {
-                        if (s2.faceSize[f2] != n) continue;
-                        sortedKey(c2, f2, key2);
-                        if (!std::equal(key, key + n, key2)) continue;
-                        if (nbCell[6 * c + f] != std::int32_t(c2)) ++matches;
-                        nbCell[6 * c + f] = std::int32_t(c2);
-                        nbFace[6 * c + f] = std::int8_t(f2);
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, nCells, 1024),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::int32_t key[4], key2[4];
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+                for (int f = 0; f < s.faces; ++f) {
+                    const int n = sortedKey(c, f, key);
+                    if (std::adjacent_find(key, key + n) != key + n) {
+                        nbCell[6 * c + f] = kDegenerate;
+                        continue;
                     }
-                }
-                if (matches > 1) {
-                    std::int64_t cur = badCell.load();
-                    while (c < cur && !badCell.compare_exchange_weak(cur, c)) {
+                    int matches = 0;
+                    for (std::int64_t i = vcOffset[key[0]]; i < vcOffset[key[0] + 1];
+                         ++i) {
+                        const std::int64_t c2 = vcCells[i];
+                        if (c2 == c) continue;
+                        const ShapeTable& s2 = kShapes[int(mesh.cellShape[c2])];
+                        for (int f2 = 0; f2 < s2.faces; ++f2) {
+                            if (s2.faceSize[f2] != n) continue;
+                            sortedKey(c2, f2, key2);
+                            if (!std::equal(key, key + n, key2)) continue;
+                            if (nbCell[6 * c + f] != std::int32_t(c2)) ++matches;
+                            nbCell[6 * c + f] = std::int32_t(c2);
+                            nbFace[6 * c + f] = std::int8_t(f2);
+                        }
+                    }
+                    if (matches > 1) {
+                        std::int64_t cur = badCell.load();
+                        while (c < cur && !badCell.compare_exchange_weak(cur, c)) {
+                        }
                     }
                 }
             }
-        }
-    });
+        });
     if (badCell.load() != std::numeric_limits<std::int64_t>::max()) {
         std::ostringstream where;
         where << "cell " << badCell.load();
@@ -460,7 +506,8 @@ void BrickTraverser::Impl::BuildTopology() {
         const int nf = kShapes[int(mesh.cellShape[c])].faces;
         for (int f = 0; f < nf; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
-            if (nb < 0 || c < nb) cellFaces[cellFaceOffset[c] + f] = std::int32_t(nFaces++);
+            if (nb < 0 || c < nb)
+                cellFaces[cellFaceOffset[c] + f] = std::int32_t(nFaces++);
             if (nFaces >= std::numeric_limits<std::int32_t>::max())
                 throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
         }
@@ -470,7 +517,8 @@ void BrickTraverser::Impl::BuildTopology() {
         for (int f = 0; f < nf; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
             if (nb >= 0 && nb < c)
-                cellFaces[cellFaceOffset[c] + f] = cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+                cellFaces[cellFaceOffset[c] + f] =
+                    cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
         }
     }
 
@@ -484,9 +532,10 @@ void BrickTraverser::Impl::BuildTopology() {
     // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
     // (from its lower corner by position), so that every face holding the edge sees the
     // same sequence; returns whether that reverses the face's counter-clockwise order.
-    auto canonicalEdge = [&](const std::vector<std::int32_t>& lattice, bool tri, int p, int e,
-                             std::int32_t* ids) {
-        for (int k = 0; k <= p; ++k) ids[k] = lattice[trace::EdgeLatticeIndex(tri, p, e, k)];
+    auto canonicalEdge = [&](const std::vector<std::int32_t>& lattice, bool tri, int p,
+                             int e, std::int32_t* ids) {
+        for (int k = 0; k <= p; ++k)
+            ids[k] = lattice[trace::EdgeLatticeIndex(tri, p, e, k)];
         const bool reversed = byPosition(ids[p], ids[0]);
         if (reversed) std::reverse(ids, ids + p + 1);
         return reversed;
@@ -540,8 +589,9 @@ void BrickTraverser::Impl::BuildTopology() {
                 if (same2 == same) {
                     std::ostringstream where;
                     where << "cells " << c << " and " << nb;
-                    throw InputError(kSource, where.str(),
-                                     "cells overlap (they lie on the same side of their shared face)");
+                    throw InputError(
+                        kSource, where.str(),
+                        "cells overlap (they lie on the same side of their shared face)");
                 }
                 rec.cell[same2 ? 0 : 1] = nb;
             }
@@ -567,8 +617,9 @@ void BrickTraverser::Impl::BuildTopology() {
             const int p = mesh.cellOrder[c];
             const CellFamily family = mesh.cellFamily[c];
             const FaceBasis basis = n == 3 ? FaceBasis::Triangle
-                                    : family == CellFamily::Serendipity ? FaceBasis::QuadSerendipity
-                                                                        : FaceBasis::Quad;
+                                    : family == CellFamily::Serendipity
+                                        ? FaceBasis::QuadSerendipity
+                                        : FaceBasis::Quad;
             bool straight = true;
             std::vector<std::int32_t> lattice;  // merged ids on the tessellation lattice
             if (p > 1) {
@@ -579,10 +630,12 @@ void BrickTraverser::Impl::BuildTopology() {
                     for (int i = 0; i <= (n == 3 ? p - j : p); ++i) {
                         LatticeIndex ijk;
                         for (int d = 0; d < 3; ++d)
-                            ijk[d] = n == 3 ? (p - i - j) * L[0][d] + i * L[1][d] + j * L[2][d]
-                                            : p * L[0][d] + i * (L[1][d] - L[0][d]) +
-                                                  j * (L[3][d] - L[0][d]);
-                        const int node = InternalNodeIndex(mesh.cellShape[c], p, family, ijk);
+                            ijk[d] =
+                                n == 3 ? (p - i - j) * L[0][d] + i * L[1][d] + j * L[2][d]
+                                       : p * L[0][d] + i * (L[1][d] - L[0][d]) +
+                                             j * (L[3][d] - L[0][d]);
+                        const int node =
+                            InternalNodeIndex(mesh.cellShape[c], p, family, ijk);
                         if (node < 0) {  // serendipity face centre
                             lattice.push_back(-1);
                             continue;
@@ -628,9 +681,12 @@ void BrickTraverser::Impl::BuildTopology() {
                     nrm[0] = e1[1] * e2[2] - e1[2] * e2[1];
                     nrm[1] = e1[2] * e2[0] - e1[0] * e2[2];
                     nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
-                    const double len = std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
-                    const double off = std::fabs(nrm[0] * e3[0] + nrm[1] * e3[1] + nrm[2] * e3[2]);
-                    rec.kind = off <= tol * len ? FaceKind::PlanarQuad : FaceKind::BilinearQuad;
+                    const double len =
+                        std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+                    const double off =
+                        std::fabs(nrm[0] * e3[0] + nrm[1] * e3[1] + nrm[2] * e3[2]);
+                    rec.kind =
+                        off <= tol * len ? FaceKind::PlanarQuad : FaceKind::BilinearQuad;
                     if (rec.kind == FaceKind::BilinearQuad) ++stats.bilinearFaces;
                 }
                 continue;
@@ -655,9 +711,10 @@ void BrickTraverser::Impl::BuildTopology() {
             }
             for (std::int32_t id : lattice) HPRAY_CHECK(id >= 0);
             curvedNodes.insert(curvedNodes.end(), lattice.begin(), lattice.end());
-            // The canonical face: its Bernstein net, with every boundary row replaced by the
-            // control points of the edge built from the edge's nodes in canonical order
-            // (straight edges: points on the segment), bitwise shared with its neighbours.
+            // The canonical face: its Bernstein net, with every boundary row replaced by
+            // the control points of the edge built from the edge's nodes in canonical
+            // order (straight edges: points on the segment), bitwise shared with its
+            // neighbours.
             {
                 const bool tri = basis == FaceBasis::Triangle;
                 const int q = cr.order;
@@ -676,12 +733,14 @@ void BrickTraverser::Impl::BuildTopology() {
                         cr.straightEdges = std::uint8_t(cr.straightEdges | (1u << e));
                         for (int k = 0; k <= q; ++k)
                             for (int d = 0; d < 3; ++d)
-                                row[3 * k + d] = k == 0   ? a[d]
-                                                 : k == q ? b[d]
-                                                          : a[d] + (double(k) / q) * (b[d] - a[d]);
+                                row[3 * k + d] =
+                                    k == 0   ? a[d]
+                                    : k == q ? b[d]
+                                             : a[d] + (double(k) / q) * (b[d] - a[d]);
                     } else {
                         for (int k = 0; k <= q; ++k)
-                            for (int d = 0; d < 3; ++d) edgeNodal[3 * k + d] = P(ids[k])[d];
+                            for (int d = 0; d < 3; ++d)
+                                edgeNodal[3 * k + d] = P(ids[k])[d];
                         trace::EdgeBernstein(q, edgeNodal, row);
                     }
                     for (int k = 0; k <= q; ++k) {
@@ -759,24 +818,29 @@ void BrickTraverser::Impl::BuildTopology() {
                 }
         for (int d = 0; d < 3; ++d) {
             boundaryBoxes[6 * b + d] = std::nextafter(float(lo[d] - queryPad), -INFINITY);
-            boundaryBoxes[6 * b + 3 + d] = std::nextafter(float(hi[d] + queryPad), INFINITY);
+            boundaryBoxes[6 * b + 3 + d] =
+                std::nextafter(float(hi[d] + queryPad), INFINITY);
         }
     }
 }
 
-void BrickTraverser::Impl::Tessellation(std::int32_t f,
-                                        std::vector<std::array<std::int32_t, 3>>& tris) const {
+void BrickTraverser::Impl::Tessellation(
+    std::int32_t f, std::vector<std::array<std::int32_t, 3>>& tris) const {
     tris.clear();
     const FaceRec& rec = faces[f];
     switch (rec.kind) {
-        case FaceKind::Degenerate: return;
-        case FaceKind::Triangle: tris.push_back({rec.v[0], rec.v[1], rec.v[2]}); return;
+        case FaceKind::Degenerate:
+            return;
+        case FaceKind::Triangle:
+            tris.push_back({rec.v[0], rec.v[1], rec.v[2]});
+            return;
         case FaceKind::PlanarQuad:
         case FaceKind::BilinearQuad:
             tris.push_back({rec.v[0], rec.v[1], rec.v[2]});
             tris.push_back({rec.v[0], rec.v[2], rec.v[3]});
             return;
-        case FaceKind::Curved: break;
+        case FaceKind::Curved:
+            break;
     }
     const CurvedRec& cr = curved[rec.curved];
     const std::int32_t* ids = &curvedNodes[cr.nodeStart];
@@ -787,14 +851,17 @@ void BrickTraverser::Impl::Tessellation(std::int32_t f,
             for (int i = 0; i < p - j; ++i) {
                 tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j)], ids[idx(i, j + 1)]});
                 if (i + j + 2 <= p)
-                    tris.push_back({ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
+                    tris.push_back(
+                        {ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
             }
     } else {
         auto idx = [p](int i, int j) { return j * (p + 1) + i; };
         for (int j = 0; j < p; ++j)
             for (int i = 0; i < p; ++i) {
-                tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)]});
-                tris.push_back({ids[idx(i, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
+                tris.push_back(
+                    {ids[idx(i, j)], ids[idx(i + 1, j)], ids[idx(i + 1, j + 1)]});
+                tris.push_back(
+                    {ids[idx(i, j)], ids[idx(i + 1, j + 1)], ids[idx(i, j + 1)]});
             }
     }
 }
@@ -806,7 +873,7 @@ namespace {
 
 struct QueryContext {
     RTCIntersectContext base;  // first member: Embree passes &base back to the callbacks
-    const void* impl;  // the BrickTraverser::Impl
+    const void* impl;          // the BrickTraverser::Impl
     const RayFrame* frame;
     std::vector<Crossing>* hits;
 };
@@ -869,7 +936,8 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
     const FaceRec& rec = faces[f];
     TriangleCrossing x;
     switch (rec.kind) {
-        case FaceKind::Degenerate: return;
+        case FaceKind::Degenerate:
+            return;
         case FaceKind::Triangle: {
             const ShearedPoint a = frame.Transform(P(rec.v[0]));
             const ShearedPoint b = frame.Transform(P(rec.v[1]));
@@ -910,15 +978,15 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
             }
             if (nh == 0) return;
             trace::PatchRoot roots[2];
-            const int nr = trace::IntersectBilinearPatch(frame.org, frame.dir, P(rec.v[0]),
-                                                         P(rec.v[1]), P(rec.v[2]), P(rec.v[3]),
-                                                         roots);
+            const int nr = trace::IntersectBilinearPatch(frame.org, frame.dir,
+                                                         P(rec.v[0]), P(rec.v[1]),
+                                                         P(rec.v[2]), P(rec.v[3]), roots);
             if (nh == 1) {
                 // The tessellation and the patch share their boundary, so a line crossing
-                // the tessellation once crosses the patch an odd number of times: once. Take
-                // the root inside the patch (u, v in [0, 1]); near the patch boundary, where
-                // rounding can put it just outside, the one least outside, and between
-                // equals the one nearest the tessellated hit.
+                // the tessellation once crosses the patch an odd number of times: once.
+                // Take the root inside the patch (u, v in [0, 1]); near the patch
+                // boundary, where rounding can put it just outside, the one least
+                // outside, and between equals the one nearest the tessellated hit.
                 int best = -1;
                 double bestOut = kInf, bestD = kInf;
                 for (int r = 0; r < nr; ++r) {
@@ -956,7 +1024,9 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
             }
             return;
         }
-        case FaceKind::Curved: AppendCurvedCrossings(f, frame, out); return;
+        case FaceKind::Curved:
+            AppendCurvedCrossings(f, frame, out);
+            return;
     }
 }
 
@@ -1015,12 +1085,15 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
 // The walk
 
 bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, double entryT,
-                                    double tIn, const RayFrame& frame, Crossing& exit) const {
+                                    double tIn, const RayFrame& frame,
+                                    Crossing& exit) const {
     const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
     const int nf = static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
     if (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
-        faces[cf[0]].kind == FaceKind::Triangle && faces[cf[1]].kind == FaceKind::Triangle &&
-        faces[cf[2]].kind == FaceKind::Triangle && faces[cf[3]].kind == FaceKind::Triangle) {
+        faces[cf[0]].kind == FaceKind::Triangle &&
+        faces[cf[1]].kind == FaceKind::Triangle &&
+        faces[cf[2]].kind == FaceKind::Triangle &&
+        faces[cf[3]].kind == FaceKind::Triangle) {
         // A planar tet seen along the (perturbed) ray covers the ray with exactly one
         // entering and one leaving face (exact predicates on the projected corners), so
         // the first leaving face is the exit.
@@ -1040,11 +1113,11 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
         }
     } else {
         // General cells (bilinear faces can be crossed twice, curved cells left and
-        // re-entered): all crossings of the cell's faces along the whole line, sorted by t,
-        // paired entering -> leaving in order (a leaving crossing that rounding put before
-        // every open entering one waits for the next entering one). The pairing is a
-        // bijection computed identically on every visit, so a walk can neither get stuck
-        // nor loop: each crossing has one predecessor and one successor.
+        // re-entered): all crossings of the cell's faces along the whole line, sorted by
+        // t, paired entering -> leaving in order (a leaving crossing that rounding put
+        // before every open entering one waits for the next entering one). The pairing is
+        // a bijection computed identically on every visit, so a walk can neither get
+        // stuck nor loop: each crossing has one predecessor and one successor.
         std::vector<Crossing>& xs = tScratch.cell;
         xs.clear();
         // The walk is bound by memory latency: fetch the cell's face records, then their
@@ -1116,7 +1189,8 @@ bool BrickTraverser::Impl::TolerantExit(std::int64_t c, double tIn, const RayFra
             const ShearedPoint a = frame.Transform(P(tri[0]));
             const ShearedPoint b = frame.Transform(P(tri[1]));
             const ShearedPoint d = frame.Transform(P(tri[2]));
-            double w[3] = {b.x * d.y - b.y * d.x, d.x * a.y - d.y * a.x, a.x * b.y - a.y * b.x};
+            double w[3] = {b.x * d.y - b.y * d.x, d.x * a.y - d.y * a.x,
+                           a.x * b.y - a.y * b.x};
             const double sum = w[0] + w[1] + w[2];
             if (sum == 0 || !std::isfinite(sum)) continue;
             const Crossing cand{0, f, sum > 0 ? 1 : -1};
@@ -1202,7 +1276,9 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                                return a.t == b.t && a.face == b.face && a.side == b.side;
                            }),
                hits.end());
-    auto entered = [&](const Crossing& x) { return im.faces[x.face].cell[x.side > 0 ? 1 : 0]; };
+    auto entered = [&](const Crossing& x) {
+        return im.faces[x.face].cell[x.side > 0 ? 1 : 0];
+    };
     // With strictly alternating entries and exits, the k-th walk leaves at the k-th exit,
     // so walks that end before tLo can be skipped unwalked.
     bool alternating = hits.size() % 2 == 0;

@@ -30,7 +30,8 @@ std::vector<double> Invert(int n, const std::vector<long double>& m) {
     for (int c = 0; c < n; ++c) {
         int piv = c;
         for (int r = c + 1; r < n; ++r)
-            if (std::fabs(a[std::size_t(r) * n + c]) > std::fabs(a[std::size_t(piv) * n + c]))
+            if (std::fabs(a[std::size_t(r) * n + c]) >
+                std::fabs(a[std::size_t(piv) * n + c]))
                 piv = r;
         HPRAY_CHECK(a[std::size_t(piv) * n + c] != 0);
         for (int k = 0; k < n; ++k) {
@@ -69,14 +70,16 @@ struct Tables {
     Tables() {
         for (int n = 0; n <= kMaxOrder; ++n) {
             binom[n][0] = binom[n][n] = 1;
-            for (int k = 1; k < n; ++k) binom[n][k] = binom[n - 1][k - 1] + binom[n - 1][k];
+            for (int k = 1; k < n; ++k)
+                binom[n][k] = binom[n - 1][k - 1] + binom[n - 1][k];
         }
         for (int p = 1; p <= kMaxOrder; ++p) {
             std::vector<long double> m(std::size_t(p + 1) * (p + 1));
             for (int k = 0; k <= p; ++k) {
                 const long double s = (long double)k / p;
                 for (int i = 0; i <= p; ++i)
-                    m[std::size_t(k) * (p + 1) + i] = binom[p][i] * PowL(s, i) * PowL(1 - s, p - i);
+                    m[std::size_t(k) * (p + 1) + i] =
+                        binom[p][i] * PowL(s, i) * PowL(1 - s, p - i);
             }
             edgeInv[p] = Invert(p + 1, m);
             const int n = NetSize(true, p);
@@ -118,8 +121,8 @@ int SegmentCount(const P2& a, const P2& b) {
     return s == up ? up : 0;
 }
 
-// De Casteljau at 1/2. Every new point is (a + b) * 0.5, which is symmetric in a and b, so
-// halving the reversed polygon gives bitwise the reversed halves.
+// De Casteljau at 1/2. Every new point is (a + b) * 0.5, which is symmetric in a and b,
+// so halving the reversed polygon gives bitwise the reversed halves.
 void Halve(const P2* c, int n, P2* left, P2* right) {
     P2 w[kMaxOrder + 1];
     std::copy(c, c + n + 1, w);
@@ -136,8 +139,8 @@ void Halve(const P2* c, int n, P2* left, P2* right) {
 }
 
 // Is the origin separated from every control point by a margin along direction (a, b)?
-// The margin (1e-10 of the points' extent) is far above the rounding that halving adds, so
-// halves of a separated curve are still counted exactly (see CurveCount).
+// The margin (1e-10 of the points' extent) is far above the rounding that halving adds,
+// so halves of a separated curve are still counted exactly (see CurveCount).
 bool Separated(const P2* c, int n, double a, double b) {
     double lo = INFINITY, hi = -INFINITY, scale = 0;
     for (int k = 0; k <= n; ++k) {
@@ -181,12 +184,12 @@ int CurveCount(const P2* c, int n, int depth) {
 // ---------------------------------------------------------------------------------------
 // Sub-patches
 
-// A sub-patch of the face: its control net in the ray plane, its parameter region, and for
-// each side the number of halvings since that side's curve was created (a face edge, or
-// the cut between two siblings), so that side counts add up exactly to the whole curve's.
-// Triangles: corners (A, B, C), net point (i, j) = blossom(A^(p-i-j) B^i C^j), sides
-// A->B, B->C, C->A; refined by newest-vertex bisection of A->B. Quadrilaterals: the box
-// [u0, u1] x [v0, v1], sides bottom, right, top, left counter-clockwise.
+// A sub-patch of the face: its control net in the ray plane, its parameter region, and
+// for each side the number of halvings since that side's curve was created (a face edge,
+// or the cut between two siblings), so that side counts add up exactly to the whole
+// curve's. Triangles: corners (A, B, C), net point (i, j) = blossom(A^(p-i-j) B^i C^j),
+// sides A->B, B->C, C->A; refined by newest-vertex bisection of A->B. Quadrilaterals: the
+// box [u0, u1] x [v0, v1], sides bottom, right, top, left counter-clockwise.
 struct Patch {
     P2 b[kMaxNet];
     double corner[3][2];  // triangle: A, B, C; quad: (u0, v0), (u1, v1)
@@ -198,7 +201,8 @@ struct Patch {
 // Copies a patch's used part.
 void CopyPatch(const Patch& from, int n, Patch& to) {
     std::copy(from.b, from.b + n, to.b);
-    for (int a = 0; a < 3; ++a) to.corner[a][0] = from.corner[a][0], to.corner[a][1] = from.corner[a][1];
+    for (int a = 0; a < 3; ++a)
+        to.corner[a][0] = from.corner[a][0], to.corner[a][1] = from.corner[a][1];
     for (int k = 0; k < 4; ++k) to.sideDepth[k] = from.sideDepth[k];
     to.depth = from.depth;
 }
@@ -215,17 +219,31 @@ void Side(const Patch& q, bool tri, int p, int s, P2* out) {
         int i, j;
         if (tri) {
             switch (s) {
-                case 0: i = k, j = 0; break;
-                case 1: i = p - k, j = k; break;
-                default: i = 0, j = p - k; break;
+                case 0:
+                    i = k, j = 0;
+                    break;
+                case 1:
+                    i = p - k, j = k;
+                    break;
+                default:
+                    i = 0, j = p - k;
+                    break;
             }
             out[k] = q.b[TriIndex(p, i, j)];
         } else {
             switch (s) {
-                case 0: i = k, j = 0; break;
-                case 1: i = p, j = k; break;
-                case 2: i = p - k, j = p; break;
-                default: i = 0, j = p - k; break;
+                case 0:
+                    i = k, j = 0;
+                    break;
+                case 1:
+                    i = p, j = k;
+                    break;
+                case 2:
+                    i = p - k, j = p;
+                    break;
+                default:
+                    i = 0, j = p - k;
+                    break;
             }
             out[k] = q.b[QuadIndex(p, i, j)];
         }
@@ -282,8 +300,10 @@ bool Injective(const Patch& q, bool tri, int p) {
             const double c = px - py;
             if (!(std::fabs(c) > 1e-12 * (std::fabs(px) + std::fabs(py)))) return false;
             const int s = c > 0 ? 1 : -1;
-            if (sign == 0) sign = s;
-            else if (s != sign) return false;
+            if (sign == 0)
+                sign = s;
+            else if (s != sign)
+                return false;
         }
     return sign != 0;
 }
@@ -291,7 +311,8 @@ bool Injective(const Patch& q, bool tri, int p) {
 void SplitQuad(const Patch& q, int p, bool alongU, Patch& lo, Patch& hi) {
     P2 row[kMaxOrder + 1], l[kMaxOrder + 1], r[kMaxOrder + 1];
     for (int a = 0; a <= p; ++a) {
-        for (int k = 0; k <= p; ++k) row[k] = q.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)];
+        for (int k = 0; k <= p; ++k)
+            row[k] = q.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)];
         Halve(row, p, l, r);
         for (int k = 0; k <= p; ++k) {
             lo.b[alongU ? QuadIndex(p, k, a) : QuadIndex(p, a, k)] = l[k];
@@ -304,17 +325,22 @@ void SplitQuad(const Patch& q, int p, bool alongU, Patch& lo, Patch& hi) {
     for (int s = 0; s < 4; ++s) lo.sideDepth[s] = hi.sideDepth[s] = q.sideDepth[s];
     if (alongU) {
         const double um = 0.5 * (u0 + u1);
-        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = um, lo.corner[1][1] = v1;
-        hi.corner[0][0] = um, hi.corner[0][1] = v0, hi.corner[1][0] = u1, hi.corner[1][1] = v1;
-        // bottom (0) and top (2) halved; lo's right (1) and hi's left (3) are the new cut.
+        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = um,
+        lo.corner[1][1] = v1;
+        hi.corner[0][0] = um, hi.corner[0][1] = v0, hi.corner[1][0] = u1,
+        hi.corner[1][1] = v1;
+        // bottom (0) and top (2) halved; lo's right (1) and hi's left (3) are the new
+        // cut.
         lo.sideDepth[0] = hi.sideDepth[0] = std::uint8_t(q.sideDepth[0] + 1);
         lo.sideDepth[2] = hi.sideDepth[2] = std::uint8_t(q.sideDepth[2] + 1);
         lo.sideDepth[1] = 0;
         hi.sideDepth[3] = 0;
     } else {
         const double vm = 0.5 * (v0 + v1);
-        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = u1, lo.corner[1][1] = vm;
-        hi.corner[0][0] = u0, hi.corner[0][1] = vm, hi.corner[1][0] = u1, hi.corner[1][1] = v1;
+        lo.corner[0][0] = u0, lo.corner[0][1] = v0, lo.corner[1][0] = u1,
+        lo.corner[1][1] = vm;
+        hi.corner[0][0] = u0, hi.corner[0][1] = vm, hi.corner[1][0] = u1,
+        hi.corner[1][1] = v1;
         lo.sideDepth[1] = hi.sideDepth[1] = std::uint8_t(q.sideDepth[1] + 1);
         lo.sideDepth[3] = hi.sideDepth[3] = std::uint8_t(q.sideDepth[3] + 1);
         lo.sideDepth[2] = 0;
@@ -326,7 +352,8 @@ void SplitQuad(const Patch& q, int p, bool alongU, Patch& lo, Patch& hi) {
 // (B, C, M) (both keep the orientation; their refinement edges are opposite M). Rows of
 // the net parallel to A->B are Bezier curves whose halves are the children's rows.
 void SplitTriangle(const Patch& q, int p, Patch& t1, Patch& t2) {
-    P2 row[kMaxOrder + 1], l[kMaxOrder + 1][kMaxOrder + 1], r[kMaxOrder + 1][kMaxOrder + 1];
+    P2 row[kMaxOrder + 1], l[kMaxOrder + 1][kMaxOrder + 1],
+        r[kMaxOrder + 1][kMaxOrder + 1];
     for (int j = 0; j <= p; ++j) {
         for (int i = 0; i <= p - j; ++i) row[i] = q.b[TriIndex(p, i, j)];
         Halve(row, p - j, l[j], r[j]);
@@ -365,7 +392,8 @@ bool InPatch(const Patch& q, bool tri, double u, double v, double margin) {
     const double det = e1[0] * e2[1] - e1[1] * e2[0];
     const double x = u - A[0], y = v - A[1];
     const double l1 = (x * e2[1] - y * e2[0]) / det, l2 = (e1[0] * y - e1[1] * x) / det;
-    const double len = std::sqrt(std::max(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
+    const double len =
+        std::sqrt(std::max(e1[0] * e1[0] + e1[1] * e1[1], e2[0] * e2[0] + e2[1] * e2[1]));
     const double m = margin / len;
     return l1 >= -m && l2 >= -m && 1 - l1 - l2 >= -m;
 }
@@ -381,8 +409,8 @@ void Centre(const Patch& q, bool tri, double& u, double& v) {
 }
 
 // Newton's start in a patch: the point whose corner-interpolant (the flat triangle of the
-// corners; for quadrilaterals the half, split on the diagonal, that holds the origin best)
-// maps to the origin, clamped into the patch.
+// corners; for quadrilaterals the half, split on the diagonal, that holds the origin
+// best) maps to the origin, clamped into the patch.
 void StartPoint(const Patch& q, bool tri, int p, double& u, double& v) {
     auto solve = [](const P2& a, const P2& b, const P2& c, double& beta, double& gamma) {
         const double e1x = b.x - a.x, e1y = b.y - a.y, e2x = c.x - a.x, e2y = c.y - a.y;
@@ -403,7 +431,8 @@ void StartPoint(const Patch& q, bool tri, int p, double& u, double& v) {
     };
     double beta, gamma;
     if (tri) {
-        const P2 a = q.b[TriIndex(p, 0, 0)], b = q.b[TriIndex(p, p, 0)], c = q.b[TriIndex(p, 0, p)];
+        const P2 a = q.b[TriIndex(p, 0, 0)], b = q.b[TriIndex(p, p, 0)],
+                 c = q.b[TriIndex(p, 0, p)];
         if (!solve(a, b, c, beta, gamma)) return Centre(q, tri, u, v);
         clampBary(beta, gamma);
         const double* A = q.corner[0];
@@ -428,7 +457,7 @@ void StartPoint(const Patch& q, bool tri, int p, double& u, double& v) {
         t = g1;
     } else {
         clampBary(b2, g2);
-        s = b2;       // (0,0) + b2 (1,1) + g2 (0,1)
+        s = b2;  // (0,0) + b2 (1,1) + g2 (0,1)
         t = b2 + g2;
     }
     u = q.corner[0][0] + s * (q.corner[1][0] - q.corner[0][0]);
@@ -436,7 +465,8 @@ void StartPoint(const Patch& q, bool tri, int p, double& u, double& v) {
 }
 
 double Diameter(const Patch& q, bool tri) {
-    if (!tri) return std::max(q.corner[1][0] - q.corner[0][0], q.corner[1][1] - q.corner[0][1]);
+    if (!tri)
+        return std::max(q.corner[1][0] - q.corner[0][0], q.corner[1][1] - q.corner[0][1]);
     double d = 0;
     for (int a = 0; a < 3; ++a) {
         const double* x = q.corner[a];
@@ -483,16 +513,23 @@ bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& o
 double EdgeDistance(bool tri, int e, double u, double v) {
     if (tri) {
         switch (e) {
-            case 0: return std::fabs(v);
-            case 1: return std::fabs(1 - u - v) / std::sqrt(2.0);
-            default: return std::fabs(u);
+            case 0:
+                return std::fabs(v);
+            case 1:
+                return std::fabs(1 - u - v) / std::sqrt(2.0);
+            default:
+                return std::fabs(u);
         }
     }
     switch (e) {
-        case 0: return std::fabs(v);
-        case 1: return std::fabs(1 - u);
-        case 2: return std::fabs(1 - v);
-        default: return std::fabs(u);
+        case 0:
+            return std::fabs(v);
+        case 1:
+            return std::fabs(1 - u);
+        case 2:
+            return std::fabs(1 - v);
+        default:
+            return std::fabs(u);
     }
 }
 
@@ -505,16 +542,23 @@ int NetSize(bool triangle, int order) {
 int EdgeLatticeIndex(bool triangle, int p, int e, int k) {
     if (triangle) {
         switch (e) {
-            case 0: return TriIndex(p, k, 0);
-            case 1: return TriIndex(p, p - k, k);
-            default: return TriIndex(p, 0, p - k);
+            case 0:
+                return TriIndex(p, k, 0);
+            case 1:
+                return TriIndex(p, p - k, k);
+            default:
+                return TriIndex(p, 0, p - k);
         }
     }
     switch (e) {
-        case 0: return QuadIndex(p, k, 0);
-        case 1: return QuadIndex(p, p, k);
-        case 2: return QuadIndex(p, p - k, p);
-        default: return QuadIndex(p, 0, p - k);
+        case 0:
+            return QuadIndex(p, k, 0);
+        case 1:
+            return QuadIndex(p, p, k);
+        case 2:
+            return QuadIndex(p, p - k, p);
+        default:
+            return QuadIndex(p, 0, p - k);
     }
 }
 
@@ -524,7 +568,8 @@ void EdgeBernstein(int p, const double* nodal, double* net) {
     for (int i = 0; i <= p; ++i)
         for (int d = 0; d < 3; ++d) {
             double s = 0;
-            for (int k = 0; k <= p; ++k) s += inv[std::size_t(i) * (p + 1) + k] * nodal[3 * k + d];
+            for (int k = 0; k <= p; ++k)
+                s += inv[std::size_t(i) * (p + 1) + k] * nodal[3 * k + d];
             net[3 * i + d] = s;
         }
     for (int d = 0; d < 3; ++d) {
@@ -542,7 +587,8 @@ void FaceBernstein(bool triangle, int p, const double* nodal, double* net) {
         for (int m = 0; m < n; ++m)
             for (int d = 0; d < 3; ++d) {
                 double s = 0;
-                for (int k = 0; k < n; ++k) s += inv[std::size_t(m) * n + k] * nodal[3 * k + d];
+                for (int k = 0; k < n; ++k)
+                    s += inv[std::size_t(m) * n + k] * nodal[3 * k + d];
                 net[3 * m + d] = s;
             }
     } else {
@@ -553,7 +599,8 @@ void FaceBernstein(bool triangle, int p, const double* nodal, double* net) {
                 for (int d = 0; d < 3; ++d) {
                     double s = 0;
                     for (int k = 0; k <= p; ++k)
-                        s += inv[std::size_t(i) * (p + 1) + k] * nodal[3 * QuadIndex(p, k, j) + d];
+                        s += inv[std::size_t(i) * (p + 1) + k] *
+                             nodal[3 * QuadIndex(p, k, j) + d];
                     tmp[3 * QuadIndex(p, i, j) + d] = s;
                 }
         for (int j = 0; j <= p; ++j)  // along v
@@ -561,7 +608,8 @@ void FaceBernstein(bool triangle, int p, const double* nodal, double* net) {
                 for (int d = 0; d < 3; ++d) {
                     double s = 0;
                     for (int k = 0; k <= p; ++k)
-                        s += inv[std::size_t(j) * (p + 1) + k] * tmp[3 * QuadIndex(p, i, k) + d];
+                        s += inv[std::size_t(j) * (p + 1) + k] *
+                             tmp[3 * QuadIndex(p, i, k) + d];
                     net[3 * QuadIndex(p, i, j) + d] = s;
                 }
     }
@@ -591,14 +639,15 @@ void EvalNet(bool triangle, int p, const ShearedPoint* net, double u, double v,
         }
         for (int j = 0; j <= p; ++j)
             for (int i = 0; i <= p - j; ++i)
-                add(value, tab.binom[p][i] * tab.binom[p - i][j] * pu[i] * pv[j] * pw[p - i - j],
+                add(value,
+                    tab.binom[p][i] * tab.binom[p - i][j] * pu[i] * pv[j] * pw[p - i - j],
                     net[TriIndex(p, i, j)]);
         // Derivatives: p * sum over the degree p-1 basis of the forward differences.
         const int q = p - 1;
         for (int j = 0; j <= q; ++j)
             for (int i = 0; i <= q - j; ++i) {
-                const double b = p * tab.binom[q][i] * tab.binom[q - i][j] * pu[i] * pv[j] *
-                                 pw[q - i - j];
+                const double b = p * tab.binom[q][i] * tab.binom[q - i][j] * pu[i] *
+                                 pv[j] * pw[q - i - j];
                 const ShearedPoint& o = net[TriIndex(p, i, j)];
                 const ShearedPoint& a = net[TriIndex(p, i + 1, j)];
                 const ShearedPoint& c = net[TriIndex(p, i, j + 1)];
@@ -680,7 +729,8 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
         const bool ok = Newton(tri, p, net, options, u, v, t);
         const double margin = 1e-6 * Diameter(q, tri) + 1e-13;
         if (ok && InPatch(q, tri, u, v, margin)) {
-            for (int k = 0; k < std::abs(w); ++k) s.found.push_back({t, u, v, w > 0 ? 1 : -1});
+            for (int k = 0; k < std::abs(w); ++k)
+                s.found.push_back({t, u, v, w > 0 ? 1 : -1});
             return true;
         }
         if (!atLimit) return false;
@@ -693,7 +743,8 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
             v = v0;
             failures += std::abs(w);
         }
-        for (int k = 0; k < std::abs(w); ++k) s.found.push_back({t, u, v, w > 0 ? 1 : -1});
+        for (int k = 0; k < std::abs(w); ++k)
+            s.found.push_back({t, u, v, w > 0 ? 1 : -1});
         return true;
     };
     Patch q;
@@ -723,10 +774,10 @@ int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
         }
     }
 
-    // Straight edges are counted by the exact segment predicate (as the planar or bilinear
-    // face on their other side counts them), the sub-patches by their snapped control
-    // points: where the two disagree, the ray passes within rounding of the edge; add the
-    // crossing at the edge, or drop the one found next to it.
+    // Straight edges are counted by the exact segment predicate (as the planar or
+    // bilinear face on their other side counts them), the sub-patches by their snapped
+    // control points: where the two disagree, the ray passes within rounding of the edge;
+    // add the crossing at the edge, or drop the one found next to it.
     const int nEdges = tri ? 3 : 4;
     for (int e = 0; e < nEdges; ++e) {
         if (!(face.straightEdges & (1u << e))) continue;

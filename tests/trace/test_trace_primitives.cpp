@@ -22,9 +22,9 @@ TEST(RayFrame, EdgeSignIsExactAndAntisymmetric) {
     std::uniform_real_distribution<double> uni(-1, 1);
     for (int i = 0; i < 20000; ++i) {
         ShearedPoint p{uni(rng), uni(rng), 0}, q{uni(rng), uni(rng), 0};
-        if (i % 3 == 0) q = {p.x * 3, p.y * 3, 0};       // collinear with the origin
-        if (i % 5 == 0) q = {p.x, uni(rng), 0};          // vertical edge
-        if (i % 7 == 0) p = {0, 0, 0};                   // through the origin
+        if (i % 3 == 0) q = {p.x * 3, p.y * 3, 0};  // collinear with the origin
+        if (i % 5 == 0) q = {p.x, uni(rng), 0};     // vertical edge
+        if (i % 7 == 0) p = {0, 0, 0};              // through the origin
         const int s = EdgeSign(p, q);
         EXPECT_EQ(EdgeSign(q, p), -s) << i;
         const bool same = p.x == q.x && p.y == q.y;
@@ -85,7 +85,8 @@ TEST(RayFrame, TriangleSideFollowsNormalAndTIsExactForPlanes) {
         }
         // The opposite winding gives the opposite side and the same t.
         TriangleCrossing y;
-        ASSERT_TRUE(CrossTriangle(frame.Transform(A), frame.Transform(C), frame.Transform(B), y));
+        ASSERT_TRUE(
+            CrossTriangle(frame.Transform(A), frame.Transform(C), frame.Transform(B), y));
         EXPECT_EQ(y.side, -x.side);
     }
     EXPECT_GT(hits, 4900);
@@ -128,14 +129,15 @@ TEST(BilinearPatch, RootsLieOnPatchAndRay) {
     for (int i = 0; i < 5000; ++i) {
         double q[4][3];
         for (int k = 0; k < 4; ++k)
-            for (int d = 0; d < 3; ++d) q[k][d] = (k == 1 || k == 2 ? 1 : 0) * (d == 0) +
-                                                  (k >= 2 ? 1 : 0) * (d == 1) + 0.4 * uni(rng);
+            for (int d = 0; d < 3; ++d)
+                q[k][d] = (k == 1 || k == 2 ? 1 : 0) * (d == 0) +
+                          (k >= 2 ? 1 : 0) * (d == 1) + 0.4 * uni(rng);
         // Ray through P(u0, v0).
         const double u0 = 0.5 * (1 + uni(rng)), v0 = 0.5 * (1 + uni(rng));
         double X[3], dir[3], len = 0;
         for (int d = 0; d < 3; ++d) {
-            X[d] = (1 - u0) * (1 - v0) * q[0][d] + u0 * (1 - v0) * q[1][d] + u0 * v0 * q[2][d] +
-                   (1 - u0) * v0 * q[3][d];
+            X[d] = (1 - u0) * (1 - v0) * q[0][d] + u0 * (1 - v0) * q[1][d] +
+                   u0 * v0 * q[2][d] + (1 - u0) * v0 * q[3][d];
             dir[d] = uni(rng) + (d == 2 ? 2 : 0);
             len += dir[d] * dir[d];
         }
@@ -151,10 +153,11 @@ TEST(BilinearPatch, RootsLieOnPatchAndRay) {
             double P[3];
             const double u = roots[r].u, v = roots[r].v;
             for (int d = 0; d < 3; ++d)
-                P[d] = (1 - u) * (1 - v) * q[0][d] + u * (1 - v) * q[1][d] + u * v * q[2][d] +
-                       (1 - u) * v * q[3][d];
+                P[d] = (1 - u) * (1 - v) * q[0][d] + u * (1 - v) * q[1][d] +
+                       u * v * q[2][d] + (1 - u) * v * q[3][d];
             double err = 0;
-            for (int d = 0; d < 3; ++d) err = std::max(err, std::fabs(P[d] - (o[d] + roots[r].t * dir[d])));
+            for (int d = 0; d < 3; ++d)
+                err = std::max(err, std::fabs(P[d] - (o[d] + roots[r].t * dir[d])));
             if (std::fabs(u) < 10 && std::fabs(v) < 10) {
                 EXPECT_LT(err, 1e-12) << i;
             }
@@ -169,15 +172,16 @@ TEST(BilinearPatch, RootsLieOnPatchAndRay) {
 }
 
 TEST(FaceBasis, KroneckerPartitionOfUnityAndDerivatives) {
-    for (FaceBasis basis : {FaceBasis::Triangle, FaceBasis::Quad, FaceBasis::QuadSerendipity}) {
+    for (FaceBasis basis :
+         {FaceBasis::Triangle, FaceBasis::Quad, FaceBasis::QuadSerendipity}) {
         for (int p = 1; p <= 10; ++p) {
             if (basis == FaceBasis::QuadSerendipity && p != 2) continue;
             const int n = FaceNodeCount(basis, p);
             std::vector<double> N(n), Nu(n), Nv(n), Np(n), Nm(n);
             for (int m = 0; m < n; ++m) {
                 const auto ij = FaceNodeLattice(basis, p, m);
-                EvalFaceBasis(basis, p, double(ij[0]) / p, double(ij[1]) / p, N.data(), nullptr,
-                              nullptr);
+                EvalFaceBasis(basis, p, double(ij[0]) / p, double(ij[1]) / p, N.data(),
+                              nullptr, nullptr);
                 for (int k = 0; k < n; ++k) EXPECT_NEAR(N[k], k == m ? 1 : 0, 1e-11) << p;
             }
             const double u = 0.23, v = 0.31, h = 1e-6;
@@ -192,11 +196,13 @@ TEST(FaceBasis, KroneckerPartitionOfUnityAndDerivatives) {
             EvalFaceBasis(basis, p, u + h, v, Np.data(), nullptr, nullptr);
             EvalFaceBasis(basis, p, u - h, v, Nm.data(), nullptr, nullptr);
             for (int k = 0; k < n; ++k)
-                EXPECT_NEAR(Nu[k], (Np[k] - Nm[k]) / (2 * h), 1e-5 * (1 + std::fabs(Nu[k])));
+                EXPECT_NEAR(Nu[k], (Np[k] - Nm[k]) / (2 * h),
+                            1e-5 * (1 + std::fabs(Nu[k])));
             EvalFaceBasis(basis, p, u, v + h, Np.data(), nullptr, nullptr);
             EvalFaceBasis(basis, p, u, v - h, Nm.data(), nullptr, nullptr);
             for (int k = 0; k < n; ++k)
-                EXPECT_NEAR(Nv[k], (Np[k] - Nm[k]) / (2 * h), 1e-5 * (1 + std::fabs(Nv[k])));
+                EXPECT_NEAR(Nv[k], (Np[k] - Nm[k]) / (2 * h),
+                            1e-5 * (1 + std::fabs(Nv[k])));
         }
     }
 }
@@ -216,7 +222,8 @@ struct PolyMap {
         for (int b = 0; b <= p; ++b)
             for (int a = 0; a <= p; ++a)
                 for (int d = 0; d < 3; ++d)
-                    c[b * (p + 1) + a][d] = (tri && a + b > p) ? 0 : uni(rng) / (1 + a + b);
+                    c[b * (p + 1) + a][d] =
+                        (tri && a + b > p) ? 0 : uni(rng) / (1 + a + b);
     }
     void Eval(double u, double v, double* f, double* fu, double* fv) const {
         for (int d = 0; d < 3; ++d) f[d] = fu[d] = fv[d] = 0;
@@ -249,7 +256,8 @@ TEST(CurvedFace, BernsteinNetsReproducePolynomialMaps) {
             }
             FaceBernstein(tri, p, nodal.data(), net.data());
             std::vector<ShearedPoint> pts(n);
-            for (int m = 0; m < n; ++m) pts[m] = {net[3 * m], net[3 * m + 1], net[3 * m + 2]};
+            for (int m = 0; m < n; ++m)
+                pts[m] = {net[3 * m], net[3 * m + 1], net[3 * m + 2]};
             const double tol = p <= 4 ? 1e-13 : 1e-10;
             for (int i = 0; i < 50; ++i) {
                 double u = uni(rng), v = uni(rng);
@@ -273,7 +281,8 @@ TEST(CurvedFace, BernsteinNetsReproducePolynomialMaps) {
                 EdgeBernstein(p, en.data(), eb.data());
                 for (int k = 0; k <= p; ++k)
                     for (int d = 0; d < 3; ++d)
-                        EXPECT_NEAR(eb[3 * k + d], net[3 * EdgeLatticeIndex(tri, p, e, k) + d], tol);
+                        EXPECT_NEAR(eb[3 * k + d],
+                                    net[3 * EdgeLatticeIndex(tri, p, e, k) + d], tol);
                 for (int d = 0; d < 3; ++d) {
                     EXPECT_EQ(eb[d], en[d]);
                     EXPECT_EQ(net[3 * EdgeLatticeIndex(tri, p, e, 0) + d], en[d]);
@@ -306,8 +315,9 @@ void AddFace(Fan& fan, const std::function<double(double, double)>& h,
         for (int d = 0; d < 2; ++d)
             xy[d] = tri ? corners[0][d] + u * (corners[1][d] - corners[0][d]) +
                               v * (corners[2][d] - corners[0][d])
-                        : (1 - u) * (1 - v) * corners[0][d] + u * (1 - v) * corners[1][d] +
-                              u * v * corners[2][d] + (1 - u) * v * corners[3][d];
+                        : (1 - u) * (1 - v) * corners[0][d] +
+                              u * (1 - v) * corners[1][d] + u * v * corners[2][d] +
+                              (1 - u) * v * corners[3][d];
         nodal[3 * m] = xy[0];
         nodal[3 * m + 1] = xy[1];
     }
@@ -321,7 +331,9 @@ void AddFace(Fan& fan, const std::function<double(double, double)>& h,
         for (int k = 0; k <= p; ++k) {
             const int m = EdgeLatticeIndex(tri, p, e, flip ? p - k : k);
             for (int d = 0; d < 2; ++d)
-                nodal[3 * m + d] = k == 0 ? a[d] : k == p ? b[d] : a[d] + (double(k) / p) * (b[d] - a[d]);
+                nodal[3 * m + d] = k == 0   ? a[d]
+                                   : k == p ? b[d]
+                                            : a[d] + (double(k) / p) * (b[d] - a[d]);
         }
     }
     for (int m = 0; m < n; ++m) nodal[3 * m + 2] = h(nodal[3 * m], nodal[3 * m + 1]);
@@ -330,27 +342,33 @@ void AddFace(Fan& fan, const std::function<double(double, double)>& h,
     for (int e = 0; e < (tri ? 3 : 4); ++e) {
         std::vector<std::array<double, 3>> en(p + 1);
         for (int k = 0; k <= p; ++k)
-            for (int d = 0; d < 3; ++d) en[k][d] = nodal[3 * EdgeLatticeIndex(tri, p, e, k) + d];
+            for (int d = 0; d < 3; ++d)
+                en[k][d] = nodal[3 * EdgeLatticeIndex(tri, p, e, k) + d];
         const bool reversed = en[p] < en[0];
         if (reversed) std::reverse(en.begin(), en.end());
         std::vector<double> row(3 * (p + 1));
         bool isStraight = true;
         for (int k = 1; k < p; ++k)
             for (int d = 0; d < 3; ++d)
-                isStraight = isStraight &&
-                             std::fabs(en[k][d] - (en[0][d] + (double(k) / p) * (en[p][d] - en[0][d]))) < 1e-13;
+                isStraight =
+                    isStraight &&
+                    std::fabs(en[k][d] - (en[0][d] + (double(k) / p) *
+                                                         (en[p][d] - en[0][d]))) < 1e-13;
         if (isStraight) {
             straight = std::uint8_t(straight | (1u << e));
             for (int k = 0; k <= p; ++k)
                 for (int d = 0; d < 3; ++d)
-                    row[3 * k + d] = k == 0 ? en[0][d] : k == p ? en[p][d]
-                                     : en[0][d] + (double(k) / p) * (en[p][d] - en[0][d]);
+                    row[3 * k + d] =
+                        k == 0   ? en[0][d]
+                        : k == p ? en[p][d]
+                                 : en[0][d] + (double(k) / p) * (en[p][d] - en[0][d]);
         } else {
             EdgeBernstein(p, en[0].data(), row.data());
         }
         for (int k = 0; k <= p; ++k)
             for (int d = 0; d < 3; ++d)
-                net[3 * EdgeLatticeIndex(tri, p, e, k) + d] = row[3 * (reversed ? p - k : k) + d];
+                net[3 * EdgeLatticeIndex(tri, p, e, k) + d] =
+                    row[3 * (reversed ? p - k : k) + d];
     }
     fan.nets.push_back(net);
     CurvedFace face;
@@ -366,7 +384,8 @@ void AddFace(Fan& fan, const std::function<double(double, double)>& h,
 void AddPlanarTriangle(Fan& fan, const std::function<double(double, double)>& h,
                        const std::vector<std::array<double, 2>>& corners) {
     std::array<std::array<double, 3>, 3> t;
-    for (int k = 0; k < 3; ++k) t[k] = {corners[k][0], corners[k][1], h(corners[k][0], corners[k][1])};
+    for (int k = 0; k < 3; ++k)
+        t[k] = {corners[k][0], corners[k][1], h(corners[k][0], corners[k][1])};
     fan.nets.emplace_back();
     fan.faces.emplace_back();
     fan.planar.push_back(true);
@@ -435,9 +454,12 @@ void CheckFan(const Fan& fan, const std::function<double(double, double)>& h,
 TEST(CurvedFace, FansAroundCurvedVerticesAreCrossedExactlyOnce) {
     const double cx = 0.125, cy = -0.1875, r = 0.25;
     const auto paraboloid = [](double x, double y) { return x * x + y * y; };
-    const auto cubic = [](double x, double y) { return x * x + 0.5 * y * y + 0.4 * x * x * x; };
+    const auto cubic = [](double x, double y) {
+        return x * x + 0.5 * y * y + 0.4 * x * x * x;
+    };
     // The ring of 8 corners around the centre, counter-clockwise.
-    const double ring[8][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 1}, {-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
+    const double ring[8][2] = {{1, 0},  {1, 1},   {0, 1},  {-1, 1},
+                               {-1, 0}, {-1, -1}, {0, -1}, {1, -1}};
     // Points on the fan: the centre, a random point on a spoke (a shared curved edge), or
     // anywhere inside.
     auto target = [&](int step) {
@@ -448,10 +470,12 @@ TEST(CurvedFace, FansAroundCurvedVerticesAreCrossedExactlyOnce) {
             const double s = 0.95 * uni(rng);
             if (kind == 1) {
                 const int k = step * (int(8 * uni(rng)) / step);
-                return std::array<double, 2>{cx + s * r * ring[k][0], cy + s * r * ring[k][1]};
+                return std::array<double, 2>{cx + s * r * ring[k][0],
+                                             cy + s * r * ring[k][1]};
             }
             const double ang = 2 * M_PI * uni(rng);
-            return std::array<double, 2>{cx + s * r * std::cos(ang), cy + s * r * std::sin(ang)};
+            return std::array<double, 2>{cx + s * r * std::cos(ang),
+                                         cy + s * r * std::sin(ang)};
         };
     };
     for (int p : {2, 4}) {
@@ -459,14 +483,20 @@ TEST(CurvedFace, FansAroundCurvedVerticesAreCrossedExactlyOnce) {
                               : std::function<double(double, double)>(cubic);
         Fan tris;  // eight triangles around the centre
         for (int k = 0; k < 8; ++k)
-            AddFace(tris, h, {{cx, cy}, {cx + r * ring[k][0], cy + r * ring[k][1]},
-                              {cx + r * ring[(k + 1) % 8][0], cy + r * ring[(k + 1) % 8][1]}}, p);
+            AddFace(tris, h,
+                    {{cx, cy},
+                     {cx + r * ring[k][0], cy + r * ring[k][1]},
+                     {cx + r * ring[(k + 1) % 8][0], cy + r * ring[(k + 1) % 8][1]}},
+                    p);
         CheckFan(tris, h, target(1), "triangles p" + std::to_string(p));
         Fan quads;  // four quadrilaterals around the centre
         for (int k = 0; k < 8; k += 2)
-            AddFace(quads, h, {{cx, cy}, {cx + r * ring[k][0], cy + r * ring[k][1]},
-                               {cx + r * ring[k + 1][0], cy + r * ring[k + 1][1]},
-                               {cx + r * ring[(k + 2) % 8][0], cy + r * ring[(k + 2) % 8][1]}}, p);
+            AddFace(quads, h,
+                    {{cx, cy},
+                     {cx + r * ring[k][0], cy + r * ring[k][1]},
+                     {cx + r * ring[k + 1][0], cy + r * ring[k + 1][1]},
+                     {cx + r * ring[(k + 2) % 8][0], cy + r * ring[(k + 2) % 8][1]}},
+                    p);
         CheckFan(quads, h, target(2), "quads p" + std::to_string(p));
     }
 }
@@ -475,7 +505,9 @@ TEST(CurvedFace, StraightEdgeSharedWithPlanarFacesIsCrossedExactlyOnce) {
     // A tilted plane for y <= 0 (planar triangles), the same plus y^2 for y >= 0 (curved
     // faces whose edges on y = 0 are straight), on non-dyadic corners: rays through the
     // straight shared edges and their vertices pass within rounding of them.
-    const auto h = [](double x, double y) { return 0.3 * x + 0.1 * y + (y > 0 ? y * y : 0.0); };
+    const auto h = [](double x, double y) {
+        return 0.3 * x + 0.1 * y + (y > 0 ? y * y : 0.0);
+    };
     const double xs[4] = {-0.6, -0.1, 0.35, 0.7};
     Fan fan;
     for (int k = 0; k + 1 < 4; ++k) {
@@ -485,14 +517,17 @@ TEST(CurvedFace, StraightEdgeSharedWithPlanarFacesIsCrossedExactlyOnce) {
         AddFace(fan, h, {{x0, 0}, {x1, 0}, {x1, 0.5}}, 2);
         AddFace(fan, h, {{x0, 0}, {x1, 0.5}, {x0, 0.5}}, 2);
     }
-    for (std::size_t f = 0; f < fan.faces.size(); f += 4) EXPECT_EQ(fan.faces[f + 2].straightEdges, 1);
-    CheckFan(fan, h,
-             [&](std::mt19937_64& rng) {
-                 std::uniform_real_distribution<double> uni(0, 1);
-                 const double x = uni(rng) < 0.3 ? xs[1 + int(2 * uni(rng))] : -0.5 + 1.1 * uni(rng);
-                 return std::array<double, 2>{x, uni(rng) < 0.7 ? 0.0 : 0.4 * uni(rng) - 0.2};
-             },
-             "planar and curved");
+    for (std::size_t f = 0; f < fan.faces.size(); f += 4)
+        EXPECT_EQ(fan.faces[f + 2].straightEdges, 1);
+    CheckFan(
+        fan, h,
+        [&](std::mt19937_64& rng) {
+            std::uniform_real_distribution<double> uni(0, 1);
+            const double x =
+                uni(rng) < 0.3 ? xs[1 + int(2 * uni(rng))] : -0.5 + 1.1 * uni(rng);
+            return std::array<double, 2>{x, uni(rng) < 0.7 ? 0.0 : 0.4 * uni(rng) - 0.2};
+        },
+        "planar and curved");
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
-// Tests of BrickTraverser against analytic chords: random and adversarial rays through the
-// unit cube cut into every cell shape, non-convex domains, clipping, unshared points,
-// inverted cells, threads, and curved quadratic cells that represent a paraboloid exactly.
+// Tests of BrickTraverser against analytic chords: random and adversarial rays through
+// the unit cube cut into every cell shape, non-convex domains, clipping, unshared points,
+// inverted cells, threads, and curved quadratic cells that represent a paraboloid
+// exactly.
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>
 
@@ -37,8 +38,10 @@ std::vector<std::array<double, 2>> Runs(const std::vector<Segment>& segs,
         if (i > 0) {
             EXPECT_LE(segs[i - 1].tExit, segs[i].tEnter) << what << " overlap at " << i;
         }
-        if (!runs.empty() && runs.back()[1] == segs[i].tEnter) runs.back()[1] = segs[i].tExit;
-        else runs.push_back({segs[i].tEnter, segs[i].tExit});
+        if (!runs.empty() && runs.back()[1] == segs[i].tEnter)
+            runs.back()[1] = segs[i].tExit;
+        else
+            runs.push_back({segs[i].tEnter, segs[i].tExit});
     }
     return runs;
 }
@@ -60,14 +63,16 @@ bool CellContains(const Mesh& mesh, std::int64_t c, const double X[3], double to
     };
     if (mesh.cellShape[c] == CellShape::Tet) {
         const double *a = corner(0), *b = corner(1), *cc = corner(2), *d = corner(3);
-        auto det = [](const double* o, const double* p1, const double* p2, const double* p3) {
+        auto det = [](const double* o, const double* p1, const double* p2,
+                      const double* p3) {
             double u[3], v[3], w[3];
             for (int i = 0; i < 3; ++i) {
                 u[i] = p1[i] - o[i];
                 v[i] = p2[i] - o[i];
                 w[i] = p3[i] - o[i];
             }
-            return u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+            return u[0] * (v[1] * w[2] - v[2] * w[1]) -
+                   u[1] * (v[0] * w[2] - v[2] * w[0]) +
                    u[2] * (v[0] * w[1] - v[1] * w[0]);
         };
         const double vol = det(a, b, cc, d);
@@ -120,7 +125,8 @@ void CheckCubeRay(const Mesh& mesh, const BrickTraverser& tr, const Ray& ray,
     for (const auto& g : segs) {
         if (!checkCells) break;
         const double tm = 0.5 * (g.tEnter + g.tExit);
-        const double X[3] = {ray.origin[0] + tm * ray.dir[0], ray.origin[1] + tm * ray.dir[1],
+        const double X[3] = {ray.origin[0] + tm * ray.dir[0],
+                             ray.origin[1] + tm * ray.dir[1],
                              ray.origin[2] + tm * ray.dir[2]};
         EXPECT_TRUE(CellContains(mesh, g.cell, X, 1e-7)) << what << " cell " << g.cell;
     }
@@ -135,19 +141,25 @@ Mesh MakeCubeMesh(const std::string& name) {
     if (name == "builtin-tets") return MakeBuiltin("builtin:cube-tets-8");
     if (name == "tets-jitter")
         return GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Tets5; });
-    if (name == "hex-jitter") return GridMesh(7, 0.25, [](int, int, int) { return CubeCut::Hex; });
+    if (name == "hex-jitter")
+        return GridMesh(7, 0.25, [](int, int, int) { return CubeCut::Hex; });
     if (name == "wedge-jitter")
         return GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Wedges; });
     if (name == "pyramid-tet-jitter")
         return GridMesh(5, 0.2, [](int, int, int) { return CubeCut::PyramidsTetsX; });
-    if (name == "hex-straight") return GridMesh(5, 0.0, [](int, int, int) { return CubeCut::Hex; });
+    if (name == "hex-straight")
+        return GridMesh(5, 0.0, [](int, int, int) { return CubeCut::Hex; });
     // Mixed: columns of hexes, pyramids, wedges and pyramids split into tets along z.
     return GridMesh(6, 0.2, [](int a, int b, int) {
         switch ((a + 2 * b) % 4) {
-            case 0: return CubeCut::Hex;
-            case 1: return CubeCut::Pyramids;
-            case 2: return CubeCut::Wedges;
-            default: return CubeCut::PyramidsTetsZ;
+            case 0:
+                return CubeCut::Hex;
+            case 1:
+                return CubeCut::Pyramids;
+            case 2:
+                return CubeCut::Wedges;
+            default:
+                return CubeCut::PyramidsTetsZ;
         }
     });
 }
@@ -174,8 +186,8 @@ TEST_P(CubeMeshTest, RandomRaysGiveTheBoxChord) {
             from[d] = inside ? uni(rng) : 0.5 + 3 * from[d] / std::sqrt(len);
             to[d] = -0.2 + 1.4 * uni(rng);
         }
-        CheckCubeRay(mesh, tr, MakeRay(from, to), GetParam().name + " ray " + std::to_string(i),
-                     segs);
+        CheckCubeRay(mesh, tr, MakeRay(from, to),
+                     GetParam().name + " ray " + std::to_string(i), segs);
         if (::testing::Test::HasFailure()) return;
     }
     const TraceCounters counters = tr.Counters();
@@ -190,8 +202,8 @@ TEST_P(CubeMeshTest, AdversarialRaysThroughVerticesEdgesAndFaces) {
     std::vector<Segment> segs;
     auto corner = [&](std::int64_t c, int k) {
         const auto lat = VertexLattice(mesh.cellShape[c], mesh.cellOrder[c])[k];
-        const int node =
-            InternalNodeIndex(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c], lat);
+        const int node = InternalNodeIndex(mesh.cellShape[c], mesh.cellOrder[c],
+                                           mesh.cellFamily[c], lat);
         const double* x = &mesh.points[3 * mesh.CellNodes(c)[node]];
         return Vec3{x[0], x[1], x[2]};
     };
@@ -234,9 +246,9 @@ TEST_P(CubeMeshTest, AdversarialRaysThroughVerticesEdgesAndFaces) {
                 kind = "edge point";
             }
         }
-        // A ray lying along an edge of non-planar (bilinear) faces lies in those faces: its
-        // crossings with them are ill-conditioned in t, so only the chord is checked, not
-        // which of the cells around the edge each piece is given to.
+        // A ray lying along an edge of non-planar (bilinear) faces lies in those faces:
+        // its crossings with them are ill-conditioned in t, so only the chord is checked,
+        // not which of the cells around the edge each piece is given to.
         const bool planarFaces = tr.Stats().bilinearFaces == 0;
         CheckCubeRay(mesh, tr, MakeRayDir(through, dir),
                      GetParam().name + " " + kind + " ray " + std::to_string(i), segs,
@@ -273,19 +285,17 @@ TEST_P(CubeMeshTest, AdversarialRaysThroughVerticesEdgesAndFaces) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Shapes, CubeMeshTest,
-                         ::testing::Values(CubeCase{"builtin-tets", 100000},
-                                           CubeCase{"tets-jitter", 20000},
-                                           CubeCase{"hex-jitter", 20000},
-                                           CubeCase{"wedge-jitter", 20000},
-                                           CubeCase{"pyramid-tet-jitter", 20000},
-                                           CubeCase{"mixed", 20000},
-                                           CubeCase{"hex-straight", 5000}),
-                         [](const auto& info) {
-                             std::string s = info.param.name;
-                             std::replace(s.begin(), s.end(), '-', '_');
-                             return s;
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    Shapes, CubeMeshTest,
+    ::testing::Values(CubeCase{"builtin-tets", 100000}, CubeCase{"tets-jitter", 20000},
+                      CubeCase{"hex-jitter", 20000}, CubeCase{"wedge-jitter", 20000},
+                      CubeCase{"pyramid-tet-jitter", 20000}, CubeCase{"mixed", 20000},
+                      CubeCase{"hex-straight", 5000}),
+    [](const auto& info) {
+        std::string s = info.param.name;
+        std::replace(s.begin(), s.end(), '-', '_');
+        return s;
+    });
 
 TEST(BrickTraverser, FaceCountsOfCubeTets) {
     for (int n : {1, 3}) {
@@ -322,15 +332,16 @@ TEST(BrickTraverser, FiveTetsAndFiveTimes40CubedTetsGiveTheSameChords) {
 }
 
 // The union of the kept cubes' chords, as merged intervals.
-std::vector<std::array<double, 2>> CubeUnionIntervals(const Ray& ray, int n,
-                                                      const std::function<bool(int, int, int)>& keep) {
+std::vector<std::array<double, 2>> CubeUnionIntervals(
+    const Ray& ray, int n, const std::function<bool(int, int, int)>& keep) {
     std::vector<std::array<double, 2>> iv;
     for (int c = 0; c < n; ++c)
         for (int b = 0; b < n; ++b)
             for (int a = 0; a < n; ++a) {
                 if (!keep(a, b, c)) continue;
-                const AxisBox box = {{{double(a) / n, double(b) / n, double(c) / n},
-                                   {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}}};
+                const AxisBox box = {
+                    {{double(a) / n, double(b) / n, double(c) / n},
+                     {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}}};
                 double t0, t1;
                 if (BoxChord(ray, box, t0, t1) && t1 > t0) iv.push_back({t0, t1});
             }
@@ -339,7 +350,8 @@ std::vector<std::array<double, 2>> CubeUnionIntervals(const Ray& ray, int n,
     for (const auto& x : iv) {
         if (!merged.empty() && x[0] <= merged.back()[1] + 1e-12)
             merged.back()[1] = std::max(merged.back()[1], x[1]);
-        else merged.push_back(x);
+        else
+            merged.push_back(x);
     }
     return merged;
 }
@@ -355,15 +367,17 @@ TEST(BrickTraverser, NonConvexDisconnectedMeshWithCavity) {
         return true;
     };
     for (CubeCut cut : {CubeCut::Hex, CubeCut::Tets5}) {
-        const Mesh mesh = GridMesh(n, 0.0, [cut](int, int, int) { return cut; }, keep);
+        const Mesh mesh = GridMesh(
+            n, 0.0, [cut](int, int, int) { return cut; }, keep);
         const BrickTraverser tr(Brick::WholeMesh(mesh));
         std::mt19937_64 rng(5);
         std::uniform_real_distribution<double> uni(0, 1);
         std::vector<Segment> segs;
         int multi = 0;
         for (int i = 0; i < 5000; ++i) {
-            const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, uni(rng) * 3 - 1},
-                                    {uni(rng), uni(rng), uni(rng)});
+            const Ray ray =
+                MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, uni(rng) * 3 - 1},
+                        {uni(rng), uni(rng), uni(rng)});
             tr.Trace(ray, -INFINITY, INFINITY, segs);
             const auto runs = Runs(segs, "non-convex");
             const auto truth = CubeUnionIntervals(ray, n, keep);
@@ -400,7 +414,8 @@ TEST(BrickTraverser, ClipsToSubBoxAndRange) {
         tr.Trace(ray, tMin, tMax, segs);
         double t0, t1;
         double expect = 0;
-        if (BoxChord(ray, sub, t0, t1)) expect = std::max(0.0, std::min(t1, tMax) - std::max(t0, tMin));
+        if (BoxChord(ray, sub, t0, t1))
+            expect = std::max(0.0, std::min(t1, tMax) - std::max(t0, tMin));
         EXPECT_NEAR(Sum(segs), expect, 1e-12) << i;
         EXPECT_LE(Runs(segs, "clip").size(), 1u) << i;
         // The clipped segments are the whole-mesh segments cut at the clip range.
@@ -430,7 +445,8 @@ Mesh Unshare(const Mesh& in, double noise) {
         std::vector<std::int64_t> nodes;
         for (int k = 0; k < in.CellNodeCount(c); ++k) {
             const std::int64_t p = in.CellNodes(c)[k];
-            for (int d = 0; d < 3; ++d) out.points.push_back(in.points[3 * p + d] + noise * uni(rng));
+            for (int d = 0; d < 3; ++d)
+                out.points.push_back(in.points[3 * p + d] + noise * uni(rng));
             nodes.push_back(out.PointCount() - 1);
         }
         out.AddCell(in.cellShape[c], in.cellOrder[c], in.cellFamily[c], nodes.data(),
@@ -487,7 +503,8 @@ TEST(BrickTraverser, InvertedCellsAreTraversedLikePositiveOnes) {
         a.Trace(ray, -INFINITY, INFINITY, sa);
         b.Trace(ray, -INFINITY, INFINITY, sb);
         ASSERT_EQ(sa.size(), sb.size()) << i;
-        for (std::size_t k = 0; k < sa.size(); ++k) EXPECT_EQ(sa[k].cell, sb[k].cell) << i;
+        for (std::size_t k = 0; k < sa.size(); ++k)
+            EXPECT_EQ(sa[k].cell, sb[k].cell) << i;
         EXPECT_NEAR(Sum(sa), Sum(sb), 1e-13);
     }
 }
@@ -500,7 +517,8 @@ TEST(BrickTraverser, ConcurrentQueriesMatchSerialOnes) {
     std::mt19937_64 rng(8);
     std::uniform_real_distribution<double> uni(0, 1);
     for (auto& r : rays)
-        r = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5}, {uni(rng), uni(rng), uni(rng)});
+        r = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                    {uni(rng), uni(rng), uni(rng)});
     std::vector<std::vector<Segment>> serial(n), parallel(n);
     for (int i = 0; i < n; ++i) tr.Trace(rays[i], 0, INFINITY, serial[i]);
     tbb::parallel_for(0, n, [&](int i) { tr.Trace(rays[i], 0, INFINITY, parallel[i]); });
@@ -535,17 +553,18 @@ TEST(BrickTraverser, StraightHighOrderCellsHaveStraightFaces) {
             tr.Trace(ray, -INFINITY, INFINITY, segs);
             double t0, t1;
             const double chord = BoxChord(ray, box, t0, t1) ? t1 - t0 : 0;
-            EXPECT_NEAR(Sum(segs), chord, 1e-12 * std::max(1.0, chord)) << spec << " " << i;
+            EXPECT_NEAR(Sum(segs), chord, 1e-12 * std::max(1.0, chord))
+                << spec << " " << i;
             EXPECT_LE(Runs(segs, spec).size(), 1u);
         }
     }
 }
 
 // ---------------------------------------------------------------------------------------
-// Curved cells. A map (x, y, z) -> (x, y, s z + z0 + q(x, y)) with a quadratic q is exact in
-// quadratic tets and hexes, so cells with mapped nodes represent its image exactly: the
-// region between two level sets of g = z - q(x, y), q = cx (x - xc)^2 + cy (y - yc)^2, over
-// a square. The chords of that region are analytic.
+// Curved cells. A map (x, y, z) -> (x, y, s z + z0 + q(x, y)) with a quadratic q is exact
+// in quadratic tets and hexes, so cells with mapped nodes represent its image exactly:
+// the region between two level sets of g = z - q(x, y), q = cx (x - xc)^2 + cy (y -
+// yc)^2, over a square. The chords of that region are analytic.
 
 struct QuadricSlab {
     double xy[2];  // |x|, |y| range: [xy0, xy1]
@@ -556,7 +575,8 @@ struct QuadricSlab {
         return x[2] - cx * (x[0] - xc) * (x[0] - xc) - cy * (x[1] - yc) * (x[1] - yc);
     }
     // g(origin + t dir) - level = a t^2 + b t + c.
-    void Coefficients(const Ray& ray, double level, double& a, double& b, double& c) const {
+    void Coefficients(const Ray& ray, double level, double& a, double& b,
+                      double& c) const {
         const double *o = ray.origin, *d = ray.dir;
         a = -(cx * d[0] * d[0] + cy * d[1] * d[1]);
         b = d[2] - 2 * (cx * (o[0] - xc) * d[0] + cy * (o[1] - yc) * d[1]);
@@ -565,7 +585,8 @@ struct QuadricSlab {
 };
 
 // The analytic intervals of the ray inside the slab: breakpoints are the square's slab
-// planes and the roots of g(t) = gLo and g(t) = gHi; between breakpoints, test the middle.
+// planes and the roots of g(t) = gLo and g(t) = gHi; between breakpoints, test the
+// middle.
 std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const QuadricSlab& s) {
     std::vector<double> br;
     double t0 = -INFINITY, t1 = INFINITY;
@@ -592,12 +613,15 @@ std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const QuadricSl
         const double lo = std::max(br[k], t0), hi = std::min(br[k + 1], t1);
         if (!(lo < hi)) continue;
         const double tm = 0.5 * (lo + hi);
-        const double x[3] = {ray.origin[0] + tm * ray.dir[0], ray.origin[1] + tm * ray.dir[1],
+        const double x[3] = {ray.origin[0] + tm * ray.dir[0],
+                             ray.origin[1] + tm * ray.dir[1],
                              ray.origin[2] + tm * ray.dir[2]};
         const double g = s.G(x);
         if (g < s.g[0] || g > s.g[1]) continue;
-        if (!out.empty() && out.back()[1] == lo) out.back()[1] = hi;
-        else out.push_back({lo, hi});
+        if (!out.empty() && out.back()[1] == lo)
+            out.back()[1] = hi;
+        else
+            out.push_back({lo, hi});
     }
     return out;
 }
@@ -630,13 +654,15 @@ std::vector<Ray> NearTangentRays(const QuadricSlab& s, int n, std::mt19937_64& r
         const double level = s.g[i % 2];
         const double x = s.xy[0] + (s.xy[1] - s.xy[0]) * uni(rng);
         const double y = s.xy[0] + (s.xy[1] - s.xy[0]) * uni(rng);
-        const double z = level + s.cx * (x - s.xc) * (x - s.xc) + s.cy * (y - s.yc) * (y - s.yc);
+        const double z =
+            level + s.cx * (x - s.xc) * (x - s.xc) + s.cy * (y - s.yc) * (y - s.yc);
         // Tangent plane: dz = 2 cx (x - xc) dx + 2 cy (y - yc) dy.
         const double phi = 2 * M_PI * uni(rng);
         const double dx = std::cos(phi), dy = std::sin(phi);
         if (s.cx * dx * dx + s.cy * dy * dy < 1e-3) continue;
         const double dz = 2 * s.cx * (x - s.xc) * dx + 2 * s.cy * (y - s.yc) * dy;
-        const double offset = (uni(rng) < 0.5 ? -1 : 1) * std::pow(10.0, -1 - 6.5 * uni(rng));
+        const double offset =
+            (uni(rng) < 0.5 ? -1 : 1) * std::pow(10.0, -1 - 6.5 * uni(rng));
         rays.push_back(MakeRayDir({x, y, z + offset}, {dx, dy, dz}, 3));
     }
     return rays;
@@ -646,8 +672,8 @@ struct CurvedStats {
     int tested = 0, excluded = 0, multi = 0;
 };
 
-// Every ray well away from tangency gives the analytic intervals to 1e-10: the same number
-// of runs of touching segments (no gap, no overlap), each run's ends within 1e-10.
+// Every ray well away from tangency gives the analytic intervals to 1e-10: the same
+// number of runs of touching segments (no gap, no overlap), each run's ends within 1e-10.
 CurvedStats CheckSlabRays(const BrickTraverser& tr, const QuadricSlab& slab,
                           const std::vector<Ray>& rays, const std::string& what) {
     CurvedStats st;
@@ -662,10 +688,10 @@ CurvedStats CheckSlabRays(const BrickTraverser& tr, const QuadricSlab& slab,
         tr.Trace(ray, -INFINITY, INFINITY, segs);
         const std::string rayText =
             what + " ray " + std::to_string(i) + " origin " +
-            ::testing::PrintToString(std::vector<double>(ray.origin, ray.origin + 3)) + " dir " +
-            ::testing::PrintToString(std::vector<double>(ray.dir, ray.dir + 3));
-        // Rays through a boundary edge or vertex can meet the domain in a point: intervals
-        // shorter than 1e-9 (rounding) are dropped on both sides.
+            ::testing::PrintToString(std::vector<double>(ray.origin, ray.origin + 3)) +
+            " dir " + ::testing::PrintToString(std::vector<double>(ray.dir, ray.dir + 3));
+        // Rays through a boundary edge or vertex can meet the domain in a point:
+        // intervals shorter than 1e-9 (rounding) are dropped on both sides.
         std::vector<std::array<double, 2>> runs, expect;
         for (const auto& x : Runs(segs, rayText))
             if (x[1] - x[0] > 1e-9) runs.push_back(x);
@@ -716,9 +742,10 @@ void CheckCurvedMesh(const Mesh& mesh, const QuadricSlab& slab, int rays,
     const CurvedStats b = CheckSlabRays(tr, slab, NearTangentRays(slab, rays / 3, rng),
                                         what + " near-tangent");
     const CurvedStats c = CheckSlabRays(tr, slab, through, what + " through edges");
-    std::printf("%s: %d random, %d near-tangent, %d through nodes/edges/faces rays exact to "
-                "1e-10; %d excluded within the tangency tolerance\n",
-                what.c_str(), a.tested, b.tested, c.tested, a.excluded + b.excluded + c.excluded);
+    std::printf(
+        "%s: %d random, %d near-tangent, %d through nodes/edges/faces rays exact to "
+        "1e-10; %d excluded within the tangency tolerance\n",
+        what.c_str(), a.tested, b.tested, c.tested, a.excluded + b.excluded + c.excluded);
     EXPECT_GT(a.multi, 0) << what;
     EXPECT_GT(b.tested, rays / 4) << what;
     EXPECT_LT(a.excluded + c.excluded, (rays + int(targets.size())) / 100) << what;
@@ -730,27 +757,34 @@ void CheckCurvedMesh(const Mesh& mesh, const QuadricSlab& slab, int rays,
 
 // Points on the (mapped) corners, edges and faces of the cells of a straight mesh: the
 // image under `map` of points on the straight reference cells' edges and faces.
-std::vector<Vec3> MappedTargets(const Mesh& straight, const std::function<Vec3(Vec3)>& map,
-                                int n, unsigned seed) {
+std::vector<Vec3> MappedTargets(const Mesh& straight,
+                                const std::function<Vec3(Vec3)>& map, int n,
+                                unsigned seed) {
     std::mt19937_64 rng(seed);
     std::uniform_real_distribution<double> uni(0, 1);
     std::vector<Vec3> out;
     for (int i = 0; i < n; ++i) {
-        const std::int64_t c = std::int64_t(uni(rng) * straight.CellCount()) % straight.CellCount();
+        const std::int64_t c =
+            std::int64_t(uni(rng) * straight.CellCount()) % straight.CellCount();
         const int nv = VertexCount(straight.cellShape[c]);
         auto corner = [&](int k) {
-            const auto lat = VertexLattice(straight.cellShape[c], straight.cellOrder[c])[k];
-            const int node = InternalNodeIndex(straight.cellShape[c], straight.cellOrder[c],
-                                               straight.cellFamily[c], lat);
+            const auto lat =
+                VertexLattice(straight.cellShape[c], straight.cellOrder[c])[k];
+            const int node =
+                InternalNodeIndex(straight.cellShape[c], straight.cellOrder[c],
+                                  straight.cellFamily[c], lat);
             const double* x = &straight.points[3 * straight.CellNodes(c)[node]];
             return Vec3{x[0], x[1], x[2]};
         };
-        const int a = int(uni(rng) * nv) % nv, b = (a + 1 + int(uni(rng) * (nv - 1))) % nv;
+        const int a = int(uni(rng) * nv) % nv,
+                  b = (a + 1 + int(uni(rng) * (nv - 1))) % nv;
         const Vec3 A = corner(a), B = corner(b);
         Vec3 X;
         switch (i % 3) {
-            case 0: X = A; break;  // a vertex
-            case 1: {              // a point on an edge (or a diagonal of a hex)
+            case 0:
+                X = A;
+                break;  // a vertex
+            case 1: {   // a point on an edge (or a diagonal of a hex)
                 const double s = uni(rng);
                 for (int d = 0; d < 3; ++d) X[d] = A[d] + s * (B[d] - A[d]);
                 break;
@@ -760,7 +794,8 @@ std::vector<Vec3> MappedTargets(const Mesh& straight, const std::function<Vec3(V
                 const Vec3 C = corner(e == a ? (e + 1) % nv : e);
                 double l1 = uni(rng), l2 = uni(rng);
                 if (l1 + l2 > 1) l1 = 1 - l1, l2 = 1 - l2;
-                for (int d = 0; d < 3; ++d) X[d] = A[d] + l1 * (B[d] - A[d]) + l2 * (C[d] - A[d]);
+                for (int d = 0; d < 3; ++d)
+                    X[d] = A[d] + l1 * (B[d] - A[d]) + l2 * (C[d] - A[d]);
             }
         }
         out.push_back(map(X));
@@ -769,18 +804,20 @@ std::vector<Vec3> MappedTargets(const Mesh& straight, const std::function<Vec3(V
 }
 
 TEST(BrickTraverser, QuadraticTetsReproduceParaboloidChords) {
-    // Straight quadratic tets on [-1,1]^3 mapped by z -> (z - 1) / 2 + x^2 + y^2: the slab
-    // x^2 + y^2 - 1 <= z <= x^2 + y^2 over the square [-1,1]^2.
+    // Straight quadratic tets on [-1,1]^3 mapped by z -> (z - 1) / 2 + x^2 + y^2: the
+    // slab x^2 + y^2 - 1 <= z <= x^2 + y^2 over the square [-1,1]^2.
     const Mesh straight = MakeBuiltin("builtin:ball-p2?n=3");
-    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1]}; };
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1]};
+    };
     Mesh mesh = straight;
     for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
         double* x = &mesh.points[3 * i];
         const Vec3 y = map({x[0], x[1], x[2]});
         std::copy(y.begin(), y.end(), x);
     }
-    CheckCurvedMesh(mesh, QuadricSlab{{-1, 1}, {-1, 0}}, 6000, MappedTargets(straight, map, 3000, 5),
-                    "p2 tets");
+    CheckCurvedMesh(mesh, QuadricSlab{{-1, 1}, {-1, 0}}, 6000,
+                    MappedTargets(straight, map, 3000, 5), "p2 tets");
 }
 
 // Order-2 hexes on an n^3 grid of [0,1]^3 (nodes of the straight grid, then `map`);
@@ -791,7 +828,8 @@ Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map, bool serendipity = f
     for (int k = 0; k < g; ++k)
         for (int j = 0; j < g; ++j)
             for (int i = 0; i < g; ++i) {
-                const Vec3 y = map({double(i) / (g - 1), double(j) / (g - 1), double(k) / (g - 1)});
+                const Vec3 y =
+                    map({double(i) / (g - 1), double(j) / (g - 1), double(k) / (g - 1)});
                 mesh.points.insert(mesh.points.end(), y.begin(), y.end());
             }
     for (int c = 0; c < n; ++c)
@@ -801,8 +839,10 @@ Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map, bool serendipity = f
                 for (int k = 0; k <= p; ++k)
                     for (int j = 0; j <= p; ++j)
                         for (int i = 0; i <= p; ++i) {
-                            if (serendipity && (i == 1) + (j == 1) + (k == 1) >= 2) continue;
-                            nodes.push_back((a * p + i) + g * ((b * p + j) + g * (c * p + k)));
+                            if (serendipity && (i == 1) + (j == 1) + (k == 1) >= 2)
+                                continue;
+                            nodes.push_back((a * p + i) +
+                                            g * ((b * p + j) + g * (c * p + k)));
                         }
                 mesh.AddCell(CellShape::Hex, p,
                              serendipity ? CellFamily::Serendipity : CellFamily::Lagrange,
@@ -813,7 +853,9 @@ Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map, bool serendipity = f
 
 TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
     // z -> z + x^2 + y^2 on [0,1]^3: the slab 0 <= z - x^2 - y^2 <= 1 over [0,1]^2.
-    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]}; };
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
+    };
     const Mesh straight = GridHexes(3, [](Vec3 x) { return x; });
     CheckCurvedMesh(GridHexes(3, map), QuadricSlab{{0, 1}, {0, 1}}, 6000,
                     MappedTargets(straight, map, 3000, 6), "q2 hexes");
@@ -821,15 +863,18 @@ TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
 
 TEST(BrickTraverser, SerendipityHexesReproduceParaboloidChords) {
     // 20-node hexes: x^2 + y^2 lies in the serendipity space, so the same slab is exact.
-    const auto map = [](Vec3 x) { return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]}; };
-    const Mesh straight = GridHexes(3, [](Vec3 x) { return x; }, true);
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
+    };
+    const Mesh straight = GridHexes(
+        3, [](Vec3 x) { return x; }, true);
     CheckCurvedMesh(GridHexes(3, map, true), QuadricSlab{{0, 1}, {0, 1}}, 3000,
                     MappedTargets(straight, map, 1500, 7), "hex20");
 }
 
 // Rays that leave a curved cell and re-enter it: the valley 0 <= z - 4 (x - 1/2)^2 <= 1
-// over [0,1]^2 as ONE quadratic hex, and as quadratic tets. A ray above the valley floor's
-// rim runs inside near x = 0, outside over the middle, inside again near x = 1.
+// over [0,1]^2 as ONE quadratic hex, and as quadratic tets. A ray above the valley
+// floor's rim runs inside near x = 0, outside over the middle, inside again near x = 1.
 TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
     const QuadricSlab valley{{0, 1}, {0, 1}, 4, 0, 0.5, 0};
     const auto map = [](Vec3 x) {
@@ -841,7 +886,8 @@ TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
     for (int i = 0; i < 3000; ++i) {
         // Through the top surface's valley: height in (1, 2), a direction mostly along x.
         const Vec3 at = {0.5, uni(rng), 1 + uni(rng)};
-        rays.push_back(MakeRayDir(at, {1, 0.3 * (uni(rng) - 0.5), 0.4 * (uni(rng) - 0.5)}, 2));
+        rays.push_back(
+            MakeRayDir(at, {1, 0.3 * (uni(rng) - 0.5), 0.4 * (uni(rng) - 0.5)}, 2));
     }
     {
         const Mesh hex = GridHexes(1, map);
@@ -853,7 +899,8 @@ TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
         std::vector<Segment> segs;
         int twice = 0;
         for (const Ray& ray : rays) {
-            if (!WellAway(ray, valley) || SlabIntervals(ray, valley).size() != 2) continue;
+            if (!WellAway(ray, valley) || SlabIntervals(ray, valley).size() != 2)
+                continue;
             tr.Trace(ray, -INFINITY, INFINITY, segs);
             ASSERT_EQ(segs.size(), 2u);
             EXPECT_EQ(segs[0].cell, 0);
