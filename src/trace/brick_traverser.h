@@ -1,5 +1,6 @@
-// Ray traversal of one brick: for a ray clipped to the brick's box and to [tMin, tMax], the
-// ordered segments (cell, tEnter, tExit) where it is inside cells — exact and watertight.
+// Ray traversal of one brick: for a ray clipped to the brick's box and to [tMin, tMax],
+// the ordered segments (cell, tEnter, tExit) where it is inside cells — exact and
+// watertight.
 #pragma once
 
 #include <cstddef>
@@ -12,8 +13,8 @@
 
 namespace hpray {
 
-/// One brick: a mesh (a whole mesh, or the cells of one k-d leaf, ghosts included) and the
-/// axis-aligned box it owns. Rays are cut at the box. The mesh is borrowed: it must
+/// One brick: a mesh (a whole mesh, or the cells of one k-d leaf, ghosts included) and
+/// the axis-aligned box it owns. Rays are cut at the box. The mesh is borrowed: it must
 /// outlive every traverser built from it and must not change meanwhile.
 struct Brick {
     const Mesh* mesh = nullptr;
@@ -42,15 +43,17 @@ struct TraceOptions {
 
 /// Build figures of a traverser.
 struct TraverserStats {
-    double buildSeconds = 0;   ///< whole build, wall clock (topology + acceleration)
-    double accelSeconds = 0;   ///< the Embree scene alone (`timing_s.accel` part)
+    double buildSeconds = 0;        ///< whole build, wall clock (topology + acceleration)
+    double accelSeconds = 0;        ///< the Embree scene alone (`timing_s.accel` part)
     std::size_t topologyBytes = 0;  ///< faces, adjacency, merged points, curved face data
     std::size_t accelBytes = 0;     ///< bytes Embree allocated for the scene
     std::int64_t cells = 0;
     std::int64_t points = 0;
-    std::int64_t mergedPoints = 0;  ///< distinct positions after merging coincident points
+    std::int64_t mergedPoints =
+        0;  ///< distinct positions after merging coincident points
     std::int64_t faces = 0;
-    std::int64_t boundaryFaces = 0;  ///< faces with one cell (what the Embree scene holds)
+    std::int64_t boundaryFaces =
+        0;  ///< faces with one cell (what the Embree scene holds)
     std::int64_t bilinearFaces = 0;  ///< non-planar straight quadrilaterals
     std::int64_t curvedFaces = 0;
 
@@ -61,28 +64,29 @@ struct TraverserStats {
 /// Counts of numerically hard events met by queries so far (all threads).
 struct TraceCounters {
     /// Curved crossings whose Newton iteration failed in a sub-patch at the subdivision
-    /// limit (their t is the face point at the sub-patch's centre; counts are unaffected).
+    /// limit (their t is the face point at the sub-patch's centre; counts are
+    /// unaffected).
     std::int64_t newtonFailures = 0;
-    std::int64_t walkRepairs = 0;     ///< cells left through a tolerant exit search
-    std::int64_t walkFailures = 0;    ///< walks abandoned (rest found by the next entry)
+    std::int64_t walkRepairs = 0;   ///< cells left through a tolerant exit search
+    std::int64_t walkFailures = 0;  ///< walks abandoned (rest found by the next entry)
 };
 
 /// Ray caster of one brick. Built once (adjacency over faces matched by merged corner
 /// positions, and an Embree scene over the boundary faces), then queried from any number
 /// of threads.
 ///
-/// Design: Embree finds where a ray enters the mesh (boundary faces only, as user geometry
-/// whose intersector is the exact test below), then the ray walks from cell to neighbouring
-/// cell through the shared faces. Measured on cube-tets-60 (1.08M tets, one core of a
-/// loaded 2-core machine, benchmarks/bench_trace.cpp): the walk gives 2.3M exact
-/// segments/s at 102 bytes/cell in all (Embree: 4 bytes/cell). A BVH over all faces as
-/// Embree float triangles, merely collecting every hit, runs at 7.6M hits/s but needs
+/// Design: Embree finds where a ray enters the mesh (boundary faces only, as user
+/// geometry whose intersector is the exact test below), then the ray walks from cell to
+/// neighbouring cell through the shared faces. Measured on cube-tets-60 (1.08M tets, one
+/// core of a loaded 2-core machine, benchmarks/bench_trace.cpp): the walk gives 2.3M
+/// exact segments/s at 102 bytes/cell in all (Embree: 4 bytes/cell). A BVH over all faces
+/// as Embree float triangles, merely collecting every hit, runs at 7.6M hits/s but needs
 /// 139 bytes/cell for the BVH alone, is not watertight in the sense below (float tests,
-/// no common tie rule), and would still need exact re-intersection and sorting; a BVH over
-/// cell boxes yields 15M candidates/s, 2.4 candidates per segment, each needing an exact
-/// cell intersection. The walk was kept for exactness, watertightness by construction and
-/// memory; it is bound by memory latency (random access to faces and points), so spatially
-/// ordered cells and points are its main speed lever.
+/// no common tie rule), and would still need exact re-intersection and sorting; a BVH
+/// over cell boxes yields 15M candidates/s, 2.4 candidates per segment, each needing an
+/// exact cell intersection. The walk was kept for exactness, watertightness by
+/// construction and memory; it is bound by memory latency (random access to faces and
+/// points), so spatially ordered cells and points are its main speed lever.
 ///
 /// Each face is intersected from ONE canonical representation (corners ordered by
 /// position) whichever cell asks, so the two cells of a face get bitwise the same t.
@@ -104,9 +108,9 @@ struct TraceCounters {
 /// at 1e-12..1e-11; below 1e-12 the two crossings of a nearly tangent ray may vanish
 /// together.
 class BrickTraverser {
-public:
-    /// Builds the traverser. Throws InputError for meshes it cannot traverse (a face shared
-    /// by more than two cells, overlapping cells, more than 2^31 - 1 faces).
+  public:
+    /// Builds the traverser. Throws InputError for meshes it cannot traverse (a face
+    /// shared by more than two cells, overlapping cells, more than 2^31 - 1 faces).
     explicit BrickTraverser(const Brick& brick, const TraceOptions& options = {});
     ~BrickTraverser();
     BrickTraverser(const BrickTraverser&) = delete;
@@ -122,7 +126,7 @@ public:
     TraceCounters Counters() const;
     const Brick& GetBrick() const;
 
-private:
+  private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };

@@ -1,6 +1,6 @@
-// Exact, watertight ray-triangle crossing tests in a sheared ray frame (after Woop, Benthin
-// & Wald, "Watertight ray/triangle intersection", JCGT 2013), with exact 2-D orientation
-// signs and a symbolic perturbation that decides every tie.
+// Exact, watertight ray-triangle crossing tests in a sheared ray frame (after Woop,
+// Benthin & Wald, "Watertight ray/triangle intersection", JCGT 2013), with exact 2-D
+// orientation signs and a symbolic perturbation that decides every tie.
 //
 // The rule that makes traversal watertight: every point is sheared into the ray frame
 // (the ray becomes the origin of a 2-D plane) by the same arithmetic whichever face or
@@ -123,7 +123,7 @@ inline int EdgeSign(const ShearedPoint& p, const ShearedPoint& q) {
 
 /// A crossing of the ray with a planar triangle (A, B, C).
 struct TriangleCrossing {
-    double t = 0;           ///< ray parameter, world units
+    double t = 0;                ///< ray parameter, world units
     double bary[3] = {0, 0, 0};  ///< barycentric weights of A, B, C (sum 1, each >= 0)
     /// +1: the ray runs along the normal (B - A) x (C - A); -1: against it.
     int side = 0;
@@ -133,8 +133,8 @@ struct TriangleCrossing {
 /// ray frame. The decision uses only EdgeSign of the three edges; t and the barycentrics
 /// are computed in floating point from the same sheared points, so a triangle evaluated
 /// with its vertices in the same order always gives bitwise the same result.
-inline bool CrossTriangle(const ShearedPoint& a, const ShearedPoint& b, const ShearedPoint& c,
-                          TriangleCrossing& out) {
+inline bool CrossTriangle(const ShearedPoint& a, const ShearedPoint& b,
+                          const ShearedPoint& c, TriangleCrossing& out) {
     const int sa = EdgeSign(b, c);
     if (sa == 0) return false;
     const int sb = EdgeSign(c, a);
