@@ -1,7 +1,8 @@
 // Traversal benchmarks: segments per second, build time and bytes per cell of
-// BrickTraverser on >= 1M cells, and the raw cost of the alternative Embree designs
-// (a BVH over all faces collecting every hit, a BVH over cell boxes) that it was chosen
-// against.
+// BrickTraverser on >= 1M cells and on curved quadratic tets and hexes (with the same
+// quadratic tets straight for comparison), and the raw cost of the alternative Embree
+// designs (a BVH over all faces collecting every hit, a BVH over cell boxes) that it was
+// chosen against.
 #include <benchmark/benchmark.h>
 #include <embree3/rtcore.h>
 

@@ -106,7 +106,11 @@ struct TraceCounters {
 /// hexes bounding a paraboloid (tests/trace), by a ray's distance from tangency in
 /// g = z - x^2 - y^2: chord ends within 1e-10 from 1e-9 on, 1e-9 at 1e-11..1e-10, 4e-6
 /// at 1e-12..1e-11; below 1e-12 the two crossings of a nearly tangent ray may vanish
-/// together.
+/// together. Speed (bench_trace, loaded 2-core machine): 0.5-0.6M segments/s on 69k
+/// curved quadratic tets and 0.4-0.5M on 64k curved quadratic hexes (the tessellation-
+/// decided test it replaced: 0.5M and 0.3M), against 7M on the same tets straight;
+/// straight cells never enter the curved path. Curved data: about 650 bytes/cell for the
+/// tets, 1.4 kB/cell for the hexes (control nets of every face).
 class BrickTraverser {
   public:
     /// Builds the traverser. Throws InputError for meshes it cannot traverse (a face

@@ -851,6 +851,39 @@ Mesh GridHexes(int n, const std::function<Vec3(Vec3)>& map, bool serendipity = f
     return mesh;
 }
 
+TEST(BrickTraverser, ConcurrentCurvedQueriesMatchSerialOnes) {
+    // Curved faces use per-thread scratch and a per-ray cache of face crossings: parallel
+    // queries must give bitwise the serial segments.
+    Mesh mesh = MakeBuiltin("builtin:ball-p2?n=3");
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        double* x = &mesh.points[3 * i];
+        x[2] = 0.5 * (x[2] - 1) + x[0] * x[0] + x[1] * x[1];
+    }
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    const int n = 4000;
+    std::vector<Ray> rays(n);
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> uni(-1, 1);
+    for (auto& r : rays)
+        r = MakeRay({3 * uni(rng), 3 * uni(rng), 3 + uni(rng)},
+                    {uni(rng), uni(rng), uni(rng)});
+    std::vector<std::vector<Segment>> serial(n), parallel(n);
+    for (int i = 0; i < n; ++i) tr.Trace(rays[i], -INFINITY, INFINITY, serial[i]);
+    tbb::parallel_for(
+        0, n, [&](int i) { tr.Trace(rays[i], -INFINITY, INFINITY, parallel[i]); });
+    int nonEmpty = 0;
+    for (int i = 0; i < n; ++i) {
+        ASSERT_EQ(serial[i].size(), parallel[i].size()) << i;
+        nonEmpty += !serial[i].empty();
+        for (std::size_t k = 0; k < serial[i].size(); ++k) {
+            EXPECT_EQ(serial[i][k].cell, parallel[i][k].cell) << i;
+            EXPECT_EQ(serial[i][k].tEnter, parallel[i][k].tEnter) << i;
+            EXPECT_EQ(serial[i][k].tExit, parallel[i][k].tExit) << i;
+        }
+    }
+    EXPECT_GT(nonEmpty, n / 4);
+}
+
 TEST(BrickTraverser, QuadraticHexesReproduceParaboloidChords) {
     // z -> z + x^2 + y^2 on [0,1]^3: the slab 0 <= z - x^2 - y^2 <= 1 over [0,1]^2.
     const auto map = [](Vec3 x) {
