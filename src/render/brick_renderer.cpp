@@ -56,6 +56,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
+        s.fieldData.push_back(FieldCellData::Build(mesh, geometry, f));
     }
     const SceneAccuracy& acc = scene.accuracy;
     s.projection.tolerance = acc.projectionTolerance;
@@ -64,6 +65,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         s.projection.maxDegree = acc.projectionOrder;
     }
     s.roots.rootTolerance = acc.rootTolerance;
+    s.roots.polish = acc.polish;
     s.inversion.tolerance = acc.mappingTolerance;
     const auto b = mesh.Bounds();
     const double diag = std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
@@ -115,6 +117,7 @@ private:
     SegmentField field_;
     std::vector<std::vector<ProjectedPiece>> pieces_;  ///< per field
     std::vector<char> fieldUsed_;
+    std::vector<double> isoValues_;
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<Event> events_;
@@ -259,10 +262,24 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                     any |= relevant_[k] && setup.isos[k].field == int(f) &&
                            (setup.isos[k].opacity >= 1) == (pass == 0);
                 if (!any) continue;
-                field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell, ray,
-                             setup.inversion);
+                field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
+                             ray, setup.inversion);
                 if (fieldUsed_[f] == 1) {  // project once per field and segment
                     fieldUsed_[f] = 2;
+                    // Rule the segment out cheaply when the mean value theorem proves that
+                    // no isovalue of this field is crossed in it.
+                    isoValues_.clear();
+                    for (std::size_t k = 0; k < nIso; ++k)
+                        if (relevant_[k] && setup.isos[k].field == int(f))
+                            isoValues_.push_back(setup.isos[k].value);
+                    if (!field_.MayReach(isoValues_.data(), int(isoValues_.size()),
+                                         seg.tEnter, seg.tExit)) {
+                        for (std::size_t k = 0; k < nIso; ++k)
+                            if (setup.isos[k].field == int(f)) relevant_[k] = 0;
+                        fieldUsed_[f] = 0;
+                        field_.AddCountersTo(counters);
+                        continue;
+                    }
                     ProjectionOptions projection = setup.projection;
                     projection.scaleFloor = setup.fieldScale[f];
                     if (field_.ExactAlongLine())
@@ -325,7 +342,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             } else {
                 const int f = setup.isos[e.iso].field;
                 if (f != loaded) {
-                    field_.Begin(*setup.mesh, *setup.geometry, setup.fields[f], seg.cell,
+                    field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
                                  ray, setup.inversion);
                     loaded = f;
                 }
@@ -345,6 +362,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
         if (transmittance <= 0 || stop) break;
     }
     if (volumeSeen) {
+        marcher_.FinishRay(composite);
         out.volError = std::max({composite.error[0], composite.error[1], composite.error[2]});
         counters.volumePixels += 1;
         counters.volumeErrorSqSum += out.volError * out.volError;

@@ -65,6 +65,17 @@ double PiecewiseLinearTf::MaxValue() const {
     return *std::max_element(values_.begin(), values_.end());
 }
 
+double PiecewiseLinearTf::MaxSlope() const {
+    double slope = 0;
+    for (int k = 0; k + 1 < Size(); ++k)
+        for (int c = 0; c < channels_; ++c) {
+            const double dv = values_[std::size_t(k + 1) * channels_ + c] -
+                              values_[std::size_t(k) * channels_ + c];
+            slope = std::max(slope, std::abs(dv) / (scalars_[k + 1] - scalars_[k]));
+        }
+    return slope;
+}
+
 namespace {
 
 constexpr int kMaxTaylorTerms = 64;

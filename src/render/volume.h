@@ -35,6 +35,8 @@ public:
     void RangeOver(double lo, double hi, double* minOut, double* maxOut) const;
     /// The largest value of any channel over all s.
     double MaxValue() const;
+    /// The largest |d value / d s| of any channel (0 for a single control point).
+    double MaxSlope() const;
 
 private:
     std::vector<double> scalars_;

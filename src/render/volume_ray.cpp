@@ -98,6 +98,9 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
         }
     });
     s.colorMax = std::max(0.0, s.colorTf.MaxValue());
+    s.extinctionSlope = s.extinctionTf.MaxSlope();
+    s.colorSlope = s.colorTf.MaxSlope();
+    s.mappingTolerance = scene.accuracy.mappingTolerance;
     const SceneAccuracy& acc = scene.accuracy;
     s.tolerance = acc.volumeTolerance;
     s.projection.tolerance = acc.projectionTolerance;
@@ -118,6 +121,49 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     tEnd_ = tEnd;
     pathLength_ = std::max(tEnd - tStart, std::numeric_limits<double>::min());
     kronrodIntervals_ = 0;
+    startTau_ = 0;
+    for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
+}
+
+void VolumeRayMarcher::RecordEnds(double p0, double p1, double tau0, const double e0[3],
+                                  double tau1, const double e1[3], double transmittanceAtP1) {
+    if (p0 == tStart_) {
+        startTau_ = tau0;
+        for (int c = 0; c < 3; ++c) startEmission_[c] = e0[c];
+    }
+    if (p1 == tEnd_) {
+        (void)tau1;
+        for (int c = 0; c < 3; ++c) endEmission_[c] = transmittanceAtP1 * e1[c];
+    }
+}
+
+void VolumeRayMarcher::FinishRay(RayComposite& composite) const {
+    // d pixel / d tStart = -E(tStart) + tau(tStart) * pixel (everything behind is
+    // attenuated); d pixel / d tEnd = T(tEnd) E(tEnd). The ends carry a few ulps of t.
+    const double dStart = 4 * kEps * std::abs(tStart_), dEnd = 4 * kEps * std::abs(tEnd_);
+    for (int c = 0; c < 3; ++c)
+        composite.error[c] +=
+            dStart * std::abs(startTau_ * composite.rgba[c] - startEmission_[c]) +
+            dEnd * endEmission_[c];
+}
+
+void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin, double T,
+                                     RayComposite& composite) const {
+    if (kind_ != VolumeSetup::kVarying) return;
+    const VolumeSetup& s = *setup_;
+    const double colorError = s.colorSlope * state_[0].error;
+    const double tauError = s.extinctionSlope * state_[fieldCount_ - 1].error;
+    // Emission happens within lambda of the piece's start: integral_0^l exp(-phi) <=
+    // lambda. First-order effects of a colour error dc and an extinction error dtau:
+    // Williams-Max dc (1 - e^-D) + 2 kappa_max dtau lambda; Wilhelms-Van Gelder
+    // dc lambda + g_max dtau lambda^2.
+    const double lambda = tauMin * length > 1 ? 1 / tauMin : length;
+    const double own = s.glow == GlowModel::WilliamsMax
+                           ? colorError * std::min(1.0, depth) + 2 * s.colorMax * tauError * lambda
+                           : (colorError + s.colorMax * tauError * lambda) * lambda;
+    for (double& e : composite.error) e += T * own;
+    // Everything behind is attenuated by the depth error (see RayComposite::AddColor).
+    composite.depthError += length * tauError;
 }
 
 bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geometry,
@@ -150,6 +196,11 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         SegmentField& sf = field_[f];
         sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
         pieces_[f].clear();
+        // Rounding of a nodal sum; in curved cells also the inversion tolerance (reference
+        // units) times the field's variation over the cell.
+        const Interval& range = s.ranges[f][seg.cell];
+        st.error = 8 * kEps * s.fieldScale[f];
+        if (!sf.ExactAlongLine()) st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
         if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
             st.valueEnter = sf(seg.tEnter);
@@ -163,6 +214,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f], projectionStats_,
                            scratch_);
             st.bySeries = pieces_[f].size() == 1;
+            if (st.bySeries) st.error = std::max(st.error, pieces_[f][0].eps);
             if (st.bySeries) {
                 // Linear data on a higher-order cell (e.g. u = x + 2y + 3z on hexes): the
                 // closed form applies.
@@ -279,20 +331,31 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
         s.extinctionTf.EvalOn(ke, ve0, &tau0);
         s.extinctionTf.EvalOn(ke, ve1, &tau1);
     }
+    tau0 = std::max(0.0, tau0);
+    tau1 = std::max(0.0, tau1);
     const LinearPieceIntegrals q = IntegrateLinearPiece(tau0, tau1, length);
     const double T = composite.transmittance;
-    double rgb[3];
+    const bool wm = s.glow == GlowModel::WilliamsMax;
+    double rgb[3], e0[3], e1[3];
     for (int c = 0; c < 3; ++c) {
-        const double e = s.glow == GlowModel::WilliamsMax
-                             ? WilliamsMaxEmission(q, std::max(0.0, c0[c]), std::max(0.0, c1[c]))
-                             : GlowEmission(q, std::max(0.0, c0[c]), std::max(0.0, c1[c]), length);
+        c0[c] = std::max(0.0, c0[c]);
+        c1[c] = std::max(0.0, c1[c]);
+        const double e = wm ? WilliamsMaxEmission(q, c0[c], c1[c])
+                            : GlowEmission(q, c0[c], c1[c], length);
         rgb[c] = T * e;
-        // Rounding of the closed form (a few ulps; see IntegrateLinearPiece).
+        // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of the
+        // compositing.
         composite.error[c] += 256 * kEps * rgb[c];
+        e0[c] = wm ? c0[c] * tau0 : c0[c];
+        e1[c] = wm ? c1[c] * tau1 : c1[c];
     }
+    // The piece's own colour first: the depth errors below affect only what lies behind.
     composite.AddColor(rgb);
+    AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T, composite);
     composite.rgba[3] += T * q.opacity;
     composite.transmittance = T * q.transmittance;
+    composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
+    RecordEnds(p0, p1, tau0, e0, tau1, e1, composite.transmittance);
 }
 
 void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composite) {
@@ -345,15 +408,20 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
             continue;
         }
         ++kronrodIntervals_;
-        double rgb[3];
+        double rgb[3], tauMin = tau[0];
+        for (int i = 0; i < n; ++i) tauMin = std::min(tauMin, tau[i]);
         for (int c = 0; c < 3; ++c) {
             rgb[c] = T * cK[c];
-            composite.error[c] += T * errC;
+            composite.error[c] += T * errC + 64 * kEps * std::abs(rgb[c]);
         }
         composite.AddColor(rgb);
+        AddFieldError(w.hi - w.lo, dK, tauMin, T, composite);
         composite.rgba[3] += T * -std::expm1(-dK);
         composite.transmittance = T * std::exp(-dK);
-        composite.depthError += errD;
+        composite.depthError += errD + 16 * kEps * std::abs(dK);
+        // The nodes nearest the ends stand for the ends' emission density.
+        RecordEnds(w.lo, w.hi, tau[0], emission[0], tau[n - 1], emission[n - 1],
+                   composite.transmittance);
     }
 }
 

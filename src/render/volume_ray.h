@@ -42,6 +42,10 @@ struct VolumeSetup {
     double tolerance = 1e-10;
     /// Largest colour value (chromaticity or glow): bounds what lies behind a point.
     double colorMax = 0;
+    /// Largest |slope| of the transfer functions (per unit of their field): how an error
+    /// of the field values becomes an error of extinction and colour.
+    double extinctionSlope = 0, colorSlope = 0;
+    double mappingTolerance = 1e-12;
 
     ProjectionOptions projection;
     RootOptions roots;
@@ -94,6 +98,10 @@ public:
     /// pixel by less than a tenth of the tolerance (that bound is added to the error).
     bool Integrate(double a, double b, RayComposite& composite, RenderCounters& counters);
 
+    /// Ends the ray: adds to the error the first-order effect of rounding in the ray's
+    /// entry and exit parameters (a few ulps of t).
+    void FinishRay(RayComposite& composite) const;
+
     /// Statistics of the last ray.
     int KronrodIntervals() const { return kronrodIntervals_; }
 
@@ -103,7 +111,16 @@ private:
         bool linear = false;    ///< value linear in t on the segment
         bool bySeries = false;  ///< exact Legendre series available (affine polynomial)
         double valueEnter = 0, valueExit = 0;  ///< at tEnter and tExit (linear fields)
+        double error = 0;  ///< bound of the absolute error of the values on the segment
     };
+    /// Error terms of a piece of length `length` and optical depth `depth` at
+    /// transmittance T, extinction >= tauMin on it: the field errors through the transfer
+    /// functions' slopes, into the colour error and the depth error.
+    void AddFieldError(double length, double depth, double tauMin, double T,
+                       RayComposite& composite) const;
+    /// Records the emission density at the ray's ends (for FinishRay).
+    void RecordEnds(double p0, double p1, double tau0, const double e0[3], double tau1,
+                    const double e1[3], double transmittanceAtP1);
     double FieldAt(int f, double t);
     void Sample(double t, double& tau, double emission[3]);
     void LinearPiece(double p0, double p1, RayComposite& composite);
@@ -131,6 +148,8 @@ private:
     };
     std::vector<Work> stack_;
     int kronrodIntervals_ = 0;
+    double startTau_ = 0, startEmission_[3] = {0, 0, 0};
+    double endEmission_[3] = {0, 0, 0};  ///< times the transmittance there
 };
 
 }  // namespace hpray

@@ -65,12 +65,14 @@ struct RefPixel {
 
 /// The pixel of a ray whose inside-the-data part is [t0, t1]: colour field c(t), extinction
 /// field e(t), transfer functions, glow model; `kinks` are the t where the integrand is not
-/// smooth (need not be sorted; those outside (t0, t1) are ignored).
+/// smooth (need not be sorted; those outside (t0, t1) are ignored). The integration is
+/// controlled to `relTolerance` relative (and 1e-6 of that absolute).
 inline RefPixel ReferenceRay(LD t0, LD t1, const std::function<LD(LD)>& colorField,
                              const std::function<LD(LD)>& extinctionField,
                              const RefTf& colorTf, const RefTf& extinctionTf,
                              bool williamsMax, std::vector<LD> kinks,
-                             std::vector<RefSurface> surfaces = {}) {
+                             std::vector<RefSurface> surfaces = {},
+                             LD relTolerance = 1e-18L) {
     namespace ode = boost::numeric::odeint;
     using State = std::array<LD, 4>;
     RefPixel out;
@@ -106,7 +108,7 @@ inline RefPixel ReferenceRay(LD t0, LD t1, const std::function<LD(LD)>& colorFie
         // Bulirsch-Stoer: extrapolation of modified-midpoint steps, whose error estimate
         // (unlike Fehlberg 7(8)'s) stays honest when the right-hand side does not depend
         // on the state, as here.
-        ode::bulirsch_stoer<State, LD> stepper(1e-24L, 1e-18L);
+        ode::bulirsch_stoer<State, LD> stepper(1e-6L * relTolerance, relTolerance);
         ode::integrate_adaptive(stepper, rhs, x, a, b, (b - a) / 8);
         for (int k = 0; k < 3; ++k) out.rgb[k] += T * x[1 + k];
         out.alpha += T * -std::expm1(-x[0]);
