@@ -10,13 +10,16 @@
 #include <filesystem>
 #include <string>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include "io/image.h"
 
 namespace hpray {
 namespace {
 
-const std::filesystem::path kDir = std::filesystem::temp_directory_path() / "hpray_test_mpi_render";
+// One folder per test process: ctest runs the tests of this binary in parallel processes.
+const std::filesystem::path kDir = std::filesystem::temp_directory_path() /
+                                   ("hpray_test_mpi_render_" + std::to_string(getpid()));
 
 int RunCommand(const std::string& cmd, std::string* out = nullptr) {
     FILE* pipe = popen((cmd + " 2>&1").c_str(), "r");
@@ -90,6 +93,7 @@ void ExpectSame(const std::vector<double>& ref, const std::vector<double>& got,
 
 class MpiRender : public ::testing::Test {
 protected:
+    static void TearDownTestSuite() { std::filesystem::remove_all(kDir); }
     static void SetUpTestSuite() {
         std::filesystem::remove_all(kDir);
         std::filesystem::create_directories(kDir);
