@@ -186,7 +186,9 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                         discrepancy = std::max(discrepancy, std::abs(f(t) - piece.p(t)));
                         ++stats.evaluations;
                     }
-                    piece.eps = 2 * std::max({tail, discrepancy, floor});
+                    // A pinned degree need not have converged, so its tail is no error
+                    // estimate: only the measured discrepancy is.
+                    piece.eps = 2 * std::max({pinned ? 0.0 : tail, discrepancy, floor});
                     piece.converged = tail <= options.tolerance * scale;
                     break;
                 }
