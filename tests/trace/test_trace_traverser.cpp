@@ -287,9 +287,9 @@ TEST_P(CubeMeshTest, AdversarialRaysThroughVerticesEdgesAndFaces) {
 
 INSTANTIATE_TEST_SUITE_P(
     Shapes, CubeMeshTest,
-    ::testing::Values(CubeCase{"builtin-tets", 100000}, CubeCase{"tets-jitter", 20000},
-                      CubeCase{"hex-jitter", 20000}, CubeCase{"wedge-jitter", 20000},
-                      CubeCase{"pyramid-tet-jitter", 20000}, CubeCase{"mixed", 20000},
+    ::testing::Values(CubeCase{"builtin-tets", 100000}, CubeCase{"tets-jitter", 100000},
+                      CubeCase{"hex-jitter", 100000}, CubeCase{"wedge-jitter", 100000},
+                      CubeCase{"pyramid-tet-jitter", 100000}, CubeCase{"mixed", 100000},
                       CubeCase{"hex-straight", 5000}),
     [](const auto& info) {
         std::string s = info.param.name;
