@@ -11,6 +11,7 @@
 #include "elements/bounds.h"
 #include "elements/mesh_geometry.h"
 #include "io/image.h"
+#include "render/ray_field.h"
 #include "render/ray_roots.h"
 #include "render/stats.h"
 #include "render/volume.h"
@@ -33,6 +34,8 @@ struct BrickSetup {
     std::vector<ScalarSelector> fields;
     std::vector<std::vector<Interval>> cellRanges;  ///< [field][cell]
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
+    /// Per field: nodal values gathered per cell and derivative bounds (ray_field.h).
+    std::vector<FieldCellData> fieldData;
 
     struct Iso {
         int field = 0;
