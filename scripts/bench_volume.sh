@@ -8,7 +8,7 @@
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-BUILD="${1:-$ROOT/build}"
+BUILD="$(cd "${1:-$ROOT/build}" && pwd)"
 SCRATCH="${2:-${TMPDIR:-/tmp}/hpray_bench_volume}"
 HPRAY="$BUILD/bin/hpray"
 [ -x "$HPRAY" ] || { echo "no $HPRAY: build the hpray target first" >&2; exit 1; }

@@ -26,13 +26,16 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         const SceneIsosurface& iso = scene.isosurfaces[k];
         const auto sel = SelectScalar(mesh, iso.field);
         const std::string key = "isosurfaces." + std::to_string(k) + ".field";
-        if (!sel) throw InputError(source, key, "the mesh has no field '" + iso.field + "'");
+        if (!sel)
+            throw InputError(source, key, "the mesh has no field '" + iso.field + "'");
         if (sel->field->association != Association::Point)
-            throw InputError(source, key,
-                             "'" + iso.field + "' is a cell field; isosurfaces need a point field");
+            throw InputError(
+                source, key,
+                "'" + iso.field + "' is a cell field; isosurfaces need a point field");
         int index = -1;
         for (std::size_t f = 0; f < s.fields.size(); ++f)
-            if (s.fields[f].field == sel->field && s.fields[f].component == sel->component)
+            if (s.fields[f].field == sel->field &&
+                s.fields[f].component == sel->component)
                 index = static_cast<int>(f);
         if (index < 0) {
             index = static_cast<int>(s.fields.size());
@@ -46,12 +49,14 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     for (std::size_t f = 0; f < s.fields.size(); ++f) {
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
                           [&](const tbb::blocked_range<std::int64_t>& range) {
-            std::vector<double> nodal;
-            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                GatherCellValues(mesh, *s.fields[f].field, s.fields[f].component, c, nodal);
-                s.cellRanges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
-            }
-        });
+                              std::vector<double> nodal;
+                              for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                                  GatherCellValues(mesh, *s.fields[f].field,
+                                                   s.fields[f].component, c, nodal);
+                                  s.cellRanges[f][c] =
+                                      FieldBounds(*geometry.cells[c].basis, nodal.data());
+                              }
+                          });
     }
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
@@ -68,7 +73,8 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.roots.polish = acc.polish;
     s.inversion.tolerance = acc.mappingTolerance;
     const auto b = mesh.Bounds();
-    const double diag = std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
+    const double diag =
+        std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
     s.duplicateDistance = 1e-9 * diag;
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
@@ -97,19 +103,20 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
 
 /// Per-thread scratch of the ray loop: grown once, then reused without allocation.
 class RayIntegrator {
-public:
+  public:
     void Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
                    RenderCounters& counters);
 
-private:
+  private:
     struct Event {
         double t;
         int iso;  ///< isosurface index, or -1 for a slice
         double residual;
         int slice = -1;  ///< slice index, or -1 for an isosurface
     };
-    void Shade(const BrickSetup& setup, const Ray& ray, const Event& e, SegmentField& field,
-               PixelSample& out, double& transmittance, RenderCounters& counters);
+    void Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
+               SegmentField& field, PixelSample& out, double& transmittance,
+               RenderCounters& counters);
     void ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
                     const Event& e, RayComposite& composite, RenderCounters& counters);
 
@@ -128,9 +135,9 @@ private:
     VolumeRayMarcher marcher_;
 };
 
-void RayIntegrator::ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
-                               const Event& e, RayComposite& composite,
-                               RenderCounters& counters) {
+void RayIntegrator::ShadeSlice(const BrickSetup& setup, const Ray& ray,
+                               const Segment& seg, const Event& e,
+                               RayComposite& composite, RenderCounters& counters) {
     const BrickSetup::Slice& slice = setup.slices[e.slice];
     // The true field on the plane: the cell of this segment holds the crossing point.
     sliceField_.Begin(*setup.mesh, *setup.geometry, slice.field, seg.cell, ray,
@@ -171,8 +178,8 @@ void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& 
     const double spec = L.specular * std::pow(std::max(0.0, nl), L.shininess);
     const double alpha = iso.opacity;
     for (int c = 0; c < 3; ++c) {
-        const double radiance =
-            std::min(1.0, iso.color[c] * (L.ambient + L.diffuse * std::max(0.0, nl)) + spec);
+        const double radiance = std::min(
+            1.0, iso.color[c] * (L.ambient + L.diffuse * std::max(0.0, nl)) + spec);
         out.rgba[c] += transmittance * alpha * radiance;
     }
     out.rgba[3] += transmittance * alpha;
@@ -211,7 +218,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             nd += sl.normal[d] * ray.dir[d];
             no += sl.normal[d] * ray.origin[d];
         }
-        sliceT_[k] = nd != 0 ? (sl.offset - no) / nd : std::numeric_limits<double>::quiet_NaN();
+        sliceT_[k] =
+            nd != 0 ? (sl.offset - no) / nd : std::numeric_limits<double>::quiet_NaN();
     }
     RayComposite composite;
     composite.rgba = out.rgba;
@@ -235,12 +243,14 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
         for (std::size_t k = 0; k < nSlices; ++k) {
             const double t = sliceT_[k];
-            anySlice |= t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit));
+            anySlice |=
+                t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit));
         }
         // Empty-space skipping: BeginSegment evaluates nothing in cells whose guaranteed
         // ranges map to no extinction (and no glow).
         const bool volumeHere =
-            hasVolume && marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
+            hasVolume &&
+            marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
         if (!any && !anySlice && !volumeHere) {
             counters.segmentsCulled += 1;
             continue;
@@ -262,12 +272,12 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                     any |= relevant_[k] && setup.isos[k].field == int(f) &&
                            (setup.isos[k].opacity >= 1) == (pass == 0);
                 if (!any) continue;
-                field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
-                             ray, setup.inversion);
+                field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f],
+                             seg.cell, ray, setup.inversion);
                 if (fieldUsed_[f] == 1) {  // project once per field and segment
                     fieldUsed_[f] = 2;
-                    // Rule the segment out cheaply when the mean value theorem proves that
-                    // no isovalue of this field is crossed in it.
+                    // Rule the segment out cheaply when the mean value theorem proves
+                    // that no isovalue of this field is crossed in it.
                     isoValues_.clear();
                     for (std::size_t k = 0; k < nIso; ++k)
                         if (relevant_[k] && setup.isos[k].field == int(f))
@@ -299,19 +309,20 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                         (iso.opacity >= 1) != (pass == 0))
                         continue;
                     double previous = lastHit_[k];
-                    const int failures = FindRoots(
-                        field_, pieces_[f], iso.value, setup.roots, scratch_,
-                        [&](const RootResult& r) {
-                            if (r.t > cutoff) return true;
-                            if (r.t - previous <= setup.duplicateDistance) return false;
-                            previous = r.t;
-                            events_.push_back({r.t, int(k), r.residual});
-                            if (iso.opacity >= 1) {
-                                cutoff = std::min(cutoff, r.t);
-                                return true;
-                            }
-                            return false;
-                        });
+                    const int failures =
+                        FindRoots(field_, pieces_[f], iso.value, setup.roots, scratch_,
+                                  [&](const RootResult& r) {
+                                      if (r.t > cutoff) return true;
+                                      if (r.t - previous <= setup.duplicateDistance)
+                                          return false;
+                                      previous = r.t;
+                                      events_.push_back({r.t, int(k), r.residual});
+                                      if (iso.opacity >= 1) {
+                                          cutoff = std::min(cutoff, r.t);
+                                          return true;
+                                      }
+                                      return false;
+                                  });
                     counters.rootFailures += failures;
                 }
                 field_.AddCountersTo(counters);
@@ -342,8 +353,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             } else {
                 const int f = setup.isos[e.iso].field;
                 if (f != loaded) {
-                    field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
-                                 ray, setup.inversion);
+                    field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f],
+                                 seg.cell, ray, setup.inversion);
                     loaded = f;
                 }
                 lastHit_[e.iso] = e.t;
@@ -357,13 +368,15 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             if (transmittance <= 0) break;
         }
         if (volumeHere && !stop && transmittance > 0)
-            stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite, counters);
+            stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite,
+                                      counters);
         field_.AddCountersTo(counters);
         if (transmittance <= 0 || stop) break;
     }
     if (volumeSeen) {
         marcher_.FinishRay(composite);
-        out.volError = std::max({composite.error[0], composite.error[1], composite.error[2]});
+        out.volError =
+            std::max({composite.error[0], composite.error[1], composite.error[2]});
         counters.volumePixels += 1;
         counters.volumeErrorSqSum += out.volError * out.volError;
         counters.volumeErrorMax = std::max(counters.volumeErrorMax, out.volError);

@@ -29,8 +29,9 @@ struct BrickSetup {
     const MeshGeometry* geometry = nullptr;
     const BrickTraverser* traverser = nullptr;
 
-    /// The distinct scalar fields the isosurfaces use, and per field and cell a guaranteed
-    /// range (Bernstein hull), so a cell is skipped when no isovalue lies in it.
+    /// The distinct scalar fields the isosurfaces use, and per field and cell a
+    /// guaranteed range (Bernstein hull), so a cell is skipped when no isovalue lies in
+    /// it.
     std::vector<ScalarSelector> fields;
     std::vector<std::vector<Interval>> cellRanges;  ///< [field][cell]
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
@@ -89,8 +90,8 @@ struct PixelSample {
 };
 
 /// Renders the whole brick for `camera` into `image` (resized), using `threads` threads
-/// (0: all). Each pixel depends only on its own ray, so the image is bitwise identical for
-/// any thread count. Counters of all rays are merged into `counters`.
+/// (0: all). Each pixel depends only on its own ray, so the image is bitwise identical
+/// for any thread count. Counters of all rays are merged into `counters`.
 void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
                  RenderCounters& counters);
 

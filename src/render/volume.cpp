@@ -1,11 +1,11 @@
 // The optical model of volume rendering (see volume.h).
 #include "render/volume.h"
 
-#include <boost/math/quadrature/gauss.hpp>
-#include <boost/math/quadrature/gauss_kronrod.hpp>
+#include <cerf.h>
 
 #include <algorithm>
-#include <cerf.h>
+#include <boost/math/quadrature/gauss.hpp>
+#include <boost/math/quadrature/gauss_kronrod.hpp>
 #include <cmath>
 #include <limits>
 
@@ -13,13 +13,14 @@
 
 namespace hpray {
 
-PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars, std::vector<double> values,
-                                     int channels)
+PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars,
+                                     std::vector<double> values, int channels)
     : scalars_(std::move(scalars)), values_(std::move(values)), channels_(channels) {
     HPRAY_CHECK(channels_ >= 1);
     HPRAY_CHECK(!scalars_.empty());
     HPRAY_CHECK(values_.size() == scalars_.size() * std::size_t(channels_));
-    for (std::size_t k = 1; k < scalars_.size(); ++k) HPRAY_CHECK(scalars_[k - 1] < scalars_[k]);
+    for (std::size_t k = 1; k < scalars_.size(); ++k)
+        HPRAY_CHECK(scalars_[k - 1] < scalars_[k]);
 }
 
 int PiecewiseLinearTf::IntervalOf(double s) const {
@@ -44,7 +45,8 @@ void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
     for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
 }
 
-void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut, double* maxOut) const {
+void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut,
+                                  double* maxOut) const {
     double v[3];
     HPRAY_CHECK(channels_ <= 3);
     Eval(lo, minOut);
@@ -58,7 +60,8 @@ void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut, double* 
     Eval(hi, v);
     include(v);
     for (int k = 0; k < Size(); ++k)
-        if (scalars_[k] > lo && scalars_[k] < hi) include(values_.data() + std::size_t(k) * channels_);
+        if (scalars_[k] > lo && scalars_[k] < hi)
+            include(values_.data() + std::size_t(k) * channels_);
 }
 
 double PiecewiseLinearTf::MaxValue() const {
@@ -79,7 +82,8 @@ double PiecewiseLinearTf::MaxSlope() const {
 namespace {
 
 constexpr int kMaxTaylorTerms = 64;
-/// Series in the slope: at most this many terms, so moments up to E_{2 + 2 kMaxSlopeTerms}.
+/// Series in the slope: at most this many terms, so moments up to E_{2 + 2
+/// kMaxSlopeTerms}.
 constexpr int kMaxSlopeTerms = 32;
 constexpr int kMaxExpMoment = 2 + 2 * kMaxSlopeTerms;
 
@@ -128,8 +132,8 @@ void ExpMoments(double alpha, int count, double* e) {
     e[0] = en;
 }
 
-/// Regime "small slope": exp(-alpha x - beta x^2) = e^(-alpha x) sum_k (-beta x^2)^k / k!,
-/// so I_m = sum_k (-beta)^k / k! E_{m+2k}(alpha). Used for |beta| <= 1 (term ratio <=
+/// Regime "small slope": exp(-alpha x - beta x^2) = e^(-alpha x) sum_k (-beta x^2)^k /
+/// k!, so I_m = sum_k (-beta)^k / k! E_{m+2k}(alpha). Used for |beta| <= 1 (term ratio <=
 /// |beta| / k) and for |beta| <= alpha^2 / 200 with beta <= alpha / 2: the term ratio is
 /// then about 4 k beta / alpha^2 <= k / 50 while 2k < alpha, and the sum of |terms|,
 /// integral x^m exp(-alpha x + |beta| x^2), stays within a small factor of the result
@@ -165,18 +169,20 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
     double m[3];
     if (alpha + std::abs(beta) <= 1) {
         TaylorMoments(alpha, beta, m);
-    } else if (std::abs(beta) <= 1 || (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
+    } else if (std::abs(beta) <= 1 ||
+               (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
         SlopeSeriesMoments(alpha, beta, m);
     } else {
         // Complete the square. Here |beta| > 1 and either beta > alpha / 2 or |beta| >
-        // alpha^2 / 200, so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an absolute
-        // error of at most (1 + alpha / |beta|) <= 16 ulps of I0.
+        // alpha^2 / 200, so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an
+        // absolute error of at most (1 + alpha / |beta|) <= 16 ulps of I0.
         const double s = std::sqrt(std::abs(beta));
         const double u0 = alpha / (2 * s);
         double i0;
         if (beta > 0) {
             // I0 = sqrt(pi) / (2 s) (erfcx(u0) - erfcx(u0 + s) T(1)).
-            i0 = 0.88622692545275801365 / s * (erfcx(u0) - erfcx(u0 + s) * q.transmittance);
+            i0 = 0.88622692545275801365 / s *
+                 (erfcx(u0) - erfcx(u0 + s) * q.transmittance);
         } else {
             // u1 = u0 - s >= 0 since alpha >= 2 |beta|; I0 = (F(u0) - F(u1) T(1)) / s.
             const double u1 = std::max(0.0, u0 - s);
@@ -190,7 +196,8 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
     q.firstMoment = std::clamp(m[1], 0.0, q.mean);
     // P = integral x (alpha + 2 beta x) T dx; by parts P = I0 - T(1), which cancels only
     // for small depth, where the moment form is used.
-    const double far = std::isnan(m[2]) ? q.mean - q.transmittance : alpha * m[1] + 2 * beta * m[2];
+    const double far =
+        std::isnan(m[2]) ? q.mean - q.transmittance : alpha * m[1] + 2 * beta * m[2];
     q.farWeight = std::clamp(far, 0.0, q.opacity);
     return q;
 }
@@ -203,7 +210,7 @@ const KronrodRule& GetKronrodRule() {
         using G = boost::math::quadrature::gauss<double, 7>;
         const auto& x = GK::abscissa();  // 0, then positive nodes ascending
         const auto& wk = GK::weights();
-        const auto& wg = G::weights();   // for the even-indexed Kronrod abscissae
+        const auto& wg = G::weights();  // for the even-indexed Kronrod abscissae
         for (int i = 0; i <= half; ++i) {
             r.nodes[half + i] = x[i];
             r.nodes[half - i] = -x[i];
@@ -220,7 +227,8 @@ const KronrodRule& GetKronrodRule() {
             const LD xj = r.nodes[j];
             p[0] = 1;
             p[1] = xj;
-            for (int k = 1; k < n; ++k) p[k + 1] = ((2 * k + 1) * xj * p[k] - k * p[k - 1]) / (k + 1);
+            for (int k = 1; k < n; ++k)
+                p[k + 1] = ((2 * k + 1) * xj * p[k] - k * p[k - 1]) / (k + 1);
             for (int k = 0; k < n; ++k) V[j][k] = p[k];
             Q[j][0] = xj + 1;
             for (int k = 1; k < n; ++k) Q[j][k] = (p[k + 1] - p[k - 1]) / (2 * k + 1);
@@ -228,7 +236,8 @@ const KronrodRule& GetKronrodRule() {
         // Gauss-Jordan with partial pivoting.
         LD a[n][2 * n];
         for (int i = 0; i < n; ++i)
-            for (int j = 0; j < 2 * n; ++j) a[i][j] = j < n ? V[i][j] : (j - n == i ? 1 : 0);
+            for (int j = 0; j < 2 * n; ++j)
+                a[i][j] = j < n ? V[i][j] : (j - n == i ? 1 : 0);
         for (int c = 0; c < n; ++c) {
             int pivot = c;
             for (int i = c + 1; i < n; ++i)

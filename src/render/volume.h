@@ -12,10 +12,12 @@ namespace hpray {
 /// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
 /// 3: colour), clamped to its first and last control values outside its control points.
 class PiecewiseLinearTf {
-public:
+  public:
     PiecewiseLinearTf() = default;
-    /// `scalars` strictly increasing (>= 1 point); `values` holds channels values per point.
-    PiecewiseLinearTf(std::vector<double> scalars, std::vector<double> values, int channels);
+    /// `scalars` strictly increasing (>= 1 point); `values` holds channels values per
+    /// point.
+    PiecewiseLinearTf(std::vector<double> scalars, std::vector<double> values,
+                      int channels);
 
     int Channels() const { return channels_; }
     int Size() const { return static_cast<int>(scalars_.size()); }
@@ -30,15 +32,15 @@ public:
     void EvalOn(int k, double s, double* out) const;
     void Eval(double s, double* out) const { EvalOn(IntervalOf(s), s, out); }
 
-    /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the ends
-    /// or at control points inside). `minOut`, `maxOut` get Channels() values.
+    /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the
+    /// ends or at control points inside). `minOut`, `maxOut` get Channels() values.
     void RangeOver(double lo, double hi, double* minOut, double* maxOut) const;
     /// The largest value of any channel over all s.
     double MaxValue() const;
     /// The largest |d value / d s| of any channel (0 for a single control point).
     double MaxSlope() const;
 
-private:
+  private:
     std::vector<double> scalars_;
     std::vector<double> values_;
     int channels_ = 1;
@@ -71,8 +73,8 @@ inline double WilliamsMaxEmission(const LinearPieceIntegrals& q, double kappa0,
                                   double kappa1) {
     return kappa0 * (q.opacity - q.farWeight) + kappa1 * q.farWeight;
 }
-/// Wilhelms-Van Gelder emission of a linear piece: integral g T dt for glow going linearly
-/// from g0 to g1 (per world unit) over `length`.
+/// Wilhelms-Van Gelder emission of a linear piece: integral g T dt for glow going
+/// linearly from g0 to g1 (per world unit) over `length`.
 inline double GlowEmission(const LinearPieceIntegrals& q, double g0, double g1,
                            double length) {
     return length * (g0 * (q.mean - q.firstMoment) + g1 * q.firstMoment);

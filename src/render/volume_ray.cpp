@@ -63,40 +63,42 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.ranges.assign(count, std::vector<Interval>(cells));
     for (int f = 0; f < count; ++f) {
         const ScalarSelector sel = s.fields[f];
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
-                          [&](const tbb::blocked_range<std::int64_t>& range) {
-            std::vector<double> nodal;
-            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                if (sel.field->association == Association::Cell) {
-                    const double v = ScalarValue(sel, c);
-                    s.ranges[f][c] = {v, v};
-                    continue;
+        tbb::parallel_for(
+            tbb::blocked_range<std::int64_t>(0, cells, 512),
+            [&](const tbb::blocked_range<std::int64_t>& range) {
+                std::vector<double> nodal;
+                for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                    if (sel.field->association == Association::Cell) {
+                        const double v = ScalarValue(sel, c);
+                        s.ranges[f][c] = {v, v};
+                        continue;
+                    }
+                    GatherCellValues(mesh, *sel.field, sel.component, c, nodal);
+                    s.ranges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
                 }
-                GatherCellValues(mesh, *sel.field, sel.component, c, nodal);
-                s.ranges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
-            }
-        });
+            });
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
     }
     s.cellKind.assign(cells, VolumeSetup::kVarying);
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
-                      [&](const tbb::blocked_range<std::int64_t>& range) {
-        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-            const Interval& rc = s.ranges[0][c];
-            const Interval& re = s.ranges[count - 1][c];
-            double eMin, eMax, cMin[3], cMax[3];
-            s.extinctionTf.RangeOver(re.lo, re.hi, &eMin, &eMax);
-            s.colorTf.RangeOver(rc.lo, rc.hi, cMin, cMax);
-            const bool glowZero = std::max({cMax[0], cMax[1], cMax[2]}) <= 0;
-            if (eMax <= 0 && (s.glow == GlowModel::WilliamsMax || glowZero)) {
-                s.cellKind[c] = VolumeSetup::kEmpty;
-            } else if (eMin == eMax && cMin[0] == cMax[0] && cMin[1] == cMax[1] &&
-                       cMin[2] == cMax[2]) {
-                s.cellKind[c] = VolumeSetup::kConstant;
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, cells, 4096),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                const Interval& rc = s.ranges[0][c];
+                const Interval& re = s.ranges[count - 1][c];
+                double eMin, eMax, cMin[3], cMax[3];
+                s.extinctionTf.RangeOver(re.lo, re.hi, &eMin, &eMax);
+                s.colorTf.RangeOver(rc.lo, rc.hi, cMin, cMax);
+                const bool glowZero = std::max({cMax[0], cMax[1], cMax[2]}) <= 0;
+                if (eMax <= 0 && (s.glow == GlowModel::WilliamsMax || glowZero)) {
+                    s.cellKind[c] = VolumeSetup::kEmpty;
+                } else if (eMin == eMax && cMin[0] == cMax[0] && cMin[1] == cMax[1] &&
+                           cMin[2] == cMax[2]) {
+                    s.cellKind[c] = VolumeSetup::kConstant;
+                }
             }
-        }
-    });
+        });
     s.colorMax = std::max(0.0, s.colorTf.MaxValue());
     s.extinctionSlope = s.extinctionTf.MaxSlope();
     s.colorSlope = s.colorTf.MaxSlope();
@@ -126,7 +128,8 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
 }
 
 void VolumeRayMarcher::RecordEnds(double p0, double p1, double tau0, const double e0[3],
-                                  double tau1, const double e1[3], double transmittanceAtP1) {
+                                  double tau1, const double e1[3],
+                                  double transmittanceAtP1) {
     if (p0 == tStart_) {
         startTau_ = tau0;
         for (int c = 0; c < 3; ++c) startEmission_[c] = e0[c];
@@ -158,9 +161,10 @@ void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin,
     // Williams-Max dc (1 - e^-D) + 2 kappa_max dtau lambda; Wilhelms-Van Gelder
     // dc lambda + g_max dtau lambda^2.
     const double lambda = tauMin * length > 1 ? 1 / tauMin : length;
-    const double own = s.glow == GlowModel::WilliamsMax
-                           ? colorError * std::min(1.0, depth) + 2 * s.colorMax * tauError * lambda
-                           : (colorError + s.colorMax * tauError * lambda) * lambda;
+    const double own =
+        s.glow == GlowModel::WilliamsMax
+            ? colorError * std::min(1.0, depth) + 2 * s.colorMax * tauError * lambda
+            : (colorError + s.colorMax * tauError * lambda) * lambda;
     for (double& e : composite.error) e += T * own;
     // Everything behind is attenuated by the depth error (see RayComposite::AddColor).
     composite.depthError += length * tauError;
@@ -196,11 +200,12 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         SegmentField& sf = field_[f];
         sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
         pieces_[f].clear();
-        // Rounding of a nodal sum; in curved cells also the inversion tolerance (reference
-        // units) times the field's variation over the cell.
+        // Rounding of a nodal sum; in curved cells also the inversion tolerance
+        // (reference units) times the field's variation over the cell.
         const Interval& range = s.ranges[f][seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
-        if (!sf.ExactAlongLine()) st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
+        if (!sf.ExactAlongLine())
+            st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
         if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
             st.valueEnter = sf(seg.tEnter);
@@ -211,8 +216,8 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             projection.scaleFloor = s.fieldScale[f];
             projection.exactDegree = sf.LineDegree();
             projectionStats_ = ProjectionStats{};
-            ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f], projectionStats_,
-                           scratch_);
+            ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
+                           projectionStats_, scratch_);
             st.bySeries = pieces_[f].size() == 1;
             if (st.bySeries) st.error = std::max(st.error, pieces_[f][0].eps);
             if (st.bySeries) {
@@ -236,7 +241,8 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     return true;
 }
 
-void VolumeRayMarcher::FindCrossings(int f, const Segment& seg, RenderCounters& counters) {
+void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
+                                     RenderCounters& counters) {
     const VolumeSetup& s = *setup_;
     FieldState& st = state_[f];
     if (st.constant) return;
@@ -271,15 +277,15 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg, RenderCounters& 
         ProjectionOptions projection = s.projection;
         projection.scaleFloor = s.fieldScale[f];
         projectionStats_ = ProjectionStats{};
-        ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f], projectionStats_,
-                       scratch_);
+        ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
+                       projectionStats_, scratch_);
     }
     forEachBreakpoint([&](double b) {
-        counters.rootFailures += FindRoots(sf, pieces_[f], b, s.roots, scratch_,
-                                           [&](const RootResult& r) {
-            if (r.t > seg.tEnter && r.t < seg.tExit) crossings_.push_back(r.t);
-            return false;
-        });
+        counters.rootFailures +=
+            FindRoots(sf, pieces_[f], b, s.roots, scratch_, [&](const RootResult& r) {
+                if (r.t > seg.tEnter && r.t < seg.tExit) crossings_.push_back(r.t);
+                return false;
+            });
     });
 }
 
@@ -351,7 +357,8 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
     }
     // The piece's own colour first: the depth errors below affect only what lies behind.
     composite.AddColor(rgb);
-    AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T, composite);
+    AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T,
+                  composite);
     composite.rgba[3] += T * q.opacity;
     composite.transmittance = T * q.transmittance;
     composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
@@ -370,7 +377,8 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
         stack_.pop_back();
         const double half = 0.5 * (w.hi - w.lo), mid = 0.5 * (w.lo + w.hi);
         double tau[n], emission[n][3];
-        for (int i = 0; i < n; ++i) Sample(mid + half * rule.nodes[i], tau[i], emission[i]);
+        for (int i = 0; i < n; ++i)
+            Sample(mid + half * rule.nodes[i], tau[i], emission[i]);
         double dK = 0, dG = 0, cK[3] = {0, 0, 0}, cG[3] = {0, 0, 0};
         for (int i = 0; i < n; ++i) {
             dK += rule.kronrodWeights[i] * tau[i];

@@ -63,7 +63,7 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
 /// Front-to-back compositing state of one ray: premultiplied colour and opacity (rgba),
 /// transmittance, and the error bookkeeping of the volume integration.
 struct RayComposite {
-    double* rgba = nullptr;      ///< the pixel's premultiplied RGBA, updated in place
+    double* rgba = nullptr;  ///< the pixel's premultiplied RGBA, updated in place
     double transmittance = 1;
     double error[3] = {0, 0, 0};  ///< estimated absolute error of R, G, B so far
     /// Estimated absolute error of the optical depth integrated so far: every later
@@ -83,13 +83,13 @@ struct RayComposite {
 /// Per-thread volume integrator: reused across rays and segments without allocation once
 /// its buffers have grown.
 class VolumeRayMarcher {
-public:
+  public:
     /// Starts a ray whose segments inside the mesh span [tStart, tEnd] (world t).
     void BeginRay(const VolumeSetup& setup, const Ray& ray, double tStart, double tEnd);
 
     /// Prepares segment `seg` (cell, tEnter, tExit) of the current ray: the volume fields
-    /// along it and their transfer-function breakpoints. Returns false when the cell holds
-    /// nothing to integrate (empty-space skipping: no field is evaluated).
+    /// along it and their transfer-function breakpoints. Returns false when the cell
+    /// holds nothing to integrate (empty-space skipping: no field is evaluated).
     bool BeginSegment(const Mesh& mesh, const MeshGeometry& geometry, const Segment& seg,
                       RenderCounters& counters);
 
@@ -105,7 +105,7 @@ public:
     /// Statistics of the last ray.
     int KronrodIntervals() const { return kronrodIntervals_; }
 
-private:
+  private:
     struct FieldState {
         bool constant = false;  ///< cell field: value fixed on the cell
         bool linear = false;    ///< value linear in t on the segment

@@ -1,13 +1,12 @@
 // Volume rendering against independent truth: the closed form of a linear piece against
 // long-double quadrature in every regime (d -> 0, huge and tiny depth, tiny segments),
-// whole images of linear tets against a long-double ODE reference of design.md's integrals
-// (both glow models, transfer functions on different fields, breakpoints at vertex values),
-// HIAC's refinement check, constant extinction over every cell type against the analytic
-// chord, clipping, slices and thread invariance.
+// whole images of linear tets against a long-double ODE reference of design.md's
+// integrals (both glow models, transfer functions on different fields, breakpoints at
+// vertex values), HIAC's refinement check, constant extinction over every cell type
+// against the analytic chord, clipping, slices and thread invariance.
 #include <gtest/gtest.h>
 
 #include <boost/math/quadrature/gauss.hpp>
-
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -15,8 +14,8 @@
 #include "mesh/builtin.h"
 #include "render/brick_renderer.h"
 #include "render/render_job.h"
-#include "render/volume.h"
 #include "render/test_volume_reference.h"
+#include "render/volume.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
 #include "trace/trace_test_meshes.h"
@@ -87,7 +86,8 @@ RefIntegrals ReferencePiece(LD tau0, LD tau1, LD length) {
     auto integrate = [&](auto f) {
         LD sum = 0;
         for (std::size_t k = 0; k + 1 < cuts.size(); ++k)
-            sum += boost::math::quadrature::gauss<LD, 30>::integrate(f, cuts[k], cuts[k + 1]);
+            sum += boost::math::quadrature::gauss<LD, 30>::integrate(f, cuts[k],
+                                                                     cuts[k + 1]);
         return sum;
     };
     RefIntegrals r;
@@ -102,7 +102,8 @@ RefIntegrals ReferencePiece(LD tau0, LD tau1, LD length) {
 void ExpectPiece(double tau0, double tau1, double length, double rel = 2e-13) {
     const LinearPieceIntegrals q = IntegrateLinearPiece(tau0, tau1, length);
     const RefIntegrals r = ReferencePiece(tau0, tau1, length);
-    const std::string at = "tau0=" + std::to_string(tau0) + " tau1=" + std::to_string(tau1) +
+    const std::string at = "tau0=" + std::to_string(tau0) +
+                           " tau1=" + std::to_string(tau1) +
                            " length=" + std::to_string(length);
     auto near = [&](double got, LD want, LD scale, const char* what) {
         EXPECT_LE(std::abs(got - want), rel * scale + 1e-300)
@@ -124,9 +125,10 @@ void ExpectPiece(double tau0, double tau1, double length, double rel = 2e-13) {
 }
 
 TEST(VolumeClosedForm, AllRegimesAgainstLongDoubleQuadrature) {
-    // alpha = tau0 (length 1) and beta = (tau1 - tau0) / 2 across the Taylor, slope-series
-    // and erfcx / Dawson regimes and their borders.
-    const double alphas[] = {0, 1e-9, 0.3, 0.999, 1.001, 2.5, 7, 40, 127, 129, 500, 1e4, 1e6};
+    // alpha = tau0 (length 1) and beta = (tau1 - tau0) / 2 across the Taylor,
+    // slope-series and erfcx / Dawson regimes and their borders.
+    const double alphas[] = {0,  1e-9, 0.3, 0.999, 1.001, 2.5, 7,
+                             40, 127,  129, 500,   1e4,   1e6};
     const double betas[] = {0, 1e-12, 1e-6, 0.2, 0.999, 1.001, 3, 30, 64, 200, 5e3, 1e6};
     int checked = 0;
     for (double a : alphas)
@@ -159,7 +161,8 @@ TEST(VolumeClosedForm, SlopeToZeroIsSmooth) {
 }
 
 TEST(VolumeClosedForm, HugeDepthTinySegmentsAndZeroExtinction) {
-    // Extinction 1e6 over unit and longer lengths: no overflow, no NaN, T underflows to 0.
+    // Extinction 1e6 over unit and longer lengths: no overflow, no NaN, T underflows to
+    // 0.
     for (double length : {1.0, 1e3}) {
         const LinearPieceIntegrals q = IntegrateLinearPiece(1e6, 3e6, length);
         EXPECT_EQ(q.transmittance, 0.0);
@@ -201,8 +204,10 @@ TEST(VolumeClosedForm, KronrodRuleIntegratesPolynomials) {
             k += rule.kronrodWeights[i] * std::pow(rule.nodes[i], p);
             g += rule.gaussWeights[i] * std::pow(rule.nodes[i], p);
             double cum = 0;
-            for (int j = 0; j < 15; ++j) cum += rule.cumulative[i][j] * std::pow(rule.nodes[j], p);
-            const double exact = (std::pow(rule.nodes[i], p + 1) - std::pow(-1.0, p + 1)) / (p + 1);
+            for (int j = 0; j < 15; ++j)
+                cum += rule.cumulative[i][j] * std::pow(rule.nodes[j], p);
+            const double exact =
+                (std::pow(rule.nodes[i], p + 1) - std::pow(-1.0, p + 1)) / (p + 1);
             EXPECT_NEAR(cum, exact, 1e-14) << p << " " << i;
         }
         const double exact = p % 2 ? 0.0 : 2.0 / (p + 1);
@@ -255,8 +260,8 @@ struct CompareResult {
     int pixels = 0;
     double maxRel = 0;
 };
-CompareResult CompareLinearImage(const Scene& scene, const Image& image, const std::string& cf,
-                                 const std::string& ef, double rel,
+CompareResult CompareLinearImage(const Scene& scene, const Image& image,
+                                 const std::string& cf, const std::string& ef, double rel,
                                  const std::array<LD, 3>& lo = {0, 0, 0},
                                  const std::array<LD, 3>& hi = {1, 1, 1}) {
     const Camera camera(scene.camera);
@@ -272,7 +277,8 @@ CompareResult CompareLinearImage(const Scene& scene, const Image& image, const s
             const LinearFieldRay ray{cr.origin, cr.direction};
             LD t0, t1;
             const std::size_t p = std::size_t(j) * image.width + i;
-            const bool hit = testing::RefBoxChord(cr.origin, cr.direction, lo, hi, t0, t1);
+            const bool hit =
+                testing::RefBoxChord(cr.origin, cr.direction, lo, hi, t0, t1);
             t0 = std::max<LD>(t0, scene.clip.near);
             t1 = std::min<LD>(t1, scene.clip.far);
             if (!hit || t1 - t0 < 1e-5) {
@@ -294,8 +300,8 @@ CompareResult CompareLinearImage(const Scene& scene, const Image& image, const s
                 const LD denom = want[c] > 0 ? want[c] : 1;
                 const double err = double(std::abs(got[c] - want[c]) / denom);
                 result.maxRel = std::max(result.maxRel, err);
-                EXPECT_LE(err, rel) << "pixel " << i << "," << j << " channel " << c << " got "
-                                    << got[c] << " want " << double(want[c]);
+                EXPECT_LE(err, rel) << "pixel " << i << "," << j << " channel " << c
+                                    << " got " << got[c] << " want " << double(want[c]);
             }
             ++result.pixels;
         }
@@ -351,10 +357,10 @@ TEST(VolumeLinear, BreakpointsEqualToVertexValues) {
     Scene scene = MakeScene(kLinearScene);
     scene.data.mesh = "builtin:cube-tets-3";
     scene.volume->extinctionField = "u";
-    scene.volume->colorTf = {{1.0 / 3, {0.1, 0.2, 0.9}}, {2.0, {0.2, 0.9, 0.3}},
-                             {11.0 / 3, {1.0, 0.9, 0.1}}};
-    scene.volume->extinctionTf = {{4.0 / 3, 0.0}, {5.0 / 3, 3.0}, {7.0 / 3, 3.0},
-                                  {3.0, 0.0}, {11.0 / 3, 0.0}, {14.0 / 3, 5.0}};
+    scene.volume->colorTf = {
+        {1.0 / 3, {0.1, 0.2, 0.9}}, {2.0, {0.2, 0.9, 0.3}}, {11.0 / 3, {1.0, 0.9, 0.1}}};
+    scene.volume->extinctionTf = {{4.0 / 3, 0.0}, {5.0 / 3, 3.0},  {7.0 / 3, 3.0},
+                                  {3.0, 0.0},     {11.0 / 3, 0.0}, {14.0 / 3, 5.0}};
     for (GlowModel glow : {GlowModel::WilliamsMax, GlowModel::WilhelmsVanGelder}) {
         scene.volume->glow = glow;
         RenderStats stats;
@@ -392,9 +398,9 @@ TEST(VolumeLinear, OneCellAndSubPixelCellsAgree) {
     const Image fine = RenderMeshJob(MakeBuiltin("builtin:cube-tets-40"), scene, s40);
     double maxDiff = 0;
     for (std::size_t p = 0; p < one.PixelCount(); ++p) {
-        maxDiff = std::max({maxDiff, std::abs(one.r[p] - fine.r[p]),
-                            std::abs(one.g[p] - fine.g[p]), std::abs(one.b[p] - fine.b[p]),
-                            std::abs(one.a[p] - fine.a[p])});
+        maxDiff = std::max(
+            {maxDiff, std::abs(one.r[p] - fine.r[p]), std::abs(one.g[p] - fine.g[p]),
+             std::abs(one.b[p] - fine.b[p]), std::abs(one.a[p] - fine.a[p])});
     }
     EXPECT_LE(maxDiff, 1e-9);
     EXPECT_GT(s40.counters.segments, 30 * s1.counters.segments);
@@ -472,13 +478,15 @@ volume:
 
 // The same on curved isoparametric hexes with extinction linear in u = x (the world x
 // coordinate, exact on the curved cells): tau = a + b x(t) along the ray, so the optical
-// depth is a L + b integral x dt in closed form, while the renderer takes the Kronrod path.
+// depth is a L + b integral x dt in closed form, while the renderer takes the Kronrod
+// path.
 TEST(VolumeConstant, LinearExtinctionOfXOnCurvedHexes) {
     Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=4");
     const double pi = std::acos(-1.0);
     for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
         double* x = &mesh.points[3 * i];
-        const double bump = std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
+        const double bump =
+            std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
         const double X = x[0], Y = x[1], Z = x[2];
         x[0] = X + 0.06 * bump * std::cos(3 * Y);
         x[1] = Y + 0.06 * bump * std::sin(2 * Z);
@@ -502,8 +510,8 @@ accuracy: {volume_tolerance: 1e-12}
         std::mt19937 rng(trial);
         std::uniform_real_distribution<double> uni(0.05, 0.95);
         std::normal_distribution<double> g;
-        const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
-                                            {g(rng), g(rng), g(rng)});
+        const Ray ray =
+            testing::MakeRayDir({uni(rng), uni(rng), uni(rng)}, {g(rng), g(rng), g(rng)});
         LD t0, t1;
         const std::array<double, 3> o = {ray.origin[0], ray.origin[1], ray.origin[2]};
         const std::array<double, 3> d = {ray.dir[0], ray.dir[1], ray.dir[2]};
@@ -593,7 +601,8 @@ TEST(VolumeSlices, SemiTransparentSliceInsideTheVolumeAtItsDepth) {
             const CameraRay cr = camera.PixelRay(i, j);
             const LinearFieldRay ray{cr.origin, cr.direction};
             LD t0, t1;
-            if (!testing::RefBoxChord(cr.origin, cr.direction, {0, 0, 0}, {1, 1, 1}, t0, t1) ||
+            if (!testing::RefBoxChord(cr.origin, cr.direction, {0, 0, 0}, {1, 1, 1}, t0,
+                                      t1) ||
                 t1 - t0 < 1e-5)
                 continue;
             const LD ts = (0.5L - cr.origin[2]) / LD(cr.direction[2]);
@@ -608,8 +617,8 @@ TEST(VolumeSlices, SemiTransparentSliceInsideTheVolumeAtItsDepth) {
             ray.Crossings(kU, ctf.scalars, kinks);
             ray.Crossings(kV, etf.scalars, kinks);
             const RefPixel ref = testing::ReferenceRay(
-                t0, t1, [&](LD t) { return ray.At(kU, t); }, [&](LD t) { return ray.At(kV, t); },
-                ctf, etf, true, kinks, surfaces);
+                t0, t1, [&](LD t) { return ray.At(kU, t); },
+                [&](LD t) { return ray.At(kV, t); }, ctf, etf, true, kinks, surfaces);
             const std::size_t p = std::size_t(j) * image.width + i;
             const double got[4] = {image.r[p], image.g[p], image.b[p], image.a[p]};
             const LD want[4] = {ref.rgb[0], ref.rgb[1], ref.rgb[2], ref.alpha};

@@ -1,7 +1,7 @@
-// Volume rendering of high-order data against independent truth: ball-p2 (u = r^2 exactly)
-// and nk-sinc (its order-8 tensor interpolant, evaluated here independently of the
-// library's bases): the true error of every pixel against a long-double ODE reference is
-// within the reported vol.error on at least 99% of the pixels; isosurfaces embedded in
+// Volume rendering of high-order data against independent truth: ball-p2 (u = r^2
+// exactly) and nk-sinc (its order-8 tensor interpolant, evaluated here independently of
+// the library's bases): the true error of every pixel against a long-double ODE reference
+// is within the reported vol.error on at least 99% of the pixels; isosurfaces embedded in
 // the volume at their analytic depth; slices of high-order and curved data show the true
 // field on the plane.
 #include <gtest/gtest.h>
@@ -53,8 +53,8 @@ void SampledCrossings(const std::function<LD(LD)>& f, LD t0, LD t1, LD level, in
 
 struct ErrorSummary {
     int pixels = 0;
-    int bounded = 0;      ///< true error <= vol.error (+ the reference's own 1e-15)
-    double maxTrue = 0;   ///< largest true RGB error
+    int bounded = 0;     ///< true error <= vol.error (+ the reference's own 1e-15)
+    double maxTrue = 0;  ///< largest true RGB error
     double maxEstimate = 0;
 };
 
@@ -63,7 +63,8 @@ struct ErrorSummary {
 void Account(const Image& image, std::size_t p, const RefPixel& ref, ErrorSummary& s) {
     const double got[3] = {image.r[p], image.g[p], image.b[p]};
     double err = 0;
-    for (int c = 0; c < 3; ++c) err = std::max(err, double(std::abs(got[c] - ref.rgb[c])));
+    for (int c = 0; c < 3; ++c)
+        err = std::max(err, double(std::abs(got[c] - ref.rgb[c])));
     ++s.pixels;
     s.bounded += err <= image.volError[p] + 1e-15;
     s.maxTrue = std::max(s.maxTrue, err);
@@ -119,15 +120,16 @@ ErrorSummary BallErrors(const Scene& scene, const Image& image) {
             const CameraRay cr = camera.PixelRay(i, j);
             const BallRay ray{cr.origin, cr.direction};
             LD t0, t1;
-            if (!testing::RefBoxChord(cr.origin, cr.direction, {-1, -1, -1}, {1, 1, 1}, t0, t1) ||
+            if (!testing::RefBoxChord(cr.origin, cr.direction, {-1, -1, -1}, {1, 1, 1},
+                                      t0, t1) ||
                 t1 - t0 < 1e-6)
                 continue;
             std::vector<LD> kinks;
             for (LD level : ctf.scalars) ray.Crossings(level, kinks);
             for (LD level : etf.scalars) ray.Crossings(level, kinks);
             const RefPixel ref = testing::ReferenceRay(
-                t0, t1, [&](LD t) { return ray.U(t); }, [&](LD t) { return ray.U(t); }, ctf, etf,
-                wm, kinks);
+                t0, t1, [&](LD t) { return ray.U(t); }, [&](LD t) { return ray.U(t); },
+                ctf, etf, wm, kinks);
             const std::size_t p = std::size_t(j) * image.width + i;
             EXPECT_NEAR(image.a[p], double(ref.alpha), 1e-7) << i << "," << j;
             Account(image, p, ref, s);
@@ -178,7 +180,8 @@ accuracy: {volume_tolerance: 1e-9}
             const CameraRay cr = camera.PixelRay(i, j);
             const BallRay ray{cr.origin, cr.direction};
             LD t0, t1;
-            if (!testing::RefBoxChord(cr.origin, cr.direction, {-1, -1, -1}, {1, 1, 1}, t0, t1) ||
+            if (!testing::RefBoxChord(cr.origin, cr.direction, {-1, -1, -1}, {1, 1, 1},
+                                      t0, t1) ||
                 t1 - t0 < 1e-6)
                 continue;
             std::vector<LD> hitsT;
@@ -189,21 +192,23 @@ accuracy: {volume_tolerance: 1e-9}
                 // Headlight Blinn-Phong with the sphere's normal facing the camera.
                 LD nl = 0;
                 for (int a = 0; a < 3; ++a)
-                    nl += (LD(cr.origin[a]) + t * LD(cr.direction[a])) / 0.7L * LD(cr.direction[a]);
+                    nl += (LD(cr.origin[a]) + t * LD(cr.direction[a])) / 0.7L *
+                          LD(cr.direction[a]);
                 nl = std::abs(nl);
                 const LD spec = 0.25L * std::pow(nl, 16.0L);
                 RefSurface surface{t, {}, 0.55L};
                 const LD color[3] = {1.0L, 0.9L, 0.2L};
                 for (int c = 0; c < 3; ++c)
-                    surface.color[c] = std::min<LD>(1, color[c] * (0.2L + 0.7L * nl) + spec);
+                    surface.color[c] =
+                        std::min<LD>(1, color[c] * (0.2L + 0.7L * nl) + spec);
                 surfaces.push_back(surface);
             }
             std::vector<LD> kinks;
             for (LD level : ctf.scalars) ray.Crossings(level, kinks);
             for (LD level : etf.scalars) ray.Crossings(level, kinks);
             const RefPixel ref = testing::ReferenceRay(
-                t0, t1, [&](LD t) { return ray.U(t); }, [&](LD t) { return ray.U(t); }, ctf, etf,
-                true, kinks, surfaces);
+                t0, t1, [&](LD t) { return ray.U(t); }, [&](LD t) { return ray.U(t); },
+                ctf, etf, true, kinks, surfaces);
             const std::size_t p = std::size_t(j) * image.width + i;
             if (!surfaces.empty()) {
                 ++hits;
@@ -230,7 +235,7 @@ accuracy: {volume_tolerance: 1e-9}
 // Lagrange interpolant of u = 2 (y - 0.3) - sinc(|(x, z) - (0.5, 0.5)|) on each box.
 
 class NkSincTruth {
-public:
+  public:
     static constexpr double kBreaks[6] = {0.0, 0.27, 0.44, 0.56, 0.73, 1.0};
     static constexpr int kOrder = 8;
 
@@ -271,7 +276,7 @@ public:
         return sum;
     }
 
-private:
+  private:
     const std::vector<double>& Nodal(const int box[3]) {
         const int key = box[0] + 5 * (box[1] + 5 * box[2]);
         auto it = cache_.find(key);
@@ -296,7 +301,8 @@ private:
 
 // Renders `scene` at each tolerance and checks every pixel against the reference along
 // the same ray through nk-sinc's interpolant.
-void CheckNkSinc(Scene scene, const std::vector<double>& tolerances, LD referenceTolerance) {
+void CheckNkSinc(Scene scene, const std::vector<double>& tolerances,
+                 LD referenceTolerance) {
     const Mesh mesh = MakeBuiltin("builtin:nk-sinc");
     NkSincTruth truth;
     const Camera camera(scene.camera);
@@ -315,7 +321,8 @@ void CheckNkSinc(Scene scene, const std::vector<double>& tolerances, LD referenc
         for (int i = 0; i < scene.camera.width; ++i) {
             const CameraRay cr = camera.PixelRay(i, j);
             LD t0, t1;
-            if (!testing::RefBoxChord(cr.origin, cr.direction, {0, 0, 0}, {1, 1, 1}, t0, t1) ||
+            if (!testing::RefBoxChord(cr.origin, cr.direction, {0, 0, 0}, {1, 1, 1}, t0,
+                                      t1) ||
                 t1 - t0 < 1e-6)
                 continue;
             // Box faces crossed, then the field's breakpoint crossings inside each box.
@@ -332,7 +339,8 @@ void CheckNkSinc(Scene scene, const std::vector<double>& tolerances, LD referenc
                 const LD mid = (cuts[k] + cuts[k + 1]) / 2;
                 std::array<int, 3> box;
                 for (int a = 0; a < 3; ++a)
-                    box[a] = NkSincTruth::Box(double(cr.origin[a] + mid * cr.direction[a]));
+                    box[a] =
+                        NkSincTruth::Box(double(cr.origin[a] + mid * cr.direction[a]));
                 boxes.push_back(box);
             }
             auto field = [&](LD t) {
@@ -347,14 +355,17 @@ void CheckNkSinc(Scene scene, const std::vector<double>& tolerances, LD referenc
             std::vector<LD> kinks(cuts.begin(), cuts.end());
             for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
                 const LD a = cuts[k] + 1e-15L, b = cuts[k + 1] - 1e-15L;
-                for (LD level : ctf.scalars) SampledCrossings(field, a, b, level, 64, kinks);
-                for (LD level : etf.scalars) SampledCrossings(field, a, b, level, 64, kinks);
+                for (LD level : ctf.scalars)
+                    SampledCrossings(field, a, b, level, 64, kinks);
+                for (LD level : etf.scalars)
+                    SampledCrossings(field, a, b, level, 64, kinks);
             }
             const RefPixel ref = testing::ReferenceRay(t0, t1, field, field, ctf, etf, wm,
                                                        kinks, {}, referenceTolerance);
             const std::size_t p = std::size_t(j) * scene.camera.width + i;
             for (std::size_t k = 0; k < count; ++k) {
-                EXPECT_NEAR(images[k].a[p], double(ref.alpha), std::max(1e-12, 2 * tolerances[k]));
+                EXPECT_NEAR(images[k].a[p], double(ref.alpha),
+                            std::max(1e-12, 2 * tolerances[k]));
                 Account(images[k], p, ref, summary[k]);
             }
         }
@@ -381,9 +392,10 @@ volume:
 )");
     CheckNkSinc(scene, {1e-4, 1e-8}, 1e-18L);
     // A dense sheet (extinction 300 within 0.05 of u = 0, glow model): the attenuation
-    // varies inside the cells, so the Kronrod pieces are subdivided to the tolerance. With
-    // a transfer-function slope of 6000 per unit of u, the field's rounding bound alone
-    // gives about 1e-9 (see VolumeRayMarcher::AddFieldError): tolerances above that.
+    // varies inside the cells, so the Kronrod pieces are subdivided to the tolerance.
+    // With a transfer-function slope of 6000 per unit of u, the field's rounding bound
+    // alone gives about 1e-9 (see VolumeRayMarcher::AddFieldError): tolerances above
+    // that.
     scene.volume->glow = GlowModel::WilhelmsVanGelder;
     scene.volume->extinctionTf = {{-0.05, 0.0}, {0.0, 300.0}, {0.05, 0.0}};
     scene.volume->colorTf = {{-0.1, {0.0, 0.5, 2.0}}, {0.1, {3.0, 1.0, 0.0}}};
@@ -425,7 +437,8 @@ slices:
                 x[a] = r.origin[a] + t * r.direction[a];
                 inside &= x[a] > 0 && x[a] < 1;
                 box[a] = NkSincTruth::Box(double(x[a]));
-                for (double b : NkSincTruth::kBreaks) nearFace |= std::abs(x[a] - b) < 1e-9;
+                for (double b : NkSincTruth::kBreaks)
+                    nearFace |= std::abs(x[a] - b) < 1e-9;
             }
             const std::size_t p = std::size_t(j) * 32 + i;
             if (nearFace) continue;
@@ -443,14 +456,15 @@ slices:
 }
 
 // Slices of curved cells: on isoparametric curved hexes the field u = x is exactly the
-// world x coordinate, so the slice colour is the transfer function of x at the plane point
-// (found through Newton inversion in the curved cell).
+// world x coordinate, so the slice colour is the transfer function of x at the plane
+// point (found through Newton inversion in the curved cell).
 TEST(VolumeHighOrder, SliceOfCurvedCellsIsExact) {
     Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=4");
     const double pi = std::acos(-1.0);
     for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
         double* x = &mesh.points[3 * i];
-        const double bump = std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
+        const double bump =
+            std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
         const double X = x[0], Y = x[1], Z = x[2];
         x[0] = X + 0.08 * bump * std::cos(3 * Y);
         x[1] = Y + 0.08 * bump * std::sin(2 * Z);

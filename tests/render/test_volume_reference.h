@@ -1,13 +1,12 @@
 // Independent reference for volume-rendering tests: the integrals of design.md ("Volume
-// semantics") along one ray, by adaptive Bulirsch-Stoer extrapolation in long double on the
-// ODE  phi' = tau(t),  C' = emission(t) exp(-phi),  restarted at every kink of the
+// semantics") along one ray, by adaptive Bulirsch-Stoer extrapolation in long double on
+// the ODE  phi' = tau(t),  C' = emission(t) exp(-phi),  restarted at every kink of the
 // integrand (cell faces, transfer-function breakpoints) and at embedded surfaces.
 #pragma once
 
-#include <boost/numeric/odeint.hpp>
-
 #include <algorithm>
 #include <array>
+#include <boost/numeric/odeint.hpp>
 #include <cmath>
 #include <functional>
 #include <vector>
@@ -46,7 +45,8 @@ struct RefTf {
         while (scalars[k + 1] < s) ++k;
         const LD w = (s - scalars[k]) / (scalars[k + 1] - scalars[k]);
         std::array<LD, 3> out;
-        for (int c = 0; c < 3; ++c) out[c] = values[k][c] + w * (values[k + 1][c] - values[k][c]);
+        for (int c = 0; c < 3; ++c)
+            out[c] = values[k][c] + w * (values[k + 1][c] - values[k][c]);
         return out;
     }
 };
@@ -63,10 +63,10 @@ struct RefPixel {
     LD alpha = 0;
 };
 
-/// The pixel of a ray whose inside-the-data part is [t0, t1]: colour field c(t), extinction
-/// field e(t), transfer functions, glow model; `kinks` are the t where the integrand is not
-/// smooth (need not be sorted; those outside (t0, t1) are ignored). The integration is
-/// controlled to `relTolerance` relative (and 1e-6 of that absolute).
+/// The pixel of a ray whose inside-the-data part is [t0, t1]: colour field c(t),
+/// extinction field e(t), transfer functions, glow model; `kinks` are the t where the
+/// integrand is not smooth (need not be sorted; those outside (t0, t1) are ignored). The
+/// integration is controlled to `relTolerance` relative (and 1e-6 of that absolute).
 inline RefPixel ReferenceRay(LD t0, LD t1, const std::function<LD(LD)>& colorField,
                              const std::function<LD(LD)>& extinctionField,
                              const RefTf& colorTf, const RefTf& extinctionTf,
@@ -125,9 +125,9 @@ inline RefPixel ReferenceRay(LD t0, LD t1, const std::function<LD(LD)>& colorFie
 }
 
 /// The chord [t0, t1] of a ray through the closed box [lo, hi] (long double slabs).
-inline bool RefBoxChord(const std::array<double, 3>& origin, const std::array<double, 3>& dir,
-                        const std::array<LD, 3>& lo, const std::array<LD, 3>& hi, LD& t0,
-                        LD& t1) {
+inline bool RefBoxChord(const std::array<double, 3>& origin,
+                        const std::array<double, 3>& dir, const std::array<LD, 3>& lo,
+                        const std::array<LD, 3>& hi, LD& t0, LD& t1) {
     t0 = -INFINITY;
     t1 = INFINITY;
     for (int a = 0; a < 3; ++a) {
@@ -135,7 +135,8 @@ inline bool RefBoxChord(const std::array<double, 3>& origin, const std::array<do
             if (origin[a] < lo[a] || origin[a] > hi[a]) return false;
             continue;
         }
-        LD u = (lo[a] - LD(origin[a])) / LD(dir[a]), v = (hi[a] - LD(origin[a])) / LD(dir[a]);
+        LD u = (lo[a] - LD(origin[a])) / LD(dir[a]),
+           v = (hi[a] - LD(origin[a])) / LD(dir[a]);
         if (u > v) std::swap(u, v);
         t0 = std::max(t0, u);
         t1 = std::min(t1, v);
