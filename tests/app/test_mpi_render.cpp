@@ -200,3 +200,34 @@ TEST_F(MpiRender, BricksThatCannotContributeAreNotRead) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// A volume with embedded semi-transparent isosurfaces and a clip box: the integral is
+// split at brick boxes and composited across ranks; up to 8 ranks (oversubscribed).
+TEST_F(MpiRender, VolumeWithIsosurfacesOnUpToEightRanks) {
+    for (const Camera& camera : {kCameras[0], kCameras[1]}) {
+        auto render = [&](const std::string& launcher, const std::string& tag) {
+            const std::string rgba = (kDir / (tag + ".rgba.npy")).string();
+            const std::string cmd = launcher + HPRAY_BINARY + " render " +
+                                    std::string(HPRAY_SOURCE_DIR) +
+                                    "/configs/volume_ball_p2_iso.yaml -q " + camera.settings +
+                                    " --set camera.width=32 --set camera.height=32" +
+                                    " --set output.exr=null --set output.png=null" +
+                                    " --set output.stats=null --set output.rgba=" + rgba;
+            std::string out;
+            EXPECT_EQ(RunCommand(cmd, &out), 0) << cmd << "\n" << out;
+            std::vector<std::size_t> shape;
+            return ReadNpy(rgba, shape);
+        };
+        const auto reference = render("", std::string("vol_ref_") + camera.name);
+        for (int ranks : {2, 3, 8}) {
+            const std::string tag = std::string("vol_") + camera.name + "_np" + std::to_string(ranks);
+            ExpectSame(reference, render(Mpirun(ranks), tag), tag);
+        }
+    }
+}
+
+}  // namespace
+}  // namespace hpray
