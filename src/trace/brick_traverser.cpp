@@ -16,6 +16,7 @@
 #include <numeric>
 #include <sstream>
 
+#include "elements/basis.h"
 #include "trace/bilinear_patch.h"
 #include "trace/curved_face.h"
 #include "trace/face_map.h"
@@ -385,6 +386,7 @@ void BrickTraverser::Impl::BuildTopology() {
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, nCells, 4096),
         [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::vector<double> values, dRef;
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
                 const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
                 const int p = mesh.cellOrder[c];
@@ -421,6 +423,26 @@ void BrickTraverser::Impl::BuildTopology() {
                     }
                 }
                 orient[c] = vol < 0 ? -1 : 1;
+                if (p > 1) {
+                    // Strongly curved cells (MFEM's twisted order-9 spiral) can have a corner
+                    // polyhedron of the opposite orientation: the map's Jacobian at the
+                    // reference centre decides.
+                    const BasisTable& basis =
+                        GetBasis(mesh.cellShape[c], p, mesh.cellFamily[c]);
+                    values.resize(basis.nodeCount);
+                    dRef.resize(3 * basis.nodeCount);
+                    const auto centre = RefCenter(mesh.cellShape[c]);
+                    EvalBasis(basis, centre.data(), values.data(), dRef.data());
+                    double J[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+                    for (int m = 0; m < basis.nodeCount; ++m)
+                        for (int i = 0; i < 3; ++i)
+                            for (int j = 0; j < 3; ++j)
+                                J[3 * i + j] += mesh.points[3 * nodes[m] + i] * dRef[3 * m + j];
+                    const double det = J[0] * (J[4] * J[8] - J[5] * J[7]) -
+                                       J[1] * (J[3] * J[8] - J[5] * J[6]) +
+                                       J[2] * (J[3] * J[7] - J[4] * J[6]);
+                    if (det != 0 && std::isfinite(det)) orient[c] = det < 0 ? -1 : 1;
+                }
             }
         });
 
