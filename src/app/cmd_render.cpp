@@ -13,6 +13,7 @@
 
 #include "app/commands.h"
 #include "compositor.h"
+#include "elements/bounds.h"
 #include "elements/mesh_geometry.h"
 #include "io/mesh_io.h"
 #include "partition.h"
@@ -80,9 +81,34 @@ void AssignRanks(BrickPlan& plan, int node, int r0, int ranks, const std::vector
     AssignRanks(plan, n.high, r0 + low, ranks - low, leaves, cost);
 }
 
-/// An in-memory k-d split of a mesh into `count` boxes by cell-centroid count (weighted
-/// median along the longest axis), tiling the guaranteed bounds of its cells.
-BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count) {
+/// Estimated render cost of each cell for a scene: in a scene of isosurfaces only, a cell
+/// whose guaranteed range holds an isovalue is projected and root-searched (about its line
+/// degree + 1 field samples, weighed here as twice that against a traversal step); the
+/// others are only traversed. Scenes with a volume or slices weigh every cell the same.
+std::vector<double> CellCosts(const Mesh& mesh, const MeshGeometry& geometry,
+                              const Scene& scene) {
+    std::vector<double> cost(mesh.CellCount(), 1.0);
+    if (scene.volume || !scene.slices.empty() || scene.isosurfaces.empty()) return cost;
+    std::vector<double> nodal;
+    for (const SceneIsosurface& iso : scene.isosurfaces) {
+        const auto sel = SelectScalar(mesh, iso.field);
+        if (!sel || sel->field->association != Association::Point) continue;
+        for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+            GatherCellValues(mesh, *sel->field, sel->component, c, nodal);
+            const BasisTable& basis = *geometry.cells[c].basis;
+            const Interval r = FieldBounds(basis, nodal.data());
+            if (iso.value >= r.lo && iso.value <= r.hi)
+                cost[c] = std::max(cost[c], 1.0 + 2.0 * (basis.lineDegree + 1));
+        }
+    }
+    return cost;
+}
+
+/// An in-memory k-d split of a mesh into `count` boxes by estimated cell cost (weighted
+/// median of the cell centroids along the longest axis), tiling the guaranteed bounds of
+/// its cells.
+BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
+                    const std::vector<double>& cellCost) {
     BrickPlan plan;
     std::vector<std::array<double, 3>> centroid(mesh.CellCount());
     for (std::int64_t c = 0; c < mesh.CellCount(); ++c)
@@ -97,18 +123,25 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count) {
         if (leaves == 1) {
             plan.tree[index].brick = static_cast<int>(plan.boxes.size());
             plan.boxes.push_back(box);
-            plan.cost.push_back(static_cast<double>(end - begin));
+            double c = 0;
+            for (std::int64_t i = begin; i < end; ++i) c += cellCost[cells[i]];
+            plan.cost.push_back(c);
             return index;
         }
         int axis = 0;
         for (int d = 1; d < 3; ++d)
             if (box[1][d] - box[0][d] > box[1][axis] - box[0][axis]) axis = d;
         const int lowLeaves = leaves / 2;
-        std::int64_t mid = begin + (end - begin) * lowLeaves / leaves;
-        std::nth_element(cells.begin() + begin, cells.begin() + mid, cells.begin() + end,
-                         [&](std::int64_t a, std::int64_t b) {
-                             return centroid[a][axis] < centroid[b][axis];
-                         });
+        // Weighted median: the first cell where the cost prefix reaches lowLeaves / leaves.
+        std::sort(cells.begin() + begin, cells.begin() + end, [&](std::int64_t a, std::int64_t b) {
+            return centroid[a][axis] < centroid[b][axis];
+        });
+        double total = 0;
+        for (std::int64_t i = begin; i < end; ++i) total += cellCost[cells[i]];
+        const double target = total * lowLeaves / leaves;
+        std::int64_t mid = begin;
+        for (double acc = 0; mid < end && acc + cellCost[cells[mid]] <= target; ++mid)
+            acc += cellCost[cells[mid]];
         double split = end > begin ? centroid[cells[mid]][axis] : 0.5 * (box[0][axis] + box[1][axis]);
         split = std::clamp(split, box[0][axis], box[1][axis]);
         AxisBox lowBox = box, highBox = box;
@@ -311,7 +344,7 @@ int RunRender(const RenderArgs& args) {
     } else {
         whole = ReadMesh(scene.data.mesh, options);
         const MeshGeometry geometry = MeshGeometry::Build(*whole);
-        plan = SplitMesh(*whole, geometry, P);
+        plan = SplitMesh(*whole, geometry, P, CellCosts(*whole, geometry, scene));
     }
     const int bricks = static_cast<int>(plan.boxes.size());
     if (bricks < P)
