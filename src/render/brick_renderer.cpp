@@ -43,25 +43,24 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         }
         s.isos.push_back({index, iso.value, iso.color, iso.opacity});
     }
-    // Guaranteed per-cell ranges of each isosurface field.
+    // Per field: the nodal values gathered once per cell (shared with the ray loop), and
+    // from them the guaranteed per-cell ranges.
     const std::int64_t cells = mesh.CellCount();
+    for (const ScalarSelector& f : s.fields)
+        s.fieldData.push_back(FieldCellData::Build(mesh, geometry, f));
     s.cellRanges.assign(s.fields.size(), std::vector<Interval>(cells));
     for (std::size_t f = 0; f < s.fields.size(); ++f) {
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
                           [&](const tbb::blocked_range<std::int64_t>& range) {
-                              std::vector<double> nodal;
-                              for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                                  GatherCellValues(mesh, *s.fields[f].field,
-                                                   s.fields[f].component, c, nodal);
-                                  s.cellRanges[f][c] =
-                                      FieldBounds(*geometry.cells[c].basis, nodal.data());
-                              }
+                              for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                                  s.cellRanges[f][c] = FieldBounds(
+                                      *geometry.cells[c].basis,
+                                      s.fieldData[f].values.data() + mesh.cellOffsets[c]);
                           });
     }
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
-        s.fieldData.push_back(FieldCellData::Build(mesh, geometry, f));
     }
     const SceneAccuracy& acc = scene.accuracy;
     s.projection.tolerance = acc.projectionTolerance;

@@ -74,7 +74,8 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
 void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {
-    BeginCommon(geometry, field, c, ray, inversion);
+    (void)field;  // `data` was built for this field
+    BeginCommon(geometry, c, ray, inversion);
     scalar_.nodal = data.values.data() + data.mesh->cellOffsets[c];
     gradBound_ = &data.refGradBound[c];
     lineDegree_ = cell_->basis->lineDegree;
@@ -99,10 +100,8 @@ bool SegmentField::MayReach(const double* isovalues, int count, double t0, doubl
              excluded((*this)(t1 - 0.5 * h), 0.5 * h));
 }
 
-void SegmentField::BeginCommon(const MeshGeometry& geometry, const ScalarSelector& field,
-                               std::int64_t c, const Ray& ray,
+void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, const Ray& ray,
                                const InversionOptions& inversion) {
-    (void)field;
     cell_ = &geometry.cells[c];
     ray_ = ray;
     inversion_ = inversion;
@@ -126,7 +125,7 @@ void SegmentField::BeginCommon(const MeshGeometry& geometry, const ScalarSelecto
 void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {
-    BeginCommon(geometry, field, c, ray, inversion);
+    BeginCommon(geometry, c, ray, inversion);
     if (field.field->association == Association::Point) {
         GatherCellValues(mesh, *field.field, field.component, c, nodal_);
         scalar_.nodal = nodal_.data();

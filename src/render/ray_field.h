@@ -63,8 +63,8 @@ public:
     void AddCountersTo(RenderCounters& counters);
 
 private:
-    void BeginCommon(const MeshGeometry& geometry, const ScalarSelector& field,
-                     std::int64_t c, const Ray& ray, const InversionOptions& inversion);
+    void BeginCommon(const MeshGeometry& geometry, std::int64_t c, const Ray& ray,
+                     const InversionOptions& inversion);
     void RefAt(double t, double ref[3]);
 
     const CellGeometry* cell_ = nullptr;
