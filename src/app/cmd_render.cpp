@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <set>
 
 #include "app/commands.h"
@@ -17,6 +18,8 @@
 #include "elements/mesh_geometry.h"
 #include "io/mesh_io.h"
 #include "partition.h"
+#include "work_split.h"
+#include "render/brick_renderer.h"
 #include "render/render_job.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
@@ -81,83 +84,94 @@ void AssignRanks(BrickPlan& plan, int node, int r0, int ranks, const std::vector
     AssignRanks(plan, n.high, r0 + low, ranks - low, leaves, cost);
 }
 
-/// Estimated render cost of each cell for a scene: in a scene of isosurfaces only, a cell
-/// whose guaranteed range holds an isovalue is projected and root-searched (about its line
-/// degree + 1 field samples, weighed here as twice that against a traversal step); the
-/// others are only traversed. Scenes with a volume or slices weigh every cell the same.
-std::vector<double> CellCosts(const Mesh& mesh, const MeshGeometry& geometry,
-                              const Scene& scene) {
-    std::vector<double> cost(mesh.CellCount(), 1.0);
-    if (scene.volume || !scene.slices.empty() || scene.isosurfaces.empty()) return cost;
-    std::vector<double> nodal;
-    for (const SceneIsosurface& iso : scene.isosurfaces) {
-        const auto sel = SelectScalar(mesh, iso.field);
-        if (!sel || sel->field->association != Association::Point) continue;
-        for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
-            GatherCellValues(mesh, *sel->field, sel->component, c, nodal);
-            const BasisTable& basis = *geometry.cells[c].basis;
-            const Interval r = FieldBounds(basis, nodal.data());
-            if (iso.value >= r.lo && iso.value <= r.hi)
-                cost[c] = std::max(cost[c], 1.0 + 2.0 * (basis.lineDegree + 1));
+/// The plan of an in-memory split from the pre-pass cost samples (every rank holds the
+/// whole mesh and clips its rays to its box, so planes may cut cells); without samples
+/// (the mesh is not in view) each cell's guaranteed box weighs one.
+BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
+                    const std::vector<SegmentCostSample>& samples) {
+    std::vector<partition::WorkExtent> items;
+    double sum = 0;
+    for (const SegmentCostSample& s : samples) sum += s.seconds;
+    if (sum > 0) {
+        items.reserve(samples.size());
+        for (const SegmentCostSample& s : samples) {
+            partition::WorkExtent x;
+            for (int d = 0; d < 3; ++d) {
+                x.lo[d] = std::min(s.enter[d], s.exit[d]);
+                x.hi[d] = std::max(s.enter[d], s.exit[d]);
+            }
+            x.weight = s.seconds;
+            x.occluded = s.occluded;
+            for (int d = 0; d < 3; ++d) x.occluder[d] = s.occluder[d];
+            items.push_back(x);
         }
+    } else {
+        for (const Box3& b : geometry.boxes) items.push_back({b.lo, b.hi, 1.0, false, {}});
     }
-    return cost;
+    // Planes snap to node coordinates: exactly where axis-aligned faces lie.
+    std::array<std::vector<double>, 3> bounds;
+    for (int d = 0; d < 3; ++d) {
+        bounds[d].reserve(mesh.PointCount());
+        for (std::int64_t i = 0; i < mesh.PointCount(); ++i)
+            bounds[d].push_back(mesh.points[3 * i + d]);
+        std::sort(bounds[d].begin(), bounds[d].end());
+        bounds[d].erase(std::unique(bounds[d].begin(), bounds[d].end()), bounds[d].end());
+    }
+    const AxisBox root{geometry.bounds.lo, geometry.bounds.hi};
+    const partition::WorkSplit split = partition::SplitWork(items, count, root, bounds);
+    BrickPlan plan;
+    for (const partition::WorkSplitNode& n : split.tree) {
+        compositor::BrickTreeNode b;
+        b.axis = n.axis;
+        b.split = n.split;
+        b.low = n.low;
+        b.high = n.high;
+        b.brick = n.leaf;
+        plan.tree.push_back(b);
+    }
+    plan.boxes = split.boxes;
+    plan.cost = split.cost;
+    return plan;
 }
 
-/// An in-memory k-d split of a mesh into `count` boxes by estimated cell cost (weighted
-/// median of the cell centroids along the longest axis), tiling the guaranteed bounds of
-/// its cells.
-BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
-                    const std::vector<double>& cellCost) {
-    BrickPlan plan;
-    std::vector<std::array<double, 3>> centroid(mesh.CellCount());
-    for (std::int64_t c = 0; c < mesh.CellCount(); ++c)
-        for (int d = 0; d < 3; ++d)
-            centroid[c][d] = 0.5 * (geometry.boxes[c].lo[d] + geometry.boxes[c].hi[d]);
-    std::vector<std::int64_t> cells(mesh.CellCount());
-    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) cells[c] = c;
-    std::function<int(AxisBox, std::int64_t, std::int64_t, int)> build =
-        [&](AxisBox box, std::int64_t begin, std::int64_t end, int leaves) -> int {
-        const int index = static_cast<int>(plan.tree.size());
-        plan.tree.emplace_back();
-        if (leaves == 1) {
-            plan.tree[index].brick = static_cast<int>(plan.boxes.size());
-            plan.boxes.push_back(box);
-            double c = 0;
-            for (std::int64_t i = begin; i < end; ++i) c += cellCost[cells[i]];
-            plan.cost.push_back(c);
-            return index;
+/// Sends rank 0's plan (tree, boxes, costs) to every rank.
+void BroadcastPlan(BrickPlan& plan) {
+    std::vector<double> buffer;
+    if (mpi::Root()) {
+        buffer.push_back(static_cast<double>(plan.tree.size()));
+        buffer.push_back(static_cast<double>(plan.boxes.size()));
+        for (const auto& n : plan.tree)
+            buffer.insert(buffer.end(), {double(n.axis), n.split, double(n.low),
+                                         double(n.high), double(n.brick)});
+        for (std::size_t b = 0; b < plan.boxes.size(); ++b) {
+            for (int k = 0; k < 2; ++k)
+                for (int d = 0; d < 3; ++d) buffer.push_back(plan.boxes[b][k][d]);
+            buffer.push_back(plan.cost[b]);
         }
-        int axis = 0;
-        for (int d = 1; d < 3; ++d)
-            if (box[1][d] - box[0][d] > box[1][axis] - box[0][axis]) axis = d;
-        const int lowLeaves = leaves / 2;
-        // Weighted median: the first cell where the cost prefix reaches lowLeaves / leaves.
-        std::sort(cells.begin() + begin, cells.begin() + end, [&](std::int64_t a, std::int64_t b) {
-            return centroid[a][axis] < centroid[b][axis];
-        });
-        double total = 0;
-        for (std::int64_t i = begin; i < end; ++i) total += cellCost[cells[i]];
-        const double target = total * lowLeaves / leaves;
-        std::int64_t mid = begin;
-        for (double acc = 0; mid < end && acc + cellCost[cells[mid]] <= target; ++mid)
-            acc += cellCost[cells[mid]];
-        double split = end > begin ? centroid[cells[mid]][axis] : 0.5 * (box[0][axis] + box[1][axis]);
-        split = std::clamp(split, box[0][axis], box[1][axis]);
-        AxisBox lowBox = box, highBox = box;
-        lowBox[1][axis] = split;
-        highBox[0][axis] = split;
-        plan.tree[index].axis = axis;
-        plan.tree[index].split = split;
-        const int lo = build(lowBox, begin, mid, lowLeaves);
-        const int hi = build(highBox, mid, end, leaves - lowLeaves);
-        plan.tree[index].low = lo;
-        plan.tree[index].high = hi;
-        return index;
-    };
-    const AxisBox root{geometry.bounds.lo, geometry.bounds.hi};
-    build(root, 0, mesh.CellCount(), count);
-    return plan;
+    }
+    long long size = static_cast<long long>(buffer.size());
+    MPI_Bcast(&size, 1, MPI_LONG_LONG, 0, MPI_COMM_WORLD);
+    buffer.resize(static_cast<std::size_t>(size));
+    MPI_Bcast(buffer.data(), static_cast<int>(size), MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    if (mpi::Root()) return;
+    std::size_t at = 0;
+    const auto nodes = static_cast<std::size_t>(buffer[at++]);
+    const auto boxes = static_cast<std::size_t>(buffer[at++]);
+    plan.tree.assign(nodes, {});
+    for (auto& n : plan.tree) {
+        n.axis = static_cast<int>(buffer[at++]);
+        n.split = buffer[at++];
+        n.low = static_cast<int>(buffer[at++]);
+        n.high = static_cast<int>(buffer[at++]);
+        n.brick = static_cast<int>(buffer[at++]);
+    }
+    plan.boxes.assign(boxes, {});
+    plan.cost.assign(boxes, 0.0);
+    for (std::size_t b = 0; b < boxes; ++b) {
+        for (int k = 0; k < 2; ++k)
+            for (int d = 0; d < 3; ++d) plan.boxes[b][k][d] = buffer[at++];
+        plan.cost[b] = buffer[at++];
+    }
 }
 
 BrickPlan PlanFromPartition(const partition::Partition& part) {
@@ -266,10 +280,11 @@ void ReduceStats(RenderStats& stats, int bricksLoaded) {
                MPI_COMM_WORLD);
     for (int i = 0; i < RenderCounters::kSize; ++i)
         counters[i] = RenderCounters::IsMax(i) ? max[i] : sum[i];
-    double times[5] = {stats.timing.load, stats.timing.accel, stats.timing.render,
-                       stats.timing.composite, stats.timing.total};
-    double timesMax[5];
-    MPI_Reduce(times, timesMax, 5, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    double times[8] = {stats.timing.load,      stats.timing.accel,   stats.timing.render,
+                       stats.timing.composite, stats.timing.total,   stats.timing.prepass,
+                       stats.timing.wait,      -stats.timing.render};
+    double timesMax[8];
+    MPI_Reduce(times, timesMax, 8, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
     double range[2] = {stats.isoFieldRange[0], -stats.isoFieldRange[1]}, rangeMin[2];
     MPI_Reduce(range, rangeMin, 2, MPI_DOUBLE, MPI_MIN, 0, MPI_COMM_WORLD);
     int loaded = 0;
@@ -283,6 +298,9 @@ void ReduceStats(RenderStats& stats, int bricksLoaded) {
         stats.timing.render = timesMax[2];
         stats.timing.composite = timesMax[3];
         stats.timing.total = timesMax[4];
+        stats.timing.prepass = timesMax[5];
+        stats.timing.wait = timesMax[6];
+        stats.timing.renderMin = -timesMax[7];
         stats.isoFieldRange = {rangeMin[0], -rangeMin[1]};
         stats.bricksLoaded = loaded;
         stats.accelBytes = bytesSum;
@@ -343,9 +361,39 @@ int RunRender(const RenderArgs& args) {
         plan = PlanFromPartition(*part);
     } else {
         whole = ReadMesh(scene.data.mesh, options);
-        const MeshGeometry geometry = MeshGeometry::Build(*whole);
-        plan = SplitMesh(*whole, geometry, P, CellCosts(*whole, geometry, scene));
     }
+    stats.timing.load += Seconds(t0);
+    std::unique_ptr<PreparedBrick> prepared;
+    if (whole) {
+        // Every rank prepares the whole mesh; rank 0 renders a pre-pass at 1/8 of the
+        // resolution, measuring each segment's cost where it lies, and splits space so
+        // that each rank's box holds an equal share of the measured cost.
+        prepared = std::make_unique<PreparedBrick>(*whole, std::nullopt, scene, stats);
+        t0 = std::chrono::steady_clock::now();
+        if (mpi::Root()) {
+            SceneCamera low = scene.camera;
+            low.width = std::min(scene.camera.width, std::max(32, scene.camera.width / 8));
+            low.height =
+                std::min(scene.camera.height, std::max(32, scene.camera.height / 8));
+            std::vector<SegmentCostSample> samples;
+            Image preview;
+            RenderStats ignored = StartStats(scene);
+            prepared->Render(scene, Camera(low), std::nullopt, preview, ignored, &samples);
+            plan = SplitMesh(*whole, prepared->Geometry(), P, samples);
+            std::string planes;
+            for (const auto& n : plan.tree)
+                if (n.axis >= 0) {
+                    char text[64];
+                    std::snprintf(text, sizeof text, " %c=%.17g", "xyz"[n.axis], n.split);
+                    planes += text;
+                }
+            log::Info("split by measured cost (" + std::to_string(samples.size()) +
+                      " pre-pass segments):" + planes);
+        }
+        BroadcastPlan(plan);
+        stats.timing.prepass = Seconds(t0);
+    }
+    t0 = std::chrono::steady_clock::now();
     const int bricks = static_cast<int>(plan.boxes.size());
     if (bricks < P)
         throw InputError(scene.data.mesh, "",
@@ -378,12 +426,16 @@ int RunRender(const RenderArgs& args) {
             stats.timing.load += Seconds(t0);
             RenderOneBrick(mesh, plan.boxes[b], scene, image, stats);
         } else {
-            RenderOneBrick(*whole, plan.boxes[b], scene, image, stats);
+            prepared->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats);
         }
         ++loaded;
         compositor::CompositeOver(accumulated, image);
     }
 
+    // Waiting for the slowest rank is imbalance, not compositing: timed apart.
+    t0 = std::chrono::steady_clock::now();
+    MPI_Barrier(MPI_COMM_WORLD);
+    stats.timing.wait = Seconds(t0);
     t0 = std::chrono::steady_clock::now();
     compositor::CompositeStats cs;
     if (P > 1) {

@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <mutex>
 
@@ -75,6 +76,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     const double diag =
         std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
     s.duplicateDistance = 1e-9 * diag;
+    s.sliverLength = 1e-12 * diag;
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
     if (scene.clip.box) s.clipBox = *scene.clip.box;
@@ -103,8 +105,10 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
 /// Per-thread scratch of the ray loop: grown once, then reused without allocation.
 class RayIntegrator {
   public:
+    /// `costSamples`: when not null, one sample per traversed segment is appended.
     void Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
-                   RenderCounters& counters);
+                   RenderCounters& counters,
+                   std::vector<SegmentCostSample>* costSamples = nullptr);
 
   private:
     struct Event {
@@ -194,8 +198,74 @@ void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& 
     counters.isoResidualMax = std::max(counters.isoResidualMax, e.residual);
 }
 
+namespace {
+using CostClock = std::chrono::steady_clock;
+
+/// Appends the cost sample of each segment of a ray as its work ends (see
+/// SegmentCostSample); inactive when `out` is null.
+class SegmentCostRecorder {
+  public:
+    SegmentCostRecorder(std::vector<SegmentCostSample>* out, const Ray& ray,
+                        const std::vector<Segment>& segments, double traceSeconds)
+        : out_(out), ray_(ray), segments_(segments) {
+        if (!out_ || segments.empty()) return;
+        traceShare_ = traceSeconds / static_cast<double>(segments.size());
+        start_ = CostClock::now();
+    }
+    /// Segment `index`'s work is done (called for every segment reached, in order).
+    void Done(std::size_t index) {
+        if (!out_) return;
+        const auto now = CostClock::now();
+        Add(index, std::chrono::duration<double>(now - start_).count());
+        start_ = now;
+        next_ = index + 1;
+        if (pending_) {
+            occluded_ = true;
+            std::copy(stop_, stop_ + 3, occluder_);
+            pending_ = false;
+        }
+    }
+    /// The ray would have stopped at t (inside the current segment): later segments are
+    /// occluded from here.
+    void Stopped(double t) {
+        pending_ = true;
+        for (int d = 0; d < 3; ++d) stop_[d] = ray_.origin[d] + t * ray_.dir[d];
+    }
+    /// The segments never reached (after an opaque hit) cost their traversal share.
+    ~SegmentCostRecorder() {
+        if (!out_) return;
+        for (std::size_t i = next_; i < segments_.size(); ++i) Add(i, 0.0);
+    }
+
+  private:
+    void Add(std::size_t index, double work) {
+        const Segment& seg = segments_[index];
+        SegmentCostSample s;
+        s.cell = seg.cell;
+        for (int d = 0; d < 3; ++d) {
+            s.enter[d] = ray_.origin[d] + seg.tEnter * ray_.dir[d];
+            s.exit[d] = ray_.origin[d] + seg.tExit * ray_.dir[d];
+        }
+        s.seconds = static_cast<float>(work + traceShare_);
+        s.occluded = occluded_;
+        std::copy(occluder_, occluder_ + 3, s.occluder);
+        out_->push_back(s);
+    }
+
+    std::vector<SegmentCostSample>* out_;
+    const Ray& ray_;
+    const std::vector<Segment>& segments_;
+    double traceShare_ = 0;
+    CostClock::time_point start_;
+    std::size_t next_ = 0;
+    bool occluded_ = false, pending_ = false;
+    double occluder_[3] = {0, 0, 0}, stop_[3] = {0, 0, 0};
+};
+}  // namespace
+
 void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
-                              RenderCounters& counters) {
+                              RenderCounters& counters,
+                              std::vector<SegmentCostSample>* costSamples) {
     out = PixelSample{};
     counters.rays += 1;
     double tMin = setup.tNear, tMax = setup.tFar;
@@ -203,8 +273,18 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
     const bool hasVolume = setup.volume.has_value();
     const std::size_t nSlices = setup.slices.size();
     if (!(tMin < tMax) || (setup.isos.empty() && !hasVolume && nSlices == 0)) return;
+    // The traverser clips to its brick box by the same arithmetic, so segments cut by a
+    // clip plane start or end exactly at tMin / tMax.
+    if (!ClipRayToBox(ray, setup.traverser->GetBrick().box, tMin, tMax)) return;
+    const CostClock::time_point traceStart =
+        costSamples ? CostClock::now() : CostClock::time_point{};
     setup.traverser->Trace(ray, tMin, tMax, segments_);
     counters.segments += static_cast<double>(segments_.size());
+    const bool measure = costSamples != nullptr;
+    SegmentCostRecorder recorder(
+        costSamples, ray, segments_,
+        costSamples ? std::chrono::duration<double>(CostClock::now() - traceStart).count()
+                    : 0.0);
     const std::size_t nIso = setup.isos.size();
     lastHit_.assign(nIso, -std::numeric_limits<double>::infinity());
     relevant_.resize(nIso);
@@ -229,6 +309,15 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
     bool volumeSeen = false;
     for (std::size_t si = 0; si < segments_.size(); ++si) {
         const Segment& seg = segments_[si];
+        // A clip plane through a face meets the ray a few ulps off the face: the sliver it
+        // leaves in the next cell (shorter than 1e-12 of the mesh size) holds nothing
+        // visible, but projecting the field on it would cost as much as a whole segment.
+        if (seg.tExit - seg.tEnter <= setup.sliverLength &&
+            (seg.tEnter == tMin || seg.tExit == tMax)) {
+            counters.segmentsCulled += 1;
+            recorder.Done(si);
+            continue;
+        }
         bool any = false;
         for (std::size_t k = 0; k < nIso; ++k) {
             const Interval& r = setup.cellRanges[setup.isos[k].field][seg.cell];
@@ -252,6 +341,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
         if (!any && !anySlice && !volumeHere) {
             counters.segmentsCulled += 1;
+            recorder.Done(si);
             continue;
         }
         volumeSeen |= volumeHere;
@@ -345,6 +435,11 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
             if (volumeHere) {
                 stop = marcher_.Integrate(tDone, e.t, composite, counters);
                 tDone = std::max(tDone, e.t);
+                if (stop && measure) {
+                    recorder.Stopped(e.t);
+                    transmittance = 1;
+                    stop = false;
+                }
                 if (stop) break;
             }
             if (e.slice >= 0) {
@@ -364,12 +459,22 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                         composite.error[c] +=
                             std::abs(out.rgba[c] - before[c]) * composite.depthError;
             }
+            if (transmittance <= 0 && measure) {
+                recorder.Stopped(e.t);
+                transmittance = 1;
+            }
             if (transmittance <= 0) break;
         }
         if (volumeHere && !stop && transmittance > 0)
             stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite,
                                       counters);
         field_.AddCountersTo(counters);
+        if ((transmittance <= 0 || stop) && measure) {
+            recorder.Stopped(std::min(seg.tExit, cutoff));
+            transmittance = 1;
+            stop = false;
+        }
+        recorder.Done(si);
         if (transmittance <= 0 || stop) break;
     }
     if (volumeSeen) {
@@ -389,7 +494,7 @@ void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
 }
 
 void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
-                 RenderCounters& counters) {
+                 RenderCounters& counters, std::vector<SegmentCostSample>* costSamples) {
     const int W = camera.Width(), H = camera.Height();
     image.Resize(W, H);
     std::unique_ptr<tbb::global_control> limit;
@@ -399,6 +504,7 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
     struct ThreadState {
         RayIntegrator integrator;
         RenderCounters counters;
+        std::vector<SegmentCostSample> costSamples;
     };
     tbb::enumerable_thread_specific<ThreadState> states;
     constexpr int kTile = 16;
@@ -415,7 +521,8 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
                     ray.origin[d] = cr.origin[d];
                     ray.dir[d] = cr.direction[d];
                 }
-                st.integrator.Integrate(setup, ray, s, st.counters);
+                st.integrator.Integrate(setup, ray, s, st.counters,
+                                        costSamples ? &st.costSamples : nullptr);
                 const std::size_t p = static_cast<std::size_t>(j) * W + i;
                 image.r[p] = s.rgba[0];
                 image.g[p] = s.rgba[1];
@@ -430,7 +537,12 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
                 image.volError[p] = s.volError;
             }
     });
-    for (const ThreadState& st : states) counters.Merge(st.counters);
+    for (const ThreadState& st : states) {
+        counters.Merge(st.counters);
+        if (costSamples)
+            costSamples->insert(costSamples->end(), st.costSamples.begin(),
+                                st.costSamples.end());
+    }
 }
 
 }  // namespace hpray

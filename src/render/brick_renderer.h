@@ -53,6 +53,9 @@ struct BrickSetup {
     /// Two hits of one isosurface closer than this (world units) are one hit: the same
     /// root seen from the two cells of a face it lies on.
     double duplicateDistance = 0;
+    /// Segments at most this long (world units) that start or end at a clip plane are
+    /// skipped: slivers left by clip planes through faces.
+    double sliverLength = 0;
 
     double tNear = 0;
     double tFar = std::numeric_limits<double>::infinity();
@@ -89,11 +92,34 @@ struct PixelSample {
     double volError = 0;
 };
 
+/// The measured cost of one ray segment: where its work was done and how long it took.
+/// Sampled on request (a steady-clock read per segment) to calibrate the partitioner's
+/// cost model and to balance in-memory splits by measured cost.
+struct SegmentCostSample {
+    std::int64_t cell = -1;
+    double enter[3] = {0, 0, 0};  ///< world points where the segment enters and leaves
+    double exit[3] = {0, 0, 0};
+    /// Wall time of the segment's work (ranges, projection, roots, shading, volume) plus
+    /// an equal share of the ray's traversal.
+    float seconds = 0;
+    /// Whether an earlier point of the ray stopped it (an opaque isosurface hit, or the
+    /// volume's transmittance falling below its tolerance), and the last such point:
+    /// a brick holding that point would not render this segment; one that does not hold
+    /// it would.
+    bool occluded = false;
+    double occluder[3] = {0, 0, 0};
+};
+
 /// Renders the whole brick for `camera` into `image` (resized), using `threads` threads
 /// (0: all). Each pixel depends only on its own ray, so the image is bitwise identical
-/// for any thread count. Counters of all rays are merged into `counters`.
+/// for any thread count. Counters of all rays are merged into `counters`. When
+/// `costSamples` is given, the brick is rendered to measure cost, not to be seen: rays do
+/// not stop where they become opaque (their transmittance restarts at 1 and the stop is
+/// recorded), and one SegmentCostSample per traversed segment is appended to it (in no
+/// particular order).
 void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
-                 RenderCounters& counters);
+                 RenderCounters& counters,
+                 std::vector<SegmentCostSample>* costSamples = nullptr);
 
 /// One ray (exposed for tests): fills `sample` and adds to `counters`.
 class RayIntegrator;

@@ -68,10 +68,18 @@ RenderStats StartStats(const Scene& scene) {
     return stats;
 }
 
-void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
-                    Image& image, RenderStats& stats) {
-    auto t0 = std::chrono::steady_clock::now();
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+struct PreparedBrick::Impl {
+    MeshGeometry geometry;
+    std::unique_ptr<BrickTraverser> traverser;
+    BrickSetup setup;
+};
+
+PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box,
+                             const Scene& scene, RenderStats& stats)
+    : impl_(std::make_unique<Impl>()) {
+    const auto t0 = std::chrono::steady_clock::now();
+    impl_->geometry = MeshGeometry::Build(mesh);
+    const MeshGeometry& geometry = impl_->geometry;
     Brick brick{&mesh, {}};
     if (box) {
         brick.box = *box;
@@ -82,20 +90,56 @@ void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const S
     }
     TraceOptions traceOptions;
     traceOptions.mappingTolerance = scene.accuracy.mappingTolerance;
-    const BrickTraverser traverser(brick, traceOptions);
-    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    impl_->traverser = std::make_unique<BrickTraverser>(brick, traceOptions);
+    impl_->setup = MakeBrickSetup(mesh, geometry, *impl_->traverser, scene);
     stats.timing.accel += Seconds(t0);
-    stats.accelBytes += static_cast<double>(traverser.Stats().Bytes());
-    stats.accelBytesPerCell = traverser.Stats().BytesPerCell();
-    for (const ScalarSelector& f : setup.fields) {
+    const TraverserStats& ts = impl_->traverser->Stats();
+    stats.accelBytes += static_cast<double>(ts.Bytes());
+    stats.accelBytesPerCell = ts.BytesPerCell();
+    for (const ScalarSelector& f : impl_->setup.fields) {
         const auto r = f.field->Range(f.component);
         stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),
                                std::max(stats.isoFieldRange[1], r[1])};
     }
-    t0 = std::chrono::steady_clock::now();
-    const Camera camera(scene.camera);
-    RenderBrick(setup, camera, scene.threads, image, stats.counters);
+}
+
+PreparedBrick::~PreparedBrick() = default;
+
+const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
+
+void PreparedBrick::Render(const Scene& scene, const Camera& camera,
+                           const std::optional<AxisBox>& clip, Image& image,
+                           RenderStats& stats,
+                           std::vector<SegmentCostSample>* costSamples) {
+    const auto t0 = std::chrono::steady_clock::now();
+    BrickSetup& setup = impl_->setup;
+    const std::optional<AxisBox> sceneClip = setup.clipBox;
+    if (clip) {
+        AxisBox box = *clip;
+        bool empty = false;
+        if (sceneClip)
+            for (int d = 0; d < 3; ++d) {
+                box[0][d] = std::max(box[0][d], (*sceneClip)[0][d]);
+                box[1][d] = std::min(box[1][d], (*sceneClip)[1][d]);
+                empty |= box[0][d] > box[1][d];
+            }
+        if (empty) {
+            image.Resize(camera.Width(), camera.Height());
+            stats.timing.render += Seconds(t0);
+            return;
+        }
+        setup.clipBox = box;
+    }
+    RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples);
+    setup.clipBox = sceneClip;
     stats.timing.render += Seconds(t0);
+}
+
+void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+                    Image& image, RenderStats& stats,
+                    std::vector<SegmentCostSample>* costSamples) {
+    PreparedBrick brick(mesh, box, scene, stats);
+    brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, costSamples);
 }
 
 void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats) {

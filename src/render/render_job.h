@@ -6,11 +6,17 @@
 #include "mesh/mesh.h"
 #include "trace/ray.h"
 
+#include <memory>
 #include <optional>
+#include <vector>
 #include "render/stats.h"
 #include "scene/scene.h"
 
 namespace hpray {
+
+struct SegmentCostSample;
+struct MeshGeometry;
+class Camera;
 
 /// Renders `scene` and writes every output it names (EXR, PNG, stats, hits, rgba). Returns
 /// the image and fills `stats`. Throws InputError for bad input; a failed job writes no
@@ -24,9 +30,36 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
 
 /// Renders one brick — `mesh` with its rays clipped to `box` (std::nullopt: the guaranteed
 /// bounds of all its cells) — into `image` (resized to the camera), adding the accel and
-/// render times, counters, field range and accel bytes to `stats`.
+/// render times, counters, field range and accel bytes to `stats`. With `costSamples`,
+/// the measured cost of every segment is appended to it (brick_renderer.h).
 void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
-                    Image& image, RenderStats& stats);
+                    Image& image, RenderStats& stats,
+                    std::vector<SegmentCostSample>* costSamples = nullptr);
+
+/// A brick ready to render many times: geometry, traverser and per-field setup built once
+/// (the in-memory split renders a pre-pass and then its own box of the same mesh).
+class PreparedBrick {
+  public:
+    /// Builds for `mesh` with rays clipped to `box` (std::nullopt: the guaranteed bounds
+    /// of all cells); adds the build time to stats.timing.accel and the accel bytes.
+    PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+                  RenderStats& stats);
+    ~PreparedBrick();
+    PreparedBrick(const PreparedBrick&) = delete;
+    PreparedBrick& operator=(const PreparedBrick&) = delete;
+
+    /// Renders for `camera` with rays further clipped to `clip` (besides the scene's clip
+    /// box), adding the render time and counters to `stats`; see RenderOneBrick.
+    void Render(const Scene& scene, const Camera& camera, const std::optional<AxisBox>& clip,
+                Image& image, RenderStats& stats,
+                std::vector<SegmentCostSample>* costSamples = nullptr);
+
+    const MeshGeometry& Geometry() const;
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 /// Writes the outputs the scene names (EXR, PNG, hits, rgba; then stats), timing the
 /// writes into stats.timing.write.

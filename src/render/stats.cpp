@@ -82,6 +82,11 @@ std::string StatsToJson(const RenderStats& s) {
     j["timing_s"] = {{"load", s.timing.load},           {"accel", s.timing.accel},
                      {"render", s.timing.render},       {"composite", s.timing.composite},
                      {"write", s.timing.write},         {"total", s.timing.total}};
+    if (s.ranks > 1) {
+        j["timing_s"]["prepass"] = s.timing.prepass;
+        j["timing_s"]["wait"] = s.timing.wait;
+        j["timing_s"]["render_min"] = s.timing.renderMin;
+    }
     j["rays"] = c.rays;
     j["segments"] = c.segments;
     j["segments_culled"] = c.segmentsCulled;

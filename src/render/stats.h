@@ -11,6 +11,9 @@ namespace hpray {
 /// Wall-clock seconds of each phase. Across ranks the maximum is reported.
 struct PhaseTimes {
     double load = 0, accel = 0, render = 0, composite = 0, write = 0, total = 0;
+    /// Distributed jobs: the cost-measuring pre-pass of an in-memory split, the wait for
+    /// the slowest rank before compositing (imbalance), and the fastest rank's render.
+    double prepass = 0, wait = 0, renderMin = 0;
 };
 
 /// Counters accumulated per thread and summed; plain so they can be reduced over MPI as

@@ -446,5 +446,48 @@ isosurfaces:
     EXPECT_GT(checked, 1000);
 }
 
+
+// Cost measuring (the pre-pass of in-memory splits): one sample per traversed segment;
+// rays do not stop at the opaque sphere, and every segment behind it names the hit point
+// (on the analytic sphere) as its occluder, every segment before it none.
+TEST(IsoRender, CostSamplesCoverEverySegmentAndRecordOpaqueStops) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    const Scene scene = MakeScene(kBallScene);
+    RenderStats stats = StartStats(scene);
+    PreparedBrick brick(mesh, std::nullopt, scene, stats);
+    std::vector<SegmentCostSample> samples;
+    Image image;
+    brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, &samples);
+    ASSERT_EQ(static_cast<double>(samples.size()), stats.counters.segments);
+    const double R = 0.7;
+    int occluded = 0, visible = 0;
+    for (const SegmentCostSample& s : samples) {
+        EXPECT_GE(s.seconds, 0.0f);
+        double enter = 0, exit = 0;
+        for (int d = 0; d < 3; ++d) {
+            enter += s.enter[d] * s.enter[d];
+            exit += s.exit[d] * s.exit[d];
+        }
+        if (s.occluded) {
+            ++occluded;
+            const double r = std::sqrt(s.occluder[0] * s.occluder[0] +
+                                       s.occluder[1] * s.occluder[1] +
+                                       s.occluder[2] * s.occluder[2]);
+            EXPECT_NEAR(r, R, 1e-9);
+        } else {
+            ++visible;
+            // Not behind the sphere: the segment starts outside it (up to rounding).
+            EXPECT_GT(std::sqrt(enter), R - 1e-9);
+        }
+    }
+    EXPECT_GT(occluded, 1000);
+    EXPECT_GT(visible, 1000);
+    // Measuring does not stop rays: hits behind the first one are found and counted.
+    RenderStats plain;
+    RenderMeshJob(mesh, scene, plain);
+    EXPECT_GT(stats.counters.isoHits, plain.counters.isoHits);
+    EXPECT_EQ(stats.counters.segments, plain.counters.segments);
+}
+
 }  // namespace
 }  // namespace hpray
