@@ -29,6 +29,7 @@
 #include "cost_model.h"
 #include "elements/basis.h"
 #include "elements/bounds.h"
+#include "elements/geometry.h"
 #include "gmsh_stream.h"
 #include "io/output_file.h"
 #include "io/vtu_writer.h"
@@ -58,9 +59,25 @@ struct CellRecord {
     std::int32_t nodeCount = 0;
     double lo[3], hi[3];
     double centroid[3];
-    double cost = 0;
+    /// The cost model's parts (cost_model.h): setup seconds, and seconds per segment
+    /// times the hull surface area; the cost follows once the root box is known.
+    double setupCost = 0;
+    double segmentArea = 0;
+    double Cost(double rootDiagonal) const {
+        return CellRenderSeconds({setupCost, segmentArea}, 1.0, rootDiagonal);
+    }
 };
-static_assert(sizeof(CellRecord) == 88, "spill record layout");
+static_assert(sizeof(CellRecord) == 96, "spill record layout");
+
+/// A centroid and its cost parts, as spilled before the root box is known.
+struct CentroidRecord {
+    double x[3];
+    double setupCost, segmentArea;
+};
+
+double Diagonal(const Box& b) {
+    return std::hypot(b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]);
+}
 
 std::string BrickName(int b) {
     char name[32];
@@ -211,7 +228,14 @@ class ScanSink : public MeshSink {
                 r.hi[d] = std::max(r.hi[d], g.hi[d]);
             }
         }
-        r.cost = Cost(shape, order, family);
+        // Affine or curved, as the renderer classifies it (order-1 tets always affine).
+        bool curved = false;
+        if (!(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange))
+            curved = !MakeCellGeometry(GetBasis(shape, order, family), xyz_.data()).affine;
+        const CellCostParts parts = Parts(shape, order, family, curved);
+        r.setupCost = parts.setup;
+        r.segmentArea =
+            parts.perSegment * CellHullSurfaceArea(shape, order, family, xyz_.data());
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::min(root.lo[d], r.lo[d]);
             root.hi[d] = std::max(root.hi[d], r.hi[d]);
@@ -219,10 +243,10 @@ class ScanSink : public MeshSink {
         cells_->Write(&r, sizeof r);
         cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
         cells_->Write(values, sizeof(double) * cellValues);
-        const WeightedPoint w{{r.centroid[0], r.centroid[1], r.centroid[2]}, r.cost};
+        const CentroidRecord w{{r.centroid[0], r.centroid[1], r.centroid[2]},
+                               r.setupCost, r.segmentArea};
         centroids_->Write(&w, sizeof w);
         ++cells;
-        totalCost += r.cost;
     }
 
     void Close() {
@@ -240,16 +264,16 @@ class ScanSink : public MeshSink {
     int pointStride = 3;
     int cellValues = 0;
     std::int64_t points = 0, cells = 0;
-    double totalCost = 0;
     Box root;
 
   private:
-    double Cost(CellShape shape, int order, CellFamily family) {
+    CellCostParts Parts(CellShape shape, int order, CellFamily family, bool curved) {
         const int key =
-            (static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order;
+            ((static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order) * 2 +
+            (curved ? 1 : 0);
         auto it = costs_.find(key);
         if (it == costs_.end())
-            it = costs_.emplace(key, CellRenderCost(shape, order, family)).first;
+            it = costs_.emplace(key, CellCostModel(shape, order, family, curved)).first;
         return it->second;
     }
 
@@ -258,7 +282,7 @@ class ScanSink : public MeshSink {
     std::unique_ptr<SpillWriter> points_, cells_, centroids_;
     std::unique_ptr<RecordCache> cache_;
     std::vector<double> xyz_;
-    std::map<int, double> costs_;
+    std::map<int, CellCostParts> costs_;
 };
 
 /// Per-brick tallies of the distribution pass.
@@ -540,17 +564,23 @@ PartitionReport PartitionMesh(const std::string& meshPath,
 
     // 2. The k-d tree over the centroids.
     const std::string centroidsPath = scan.CentroidsPath();
+    const double rootDiagonal = Diagonal(scan.root);
     const CentroidPass pass =
         [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
             SpillReader reader(centroidsPath, std::size_t(1) << 20);
             constexpr std::size_t kBlock = 4096;
             std::vector<WeightedPoint> block(kBlock);
             std::size_t n = 0;
-            while (reader.Read(&block[n], sizeof(WeightedPoint)))
+            CentroidRecord c;
+            while (reader.Read(&c, sizeof c)) {
+                WeightedPoint& w = block[n];
+                std::copy(c.x, c.x + 3, w.x);
+                w.cost = CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
                 if (++n == kBlock) {
                     visit(block.data(), n);
                     n = 0;
                 }
+            }
             if (n > 0) visit(block.data(), n);
         };
     const std::size_t collectLimit = std::clamp<std::size_t>(
@@ -595,9 +625,9 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 t.nodes += r.nodeCount;
                 if (r.ghost) {
                     ++t.ghosts;
-                    t.ghostCost += r.cost;
+                    t.ghostCost += r.Cost(rootDiagonal);
                 } else {
-                    t.cost += r.cost;
+                    t.cost += r.Cost(rootDiagonal);
                 }
             }
         }

@@ -11,6 +11,8 @@
 #include <set>
 
 #include "cost_model.h"
+#include "elements/basis.h"
+#include "elements/geometry.h"
 #include "io/mesh_io.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
@@ -148,6 +150,24 @@ TEST(VtuStream, TruncatedFileIsAnInputError) {
     }
 }
 
+/// The cost model's estimate for cell c of `mesh` in a partition of root box `root`.
+double ModelCost(const Mesh& mesh, std::int64_t c, const partition::Box& root) {
+    const CellShape shape = mesh.cellShape[c];
+    const int order = mesh.cellOrder[c];
+    const CellFamily family = mesh.cellFamily[c];
+    std::vector<double> xyz;
+    for (std::int64_t k = mesh.cellOffsets[c]; k < mesh.cellOffsets[c + 1]; ++k)
+        for (int d = 0; d < 3; ++d) xyz.push_back(mesh.points[3 * mesh.connectivity[k] + d]);
+    const bool curved =
+        !(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange) &&
+        !MakeCellGeometry(GetBasis(shape, order, family), xyz.data()).affine;
+    const double area = partition::CellHullSurfaceArea(shape, order, family, xyz.data());
+    const double diagonal = std::hypot(root.hi[0] - root.lo[0], root.hi[1] - root.lo[1],
+                                       root.hi[2] - root.lo[2]);
+    return partition::CellRenderSeconds(
+        partition::CellCostModel(shape, order, family, curved), area, diagonal);
+}
+
 /// Balance of a partition computed independently: each cell's owner found by walking the
 /// manifest's tree with the cell's centroid, costs from the cost model.
 double IndependentBalance(const Mesh& mesh, const Partition& p) {
@@ -167,8 +187,7 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
             }
             n = low ? node.low : node.high;
         }
-        cost[p.nodes[n].brick] += partition::CellRenderCost(
-            mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
+        cost[p.nodes[n].brick] += ModelCost(mesh, c, p.rootBox);
     }
     double sum = 0, max = 0;
     for (double v : cost) {
@@ -179,7 +198,7 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
 }
 
 TEST(Partition, BalancedForEveryBrickCountUpTo64) {
-    // Curved order-3 tets (every cell costs the same): 21,504 cells, 336 per brick at 64.
+    // Curved order-3 tets of varying size: 21,504 cells, 336 per brick at 64.
     const std::string path = kData + "/mfem_escher_tet_p3.vtu";
     const Mesh mesh = ReadMesh(path);
     ScratchDir dir("partition_balance");

@@ -1,0 +1,84 @@
+// Hull surface areas for the cost model (see cost_model.h).
+#include "cost_model.h"
+
+#include <array>
+#include <map>
+#include <mutex>
+#include <tuple>
+#include <vector>
+
+#include "util/check.h"
+
+namespace hpray::partition {
+namespace {
+
+double TriangleArea(const double* a, const double* b, const double* c) {
+    double u[3], v[3];
+    for (int d = 0; d < 3; ++d) {
+        u[d] = b[d] - a[d];
+        v[d] = c[d] - a[d];
+    }
+    const double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
+                 z = u[0] * v[1] - u[1] * v[0];
+    return 0.5 * std::sqrt(x * x + y * y + z * z);
+}
+
+double QuadArea(const double* a, const double* b, const double* c, const double* d) {
+    double p[3], q[3];
+    for (int k = 0; k < 3; ++k) {
+        p[k] = c[k] - a[k];
+        q[k] = d[k] - b[k];
+    }
+    const double x = p[1] * q[2] - p[2] * q[1], y = p[2] * q[0] - p[0] * q[2],
+                 z = p[0] * q[1] - p[1] * q[0];
+    return 0.5 * std::sqrt(x * x + y * y + z * z);
+}
+
+}  // namespace
+
+double HullSurfaceArea(CellShape shape, const double* v) {
+    auto P = [v](int i) { return v + 3 * i; };
+    switch (shape) {
+        case CellShape::Tet:
+            return TriangleArea(P(0), P(1), P(2)) + TriangleArea(P(0), P(1), P(3)) +
+                   TriangleArea(P(1), P(2), P(3)) + TriangleArea(P(0), P(2), P(3));
+        case CellShape::Hex:
+            return QuadArea(P(0), P(1), P(2), P(3)) + QuadArea(P(4), P(5), P(6), P(7)) +
+                   QuadArea(P(0), P(1), P(5), P(4)) + QuadArea(P(1), P(2), P(6), P(5)) +
+                   QuadArea(P(2), P(3), P(7), P(6)) + QuadArea(P(3), P(0), P(4), P(7));
+        case CellShape::Wedge:
+            return TriangleArea(P(0), P(1), P(2)) + TriangleArea(P(3), P(4), P(5)) +
+                   QuadArea(P(0), P(1), P(4), P(3)) + QuadArea(P(1), P(2), P(5), P(4)) +
+                   QuadArea(P(2), P(0), P(3), P(5));
+        case CellShape::Pyramid:
+            return QuadArea(P(0), P(1), P(2), P(3)) + TriangleArea(P(0), P(1), P(4)) +
+                   TriangleArea(P(1), P(2), P(4)) + TriangleArea(P(2), P(3), P(4)) +
+                   TriangleArea(P(3), P(0), P(4));
+    }
+    return 0;
+}
+
+double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
+                           const double* nodeXyz) {
+    // Internal indices of the corner vertices, cached per (shape, order, family).
+    static std::mutex mutex;
+    static std::map<std::tuple<int, int, int>, std::vector<int>> cache;
+    const std::vector<int>* corners = nullptr;
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        auto& entry = cache[{static_cast<int>(shape), order, static_cast<int>(family)}];
+        if (entry.empty())
+            for (const LatticeIndex& ijk : VertexLattice(shape, order)) {
+                const int index = InternalNodeIndex(shape, order, family, ijk);
+                HPRAY_CHECK_GE(index, 0);
+                entry.push_back(index);
+            }
+        corners = &entry;
+    }
+    double v[8 * 3];
+    for (std::size_t k = 0; k < corners->size(); ++k)
+        for (int d = 0; d < 3; ++d) v[3 * k + d] = nodeXyz[3 * (*corners)[k] + d];
+    return HullSurfaceArea(shape, v);
+}
+
+}  // namespace hpray::partition
