@@ -15,6 +15,10 @@ namespace {
 constexpr double kEps = std::numeric_limits<double>::epsilon();
 /// Bisections of a Kronrod piece stop here (2^-40 of the piece); the estimate stays.
 constexpr int kMaxKronrodDepth = 40;
+/// Kronrod intervals evaluated in one piece before the rest are accepted as they are
+/// (their error estimates still go into vol.error): a cap on the work of integrands whose
+/// estimated error does not shrink with the interval (noise at the tolerance's level).
+constexpr int kMaxKronrodEvaluations = 4096;
 
 PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points) {
     std::vector<double> s, v;
@@ -372,7 +376,9 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
     const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
     stack_.clear();
     stack_.push_back({p0, p1, 0});
+    int evaluations = 0;
     while (!stack_.empty()) {
+        ++evaluations;
         const Work w = stack_.back();
         stack_.pop_back();
         const double half = 0.5 * (w.hi - w.lo), mid = 0.5 * (w.lo + w.hi);
@@ -410,7 +416,8 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
                                   ? 1.0
                                   : 1.0 + s.colorMax * std::max(0.0, tEnd_ - w.hi);
         const double estimate = T * (errC + errD * behind);
-        if (estimate > budgetPerLength * (w.hi - w.lo) && w.depth < kMaxKronrodDepth) {
+        if (estimate > budgetPerLength * (w.hi - w.lo) && w.depth < kMaxKronrodDepth &&
+            evaluations < kMaxKronrodEvaluations) {
             stack_.push_back({mid, w.hi, w.depth + 1});
             stack_.push_back({w.lo, mid, w.depth + 1});
             continue;
