@@ -7,6 +7,8 @@
 #include <tuple>
 #include <vector>
 
+#include "elements/basis.h"
+#include "elements/geometry.h"
 #include "util/check.h"
 
 namespace hpray::partition {
@@ -79,6 +81,16 @@ double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
     for (std::size_t k = 0; k < corners->size(); ++k)
         for (int d = 0; d < 3; ++d) v[3 * k + d] = nodeXyz[3 * (*corners)[k] + d];
     return HullSurfaceArea(shape, v);
+}
+
+CellCostInput CellCostFromNodes(CellShape shape, int order, CellFamily family,
+                                const double* nodeXyz) {
+    // Order-1 tets are always affine; the others by the renderer's own test.
+    const bool curved =
+        !(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange) &&
+        !MakeCellGeometry(GetBasis(shape, order, family), nodeXyz).affine;
+    return {CellCostModel(shape, order, family, curved),
+            CellHullSurfaceArea(shape, order, family, nodeXyz)};
 }
 
 }  // namespace hpray::partition

@@ -123,6 +123,15 @@ double HullSurfaceArea(CellShape shape, const double* vertexXyz);
 double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
                            const double* nodeXyz);
 
+/// A cell's cost parts and hull area from its nodes in internal order (xyz interleaved),
+/// classified affine or curved as the renderer does (elements/geometry.h).
+struct CellCostInput {
+    CellCostParts parts;
+    double area = 0;
+};
+CellCostInput CellCostFromNodes(CellShape shape, int order, CellFamily family,
+                                const double* nodeXyz);
+
 /// Estimated seconds to render a cell in a kReferencePixels^2 view of the whole data
 /// (box diagonal `rootDiagonal`), given its parts and hull surface area.
 inline double CellRenderSeconds(const CellCostParts& parts, double area, double rootDiagonal) {

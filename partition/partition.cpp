@@ -29,7 +29,6 @@
 #include "cost_model.h"
 #include "elements/basis.h"
 #include "elements/bounds.h"
-#include "elements/geometry.h"
 #include "gmsh_stream.h"
 #include "io/output_file.h"
 #include "io/vtu_writer.h"
@@ -228,14 +227,9 @@ class ScanSink : public MeshSink {
                 r.hi[d] = std::max(r.hi[d], g.hi[d]);
             }
         }
-        // Affine or curved, as the renderer classifies it (order-1 tets always affine).
-        bool curved = false;
-        if (!(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange))
-            curved = !MakeCellGeometry(GetBasis(shape, order, family), xyz_.data()).affine;
-        const CellCostParts parts = Parts(shape, order, family, curved);
-        r.setupCost = parts.setup;
-        r.segmentArea =
-            parts.perSegment * CellHullSurfaceArea(shape, order, family, xyz_.data());
+        const CellCostInput cost = CellCostFromNodes(shape, order, family, xyz_.data());
+        r.setupCost = cost.parts.setup;
+        r.segmentArea = cost.parts.perSegment * cost.area;
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::min(root.lo[d], r.lo[d]);
             root.hi[d] = std::max(root.hi[d], r.hi[d]);
@@ -267,22 +261,11 @@ class ScanSink : public MeshSink {
     Box root;
 
   private:
-    CellCostParts Parts(CellShape shape, int order, CellFamily family, bool curved) {
-        const int key =
-            ((static_cast<int>(shape) * 2 + static_cast<int>(family)) * 16 + order) * 2 +
-            (curved ? 1 : 0);
-        auto it = costs_.find(key);
-        if (it == costs_.end())
-            it = costs_.emplace(key, CellCostModel(shape, order, family, curved)).first;
-        return it->second;
-    }
-
     std::string spill_;
     std::size_t memoryLimit_;
     std::unique_ptr<SpillWriter> points_, cells_, centroids_;
     std::unique_ptr<RecordCache> cache_;
     std::vector<double> xyz_;
-    std::map<int, CellCostParts> costs_;
 };
 
 /// Per-brick tallies of the distribution pass.

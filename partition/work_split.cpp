@@ -50,8 +50,7 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
         for (int d : axes) {
             if (index.empty()) break;
             const double a = box[0][d], b = box[1][d];
-            // low(x) = sum over [lo < x] - [qLow < x]; high(x) = [qHigh <= x] - [hi <=
-            // x].
+            // low(x) = sum of [lo < x] - [qLow < x]; high(x) = [qHigh <= x] - [hi <= x].
             std::vector<std::pair<double, double>> lowOn, lowOff, highOn, highOff;
             std::vector<double> candidates;
             for (std::size_t k = 0; k < index.size(); ++k) {
@@ -70,12 +69,17 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
                     highOn.emplace_back(qHigh, x.weight);
                     highOff.emplace_back(hiKey, x.weight);
                 }
-                for (double v : {x.lo[d], x.hi[d], hidden[k] ? x.occluder[d] : a})
-                    if (v > a && v < b) candidates.push_back(v);
+                candidates.push_back(x.lo[d]);
+                candidates.push_back(x.hi[d]);
+                if (hidden[k]) candidates.push_back(x.occluder[d]);
             }
             for (auto* v : {&lowOn, &lowOff, &highOn, &highOff})
                 std::sort(v->begin(), v->end());
-            candidates.push_back(0.5 * (a + b));  // a plane inside wide pieces
+            // Planes strictly inside the box, and its middle (inside wide pieces).
+            candidates.erase(std::remove_if(candidates.begin(), candidates.end(),
+                                            [&](double v) { return !(v > a && v < b); }),
+                             candidates.end());
+            candidates.push_back(0.5 * (a + b));
             std::sort(candidates.begin(), candidates.end());
             candidates.erase(std::unique(candidates.begin(), candidates.end()),
                              candidates.end());

@@ -99,10 +99,10 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
             for (int d = 0; d < 3; ++d) {
                 x.lo[d] = std::min(s.enter[d], s.exit[d]);
                 x.hi[d] = std::max(s.enter[d], s.exit[d]);
+                x.occluder[d] = s.occluder[d];
             }
             x.weight = s.seconds;
             x.occluded = s.occluded;
-            for (int d = 0; d < 3; ++d) x.occluder[d] = s.occluder[d];
             items.push_back(x);
         }
     } else {

@@ -11,8 +11,6 @@
 #include <set>
 
 #include "cost_model.h"
-#include "elements/basis.h"
-#include "elements/geometry.h"
 #include "io/mesh_io.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
@@ -152,20 +150,14 @@ TEST(VtuStream, TruncatedFileIsAnInputError) {
 
 /// The cost model's estimate for cell c of `mesh` in a partition of root box `root`.
 double ModelCost(const Mesh& mesh, std::int64_t c, const partition::Box& root) {
-    const CellShape shape = mesh.cellShape[c];
-    const int order = mesh.cellOrder[c];
-    const CellFamily family = mesh.cellFamily[c];
     std::vector<double> xyz;
     for (std::int64_t k = mesh.cellOffsets[c]; k < mesh.cellOffsets[c + 1]; ++k)
         for (int d = 0; d < 3; ++d) xyz.push_back(mesh.points[3 * mesh.connectivity[k] + d]);
-    const bool curved =
-        !(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange) &&
-        !MakeCellGeometry(GetBasis(shape, order, family), xyz.data()).affine;
-    const double area = partition::CellHullSurfaceArea(shape, order, family, xyz.data());
+    const partition::CellCostInput cost = partition::CellCostFromNodes(
+        mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c], xyz.data());
     const double diagonal = std::hypot(root.hi[0] - root.lo[0], root.hi[1] - root.lo[1],
                                        root.hi[2] - root.lo[2]);
-    return partition::CellRenderSeconds(
-        partition::CellCostModel(shape, order, family, curved), area, diagonal);
+    return partition::CellRenderSeconds(cost.parts, cost.area, diagonal);
 }
 
 /// Balance of a partition computed independently: each cell's owner found by walking the
