@@ -173,30 +173,9 @@ class MshCursor {
         bufPos_ += len;
         return t;
     }
-    std::uint64_t TextUnsigned(const char* what) {
-        const std::string_view t = Token(what);
-        std::uint64_t v = 0;
-        if (!gmsh::ParseUnsigned(t, v))
-            Fail(std::string("expected ") + what + " (a non-negative integer), found '" +
-                 std::string(t.substr(0, 40)) + "'");
-        return v;
-    }
-    long long TextInt(const char* what) {
-        const std::string_view t = Token(what);
-        long long v = 0;
-        if (!gmsh::ParseInt(t, v))
-            Fail(std::string("expected ") + what + " (an integer), found '" +
-                 std::string(t.substr(0, 40)) + "'");
-        return v;
-    }
-    double TextDouble(const char* what) {
-        const std::string_view t = Token(what);
-        double v = 0;
-        if (!gmsh::ParseDouble(t, v))
-            Fail(std::string("expected ") + what + " (a number), found '" +
-                 std::string(t.substr(0, 40)) + "'");
-        return v;
-    }
+    std::uint64_t TextUnsigned(const char* what) { return gmsh::TextUnsigned(*this, what); }
+    long long TextInt(const char* what) { return gmsh::TextInt(*this, what); }
+    double TextDouble(const char* what) { return gmsh::TextDouble(*this, what); }
     std::string TextString(const char* what) {
         SkipSpace();
         last_ = Pos();

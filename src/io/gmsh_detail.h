@@ -42,6 +42,30 @@ bool ParseUnsigned(std::string_view text, std::uint64_t& value);
 bool ParseInt(std::string_view text, long long& value);
 bool ParseDouble(std::string_view text, double& value);
 
+/// The next text token of reader `r` parsed as `what` by `parse`, or r.Fail naming what
+/// was expected (`kind`) and what was found.
+template <class T, class R>
+T TextNumber(R& r, const char* what, bool (*parse)(std::string_view, T&), const char* kind) {
+    const std::string_view t = r.Token(what);
+    T v{};
+    if (!parse(t, v))
+        r.Fail(std::string("expected ") + what + " (" + kind + "), found '" +
+               std::string(t.substr(0, 40)) + "'");
+    return v;
+}
+template <class R>
+std::uint64_t TextUnsigned(R& r, const char* what) {
+    return TextNumber<std::uint64_t>(r, what, ParseUnsigned, "a non-negative integer");
+}
+template <class R>
+long long TextInt(R& r, const char* what) {
+    return TextNumber<long long>(r, what, ParseInt, "an integer");
+}
+template <class R>
+double TextDouble(R& r, const char* what) {
+    return TextNumber<double>(r, what, ParseDouble, "a number");
+}
+
 /// The message for a 3-D element type hpray does not read.
 std::string UnsupportedTypeMessage(long long type, int nodes);
 
