@@ -194,32 +194,6 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
     return sf;
 }
 
-template <typename T>
-T ByteSwapped(T v) {
-    if constexpr (sizeof(T) == 1) {
-        return v;
-    } else {
-        using U = std::conditional_t<
-            sizeof(T) == 2, std::uint16_t,
-            std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>>;
-        U u;
-        std::memcpy(&u, &v, sizeof(T));
-        if constexpr (sizeof(T) == 2) u = __builtin_bswap16(u);
-        if constexpr (sizeof(T) == 4) u = __builtin_bswap32(u);
-        if constexpr (sizeof(T) == 8) u = __builtin_bswap64(u);
-        std::memcpy(&v, &u, sizeof(T));
-        return v;
-    }
-}
-
-template <typename Src, typename Dst>
-void ConvertAs(const std::uint8_t* src, std::size_t n, bool swap, Dst* dst) {
-    for (std::size_t i = 0; i < n; ++i) {
-        Src v;
-        std::memcpy(&v, src + i * sizeof(Src), sizeof(Src));
-        dst[i] = static_cast<Dst>(swap ? ByteSwapped(v) : v);
-    }
-}
 
 /// A sequential reader of one appended array: decodes raw bytes or zlib blocks on demand,
 /// holding one block (or one chunk of raw data) at a time.
@@ -326,11 +300,11 @@ class ArrayCursor {
         if (headerSize_ == 8) {
             std::uint64_t v;
             std::memcpy(&v, b, 8);
-            return sf_.xml->swapBytes ? ByteSwapped(v) : v;
+            return sf_.xml->swapBytes ? vtkxml::ByteSwap(v) : v;
         }
         std::uint32_t v;
         std::memcpy(&v, b, 4);
-        return sf_.xml->swapBytes ? ByteSwapped(v) : v;
+        return sf_.xml->swapBytes ? vtkxml::ByteSwap(v) : v;
     }
 
     /// Keeps the partial value at the end of the buffer and appends the next chunk/block.
@@ -380,43 +354,7 @@ class ArrayCursor {
 
     template <typename Dst>
     void Convert(const std::uint8_t* src, std::size_t n, Dst* dst) const {
-        const bool swap = sf_.xml->swapBytes;
-        switch (a_.type) {
-            case ScalarType::Int8:
-                ConvertAs<std::int8_t>(src, n, swap, dst);
-                break;
-            case ScalarType::UInt8:
-                ConvertAs<std::uint8_t>(src, n, swap, dst);
-                break;
-            case ScalarType::Int16:
-                ConvertAs<std::int16_t>(src, n, swap, dst);
-                break;
-            case ScalarType::UInt16:
-                ConvertAs<std::uint16_t>(src, n, swap, dst);
-                break;
-            case ScalarType::Int32:
-                ConvertAs<std::int32_t>(src, n, swap, dst);
-                break;
-            case ScalarType::UInt32:
-                ConvertAs<std::uint32_t>(src, n, swap, dst);
-                break;
-            case ScalarType::Int64:
-                ConvertAs<std::int64_t>(src, n, swap, dst);
-                break;
-            case ScalarType::UInt64:
-                ConvertAs<std::uint64_t>(src, n, swap, dst);
-                break;
-            case ScalarType::Float32:
-                if constexpr (std::is_floating_point_v<Dst>)
-                    ConvertAs<float>(src, n, swap, dst);
-                break;
-            case ScalarType::Float64:
-                if constexpr (std::is_floating_point_v<Dst>)
-                    ConvertAs<double>(src, n, swap, dst);
-                break;
-            case ScalarType::NonNumeric:
-                break;
-        }
+        vtkxml::Convert(src, a_.type, n, sf_.xml->swapBytes, dst);
     }
 
     const StreamFile& sf_;

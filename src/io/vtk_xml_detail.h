@@ -4,9 +4,11 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <memory>
 #include <pugixml.hpp>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace hpray::vtkxml {
@@ -22,6 +24,86 @@ int ScalarSize(ScalarType type);
 bool IsIntegerType(ScalarType type);
 /// Maps a `type` attribute ("Float32", "Int64", ...) to its ScalarType.
 ScalarType ParseScalarType(const std::string& name);
+
+/// `v` with its bytes reversed.
+template <typename T>
+T ByteSwap(T v) {
+    if constexpr (sizeof(T) == 1) {
+        return v;
+    } else {
+        using U = std::conditional_t<
+            sizeof(T) == 2, std::uint16_t,
+            std::conditional_t<sizeof(T) == 4, std::uint32_t, std::uint64_t>>;
+        U u;
+        std::memcpy(&u, &v, sizeof(T));
+        if constexpr (sizeof(T) == 2) u = __builtin_bswap16(u);
+        if constexpr (sizeof(T) == 4) u = __builtin_bswap32(u);
+        if constexpr (sizeof(T) == 8) u = __builtin_bswap64(u);
+        std::memcpy(&v, &u, sizeof(T));
+        return v;
+    }
+}
+
+/// Converts n values of type Src at `src` (byte-swapped first if `swap`) to Dst.
+template <typename Src, typename Dst>
+void ConvertTyped(const std::uint8_t* src, std::size_t n, bool swap, Dst* dst) {
+    if (swap) {
+        for (std::size_t i = 0; i < n; ++i) {
+            Src v;
+            std::memcpy(&v, src + i * sizeof(Src), sizeof(Src));
+            dst[i] = static_cast<Dst>(ByteSwap(v));
+        }
+    } else {
+        for (std::size_t i = 0; i < n; ++i) {
+            Src v;
+            std::memcpy(&v, src + i * sizeof(Src), sizeof(Src));
+            dst[i] = static_cast<Dst>(v);
+        }
+    }
+}
+
+/// Converts n values of `type` at `src` to Dst. Integer Dst only from integer types (the
+/// caller checks), so no float-to-integer conversion happens here.
+template <typename Dst>
+void Convert(const std::uint8_t* src, ScalarType type, std::size_t n, bool swap,
+             Dst* dst) {
+    switch (type) {
+        case ScalarType::Int8:
+            ConvertTyped<std::int8_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt8:
+            ConvertTyped<std::uint8_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int16:
+            ConvertTyped<std::int16_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt16:
+            ConvertTyped<std::uint16_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int32:
+            ConvertTyped<std::int32_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt32:
+            ConvertTyped<std::uint32_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Int64:
+            ConvertTyped<std::int64_t>(src, n, swap, dst);
+            break;
+        case ScalarType::UInt64:
+            ConvertTyped<std::uint64_t>(src, n, swap, dst);
+            break;
+        case ScalarType::Float32:
+            if constexpr (std::is_floating_point_v<Dst>)
+                ConvertTyped<float>(src, n, swap, dst);
+            break;
+        case ScalarType::Float64:
+            if constexpr (std::is_floating_point_v<Dst>)
+                ConvertTyped<double>(src, n, swap, dst);
+            break;
+        case ScalarType::NonNumeric:
+            break;
+    }
+}
 
 /// A VTK XML file in memory with its parsed XML header.
 struct XmlFile {
