@@ -32,8 +32,6 @@ using vtkxml::Fail;
 using vtkxml::ScalarType;
 using vtkxml::XmlFile;
 
-constexpr const char* kGhostName = "vtkGhostType";
-constexpr const char* kDegreesName = "HigherOrderDegrees";
 /// The XML part of a file we stream must fit in this many bytes (inline data does not).
 constexpr std::size_t kMaxXmlBytes = std::size_t(64) << 20;
 /// Largest zlib block we accept (VTK writes 32 KiB blocks by default).
@@ -372,28 +370,6 @@ class ArrayCursor {
     std::uint64_t values_ = 0, consumed_ = 0;
 };
 
-std::int64_t Count(const XmlFile& f, pugi::xml_node piece, const char* name,
-                   const std::string& where) {
-    const std::string text = piece.attribute(name).value();
-    long long v = -1;
-    auto [p, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-    if (ec != std::errc() || p != text.data() + text.size() || v < 0)
-        Fail(f, where,
-             std::string(name) + " '" + text + "' is not a non-negative integer");
-    return v;
-}
-
-/// "u.x" -> "u", "u[2]" -> "u"; "" without a suffix.
-std::string StripComponent(const std::string& name) {
-    if (!name.empty() && name.back() == ']') {
-        const auto b = name.rfind('[');
-        if (b != std::string::npos && b > 0) return name.substr(0, b);
-    }
-    const auto dot = name.rfind('.');
-    if (dot != std::string::npos && dot > 0) return name.substr(0, dot);
-    return "";
-}
-
 /// The arrays of one unstructured piece, selected by the read options.
 struct PieceArrays {
     std::int64_t points = 0, cells = 0;
@@ -406,8 +382,8 @@ PieceArrays DescribePiece(const XmlFile& f, pugi::xml_node piece, int index,
                           const ReadOptions& options) {
     const std::string where = "<Piece> " + std::to_string(index);
     PieceArrays p;
-    p.points = Count(f, piece, "NumberOfPoints", where);
-    p.cells = Count(f, piece, "NumberOfCells", where);
+    p.points = vtkxml::RequireCount(f, piece, "NumberOfPoints", where);
+    p.cells = vtkxml::RequireCount(f, piece, "NumberOfCells", where);
     auto note = [&](const ArrayDesc& a) {
         p.allAppended &= a.format == ArrayDesc::Format::Appended;
     };
@@ -434,60 +410,13 @@ PieceArrays DescribePiece(const XmlFile& f, pugi::xml_node piece, int index,
             if (!*arr)
                 Fail(f, where + " <Cells>",
                      std::string("has no DataArray named '") + name + "'");
-    std::string degreesName = piece.child("CellData").attribute(kDegreesName).value();
-    if (degreesName.empty()) degreesName = kDegreesName;
-    std::vector<std::string> available;
-    auto collect = [&](const char* element, std::vector<ArrayDesc>& out, bool cellData) {
-        for (pugi::xml_node n : piece.child(element).children("DataArray")) {
-            ArrayDesc a = vtkxml::DescribeArray(f, n, where + " <" + element + ">");
-            if (cellData && a.name == kGhostName) {
-                note(a);
-                p.ghost = a;
-                continue;
-            }
-            if (cellData && a.name == degreesName) {
-                note(a);
-                p.degrees = a;
-                continue;
-            }
-            if (a.name == kGhostName || a.name == kDegreesName) continue;
-            if (a.type == ScalarType::NonNumeric) continue;
-            available.push_back(a.name);
-            out.push_back(std::move(a));
-        }
-    };
-    collect("PointData", p.pointFields, false);
-    collect("CellData", p.cellFields, true);
-    if (options.fields) {
-        std::set<std::string> selected;
-        auto exists = [&](const std::string& n) {
-            return std::find(available.begin(), available.end(), n) != available.end();
-        };
-        for (const std::string& name : *options.fields) {
-            if (exists(name)) {
-                selected.insert(name);
-                continue;
-            }
-            const std::string base = StripComponent(name);
-            if (!base.empty() && exists(base)) {
-                selected.insert(base);
-                continue;
-            }
-            std::string list;
-            for (const std::string& n : available) list += (list.empty() ? "" : ", ") + n;
-            Fail(f, where,
-                 "field '" + name + "' does not exist; available: " +
-                     (list.empty() ? std::string("(none)") : list));
-        }
-        auto keep = [&](std::vector<ArrayDesc>& v) {
-            v.erase(std::remove_if(
-                        v.begin(), v.end(),
-                        [&](const ArrayDesc& a) { return !selected.count(a.name); }),
-                    v.end());
-        };
-        keep(p.pointFields);
-        keep(p.cellFields);
-    }
+    vtkxml::PieceArrays fields = vtkxml::CollectArrays(f, piece, where, options);
+    p.pointFields = std::move(fields.pointFields);
+    p.cellFields = std::move(fields.cellFields);
+    p.ghost = std::move(fields.ghost);
+    p.degrees = std::move(fields.degrees);
+    if (p.ghost) note(*p.ghost);
+    if (p.degrees) note(*p.degrees);
     for (const ArrayDesc& a : p.pointFields) note(a);
     for (const ArrayDesc& a : p.cellFields) note(a);
     return p;

@@ -4,17 +4,21 @@
 
 #include <zlib.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <set>
 #include <sstream>
 #include <type_traits>
 
 #include "io/base64.h"
+#include "io/mesh_io.h"
 #include "util/error.h"
+#include "util/log.h"
 
 namespace hpray::vtkxml {
 namespace {
@@ -648,5 +652,103 @@ template void ReadArray<double>(const XmlFile&, const ArrayDesc&, std::int64_t,
                                 std::vector<double>&);
 template void ReadArray<std::int64_t>(const XmlFile&, const ArrayDesc&, std::int64_t,
                                       std::vector<std::int64_t>&);
+
+namespace {
+
+constexpr const char* kGhostName = "vtkGhostType";
+constexpr const char* kDegreesName = "HigherOrderDegrees";
+
+/// "u.x" -> "u", "u[2]" -> "u", "u.magnitude" -> "u"; "" when there is no suffix.
+std::string StripComponent(const std::string& name) {
+    if (!name.empty() && name.back() == ']') {
+        const auto b = name.rfind('[');
+        if (b != std::string::npos && b > 0) return name.substr(0, b);
+    }
+    const auto dot = name.rfind('.');
+    if (dot != std::string::npos && dot > 0) return name.substr(0, dot);
+    return "";
+}
+
+}  // namespace
+
+std::int64_t RequireCount(const XmlFile& file, pugi::xml_node node, const char* attribute,
+                          const std::string& where) {
+    const pugi::xml_attribute attr = node.attribute(attribute);
+    const char* text = attr.value();
+    while (*text == ' ' || *text == '\t' || *text == '\n' || *text == '\r') ++text;
+    char* end = nullptr;
+    errno = 0;
+    const long long value = std::strtoll(text, &end, 10);
+    while (end && (*end == ' ' || *end == '\t' || *end == '\n' || *end == '\r')) ++end;
+    if (!attr || end == text || *end != '\0' || errno != 0 || value < 0)
+        Fail(file, where,
+             std::string(attribute) + " '" + attr.value() +
+                 "' is not a non-negative integer");
+    return value;
+}
+
+PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
+                          const std::string& where, const ReadOptions& options) {
+    PieceArrays arrays;
+    std::vector<std::string> available;
+    // <CellData HigherOrderDegrees="name"> may name the degrees array; VTK's writers call
+    // it HigherOrderDegrees.
+    std::string degreesName = piece.child("CellData").attribute(kDegreesName).value();
+    if (degreesName.empty()) degreesName = kDegreesName;
+    auto collect = [&](const char* element, std::vector<ArrayDesc>& out, bool cellData) {
+        for (pugi::xml_node n : piece.child(element).children("DataArray")) {
+            ArrayDesc a = DescribeArray(file, n, where + " <" + element + ">");
+            if (cellData && a.name == kGhostName) {
+                arrays.ghost = a;
+                continue;
+            }
+            if (cellData && a.name == degreesName) {
+                arrays.degrees = a;
+                continue;
+            }
+            if (a.name == kGhostName || a.name == kDegreesName) continue;  // point ghosts
+            if (a.type == ScalarType::NonNumeric) {
+                log::Debug(file.path + ": skipping non-numeric array '" + a.name + "'");
+                continue;
+            }
+            available.push_back(a.name);
+            out.push_back(std::move(a));
+        }
+    };
+    collect("PointData", arrays.pointFields, false);
+    collect("CellData", arrays.cellFields, true);
+    if (!options.fields) return arrays;
+
+    // Keep only the requested arrays; a component name selects its whole array.
+    std::set<std::string> selected;
+    auto exists = [&](const std::string& n) {
+        return std::find(available.begin(), available.end(), n) != available.end();
+    };
+    for (const std::string& name : *options.fields) {
+        if (exists(name)) {
+            selected.insert(name);
+            continue;
+        }
+        const std::string base = StripComponent(name);
+        if (!base.empty() && exists(base)) {
+            selected.insert(base);
+            continue;
+        }
+        std::string list;
+        for (const std::string& n : available) list += (list.empty() ? "" : ", ") + n;
+        Fail(file, where,
+             "field '" + name + "' does not exist; available: " +
+                 (list.empty() ? std::string("(none)") : list));
+    }
+    auto keep = [&](std::vector<ArrayDesc>& v) {
+        v.erase(
+            std::remove_if(v.begin(), v.end(),
+                           [&](const ArrayDesc& a) { return !selected.count(a.name); }),
+            v.end());
+    };
+    keep(arrays.pointFields);
+    keep(arrays.cellFields);
+    return arrays;
+}
 
 }  // namespace hpray::vtkxml

@@ -6,10 +6,15 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <pugixml.hpp>
 #include <string>
 #include <type_traits>
 #include <vector>
+
+namespace hpray {
+struct ReadOptions;
+}
 
 namespace hpray::vtkxml {
 
@@ -166,5 +171,24 @@ extern template void ReadArray<double>(const XmlFile&, const ArrayDesc&, std::in
                                        std::vector<double>&);
 extern template void ReadArray<std::int64_t>(const XmlFile&, const ArrayDesc&,
                                              std::int64_t, std::vector<std::int64_t>&);
+
+/// A non-negative integer attribute of `node` (NumberOfPoints, NumberOfCells), or Fail.
+std::int64_t RequireCount(const XmlFile& file, pugi::xml_node node, const char* attribute,
+                          const std::string& where);
+
+/// The arrays of one piece that are not geometry.
+struct PieceArrays {
+    std::vector<ArrayDesc> pointFields;
+    std::vector<ArrayDesc> cellFields;
+    std::optional<ArrayDesc> ghost;
+    std::optional<ArrayDesc> degrees;
+};
+
+/// The field arrays of a <Piece>: <PointData> and <CellData> DataArrays except the
+/// ghost flags and the HigherOrderDegrees (returned apart), non-numeric arrays skipped,
+/// and, when `options.fields` is set, only the arrays it names ("u.x" selects "u"); a
+/// name that no array has is an error listing the available ones.
+PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
+                          const std::string& where, const ReadOptions& options);
 
 }  // namespace hpray::vtkxml
