@@ -370,29 +370,6 @@ nlohmann::json BoxJson(const Box& b) {
     return {{b.lo[0], b.lo[1], b.lo[2]}, {b.hi[0], b.hi[1], b.hi[2]}};
 }
 
-std::string XmlEscape(const std::string& s) {
-    std::string out;
-    for (char c : s) {
-        switch (c) {
-            case '&':
-                out += "&amp;";
-                break;
-            case '<':
-                out += "&lt;";
-                break;
-            case '>':
-                out += "&gt;";
-                break;
-            case '"':
-                out += "&quot;";
-                break;
-            default:
-                out += c;
-        }
-    }
-    return out;
-}
-
 /// Writes `text` to path atomically.
 void WriteTextAtomically(const std::string& path, const std::string& text) {
     const std::string tmp = detail::BeginOutputFile(path);

@@ -22,31 +22,6 @@ bool HostIsBigEndian() {
     return first == 0;
 }
 
-std::string XmlEscape(const std::string& s) {
-    std::string out;
-    for (char c : s) {
-        switch (c) {
-            case '&':
-                out += "&amp;";
-                break;
-            case '<':
-                out += "&lt;";
-                break;
-            case '>':
-                out += "&gt;";
-                break;
-            case '"':
-                out += "&quot;";
-                break;
-            case '\'':
-                out += "&apos;";
-                break;
-            default:
-                out += c;
-        }
-    }
-    return out;
-}
 
 /// One appended array: its XML attributes and where its bytes come from.
 struct Block {
@@ -78,6 +53,32 @@ void WriteArrayTag(std::ostream& os, const Block& b, const char* indent) {
 }
 
 }  // namespace
+
+std::string XmlEscape(const std::string& s) {
+    std::string out;
+    for (char c : s) {
+        switch (c) {
+            case '&':
+                out += "&amp;";
+                break;
+            case '<':
+                out += "&lt;";
+                break;
+            case '>':
+                out += "&gt;";
+                break;
+            case '"':
+                out += "&quot;";
+                break;
+            case '\'':
+                out += "&apos;";
+                break;
+            default:
+                out += c;
+        }
+    }
+    return out;
+}
 
 void WriteVtu(const std::string& path, const Mesh& mesh) {
     const std::int64_t nCells = mesh.CellCount();

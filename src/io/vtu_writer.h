@@ -7,6 +7,9 @@
 
 namespace hpray {
 
+/// `s` with & < > " ' replaced by XML entities (for attribute values).
+std::string XmlEscape(const std::string& s);
+
 /// Writes `mesh` as a .vtu (VTK file version 2.2, appended raw binary, UInt64 header,
 /// Float64 points and fields, Int64 connectivity/offsets, UInt8 types). Lagrange cells are
 /// written as VTK 71-74 (with HigherOrderDegrees), serendipity cells as VTK 25-27, linear
