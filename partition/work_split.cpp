@@ -32,7 +32,7 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
             if (!inside) visible += x.weight;
         }
         if (leaves == 1) {
-            plan.tree[node].leaf = static_cast<int>(plan.boxes.size());
+            plan.tree[node].brick = static_cast<int>(plan.boxes.size());
             plan.boxes.push_back(box);
             plan.cost.push_back(visible);
             return node;

@@ -23,7 +23,7 @@ struct WorkSplitNode {
     int axis = -1;  ///< -1 for a leaf
     double split = 0;
     int low = -1, high = -1;
-    int leaf = -1;
+    int brick = -1;  ///< leaf: its box index
 };
 
 /// The k-d tree (node 0 is the root), the leaf boxes and the work estimated in each.

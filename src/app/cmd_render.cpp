@@ -45,6 +45,22 @@ struct BrickPlan {
 
 AxisBox ToAxisBox(const partition::Box& b) { return {b.lo, b.hi}; }
 
+/// The compositor's tree of a k-d tree (a partition's or an in-memory split's nodes).
+template <class KdNode>
+std::vector<compositor::BrickTreeNode> ToBrickTree(const std::vector<KdNode>& nodes) {
+    std::vector<compositor::BrickTreeNode> tree;
+    for (const KdNode& n : nodes) {
+        compositor::BrickTreeNode b;
+        b.axis = n.axis;
+        b.split = n.split;
+        b.low = n.low;
+        b.high = n.high;
+        b.brick = n.brick;
+        tree.push_back(b);
+    }
+    return tree;
+}
+
 /// Leaves and cost under each node.
 void SubtreeTotals(const BrickPlan& plan, int node, std::vector<int>& leaves,
                    std::vector<double>& cost) {
@@ -120,15 +136,7 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
     const AxisBox root{geometry.bounds.lo, geometry.bounds.hi};
     const partition::WorkSplit split = partition::SplitWork(items, count, root, bounds);
     BrickPlan plan;
-    for (const partition::WorkSplitNode& n : split.tree) {
-        compositor::BrickTreeNode b;
-        b.axis = n.axis;
-        b.split = n.split;
-        b.low = n.low;
-        b.high = n.high;
-        b.brick = n.leaf;
-        plan.tree.push_back(b);
-    }
+    plan.tree = ToBrickTree(split.tree);
     plan.boxes = split.boxes;
     plan.cost = split.cost;
     return plan;
@@ -176,15 +184,7 @@ void BroadcastPlan(BrickPlan& plan) {
 
 BrickPlan PlanFromPartition(const partition::Partition& part) {
     BrickPlan plan;
-    for (const partition::KdNode& n : part.nodes) {
-        compositor::BrickTreeNode b;
-        b.axis = n.axis;
-        b.split = n.split;
-        b.low = n.low;
-        b.high = n.high;
-        b.brick = n.brick;
-        plan.tree.push_back(b);
-    }
+    plan.tree = ToBrickTree(part.nodes);
     for (const partition::BrickInfo& b : part.bricks) {
         plan.boxes.push_back(ToAxisBox(b.box));
         plan.cost.push_back(b.cost);

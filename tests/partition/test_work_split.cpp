@@ -25,7 +25,7 @@ const std::array<std::vector<double>, 3> kFaces{std::vector<double>{0, 1, 2, 3, 
 TEST(WorkSplit, OneLeafHoldsAllTheWork) {
     const WorkSplit s = SplitWork({Along(0, 1, 2), Along(1, 2, 3)}, 1, kUnitX, kFaces);
     ASSERT_EQ(s.tree.size(), 1u);
-    EXPECT_EQ(s.tree[0].leaf, 0);
+    EXPECT_EQ(s.tree[0].brick, 0);
     EXPECT_DOUBLE_EQ(s.cost[0], 5);
     EXPECT_EQ(s.boxes[0], kUnitX);
 }
