@@ -45,13 +45,6 @@ std::string At(const std::string& where, std::uint64_t offset) {
     return os.str();
 }
 
-bool HostIsBigEndian() {
-    const std::uint16_t one = 1;
-    std::uint8_t first;
-    std::memcpy(&first, &one, 1);
-    return first == 0;
-}
-
 /// An open file descriptor, closed on destruction.
 class Fd {
   public:
@@ -93,11 +86,6 @@ struct StreamFile {
     std::uint64_t size = 0;
 };
 
-bool ParseInt(const std::string& s, int& v) {
-    auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    return ec == std::errc() && p == s.data() + s.size() && !s.empty();
-}
-
 /// Loads the XML part of `path` if its data is appended raw (possibly zlib); nullptr when
 /// the file has to be read whole instead (inline data, base64 appended data).
 std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
@@ -138,47 +126,7 @@ std::unique_ptr<StreamFile> LoadStreamFile(const std::string& path) {
     f.path = path;
     f.xmlCopy.assign(prefix, 0, marker);
     f.xmlCopy += "</AppendedData></VTKFile>";
-    f.xmlBase = f.xmlCopy.data();
-    const pugi::xml_parse_result parsed = f.doc.load_buffer_inplace(
-        f.xmlCopy.data(), f.xmlCopy.size(), pugi::parse_default, pugi::encoding_utf8);
-    if (!parsed)
-        Fail(f, At("", static_cast<std::uint64_t>(parsed.offset)),
-             std::string("XML error: ") + parsed.description());
-    f.root = f.doc.document_element();
-    if (std::strcmp(f.root.name(), "VTKFile") != 0)
-        Fail(f, "",
-             std::string("root element is <") + f.root.name() + ">, expected <VTKFile>");
-    f.type = f.root.attribute("type").value();
-    const std::string version = f.root.attribute("version").value();
-    if (!version.empty()) {
-        const auto dot = version.find('.');
-        if (dot == std::string::npos ||
-            !ParseInt(version.substr(0, dot), f.versionMajor) ||
-            !ParseInt(version.substr(dot + 1), f.versionMinor))
-            Fail(f, "<VTKFile>", "version '" + version + "' is not MAJOR.MINOR");
-    }
-    const std::string order = f.root.attribute("byte_order").value();
-    bool fileBig = HostIsBigEndian();
-    if (order == "LittleEndian")
-        fileBig = false;
-    else if (order == "BigEndian")
-        fileBig = true;
-    else if (!order.empty())
-        Fail(f, "<VTKFile>",
-             "byte_order '" + order + "' is neither LittleEndian nor BigEndian");
-    f.swapBytes = fileBig != HostIsBigEndian();
-    const std::string header = f.root.attribute("header_type").value();
-    if (header == "UInt64")
-        f.headerUInt64 = true;
-    else if (!header.empty() && header != "UInt32")
-        Fail(f, "<VTKFile>", "header_type '" + header + "' is not UInt32 or UInt64");
-    const std::string compressor = f.root.attribute("compressor").value();
-    if (compressor == "vtkZLibDataCompressor")
-        f.zlib = true;
-    else if (!compressor.empty())
-        Fail(f, "<VTKFile>",
-             "compressor '" + compressor +
-                 "' is not supported (only vtkZLibDataCompressor)");
+    vtkxml::ParseHeader(f, f.xmlCopy.data(), f.xmlCopy.size());
     const std::string encoding =
         f.root.child("AppendedData").attribute("encoding").value();
     if (encoding == "base64") return nullptr;

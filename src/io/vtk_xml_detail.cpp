@@ -325,6 +325,58 @@ void Fail(const XmlFile& file, const std::string& where, const std::string& what
     throw InputError(file.path, where, what);
 }
 
+void ParseHeader(XmlFile& file, char* xml, std::size_t size) {
+    file.xmlBase = xml;
+    const pugi::xml_parse_result parsed =
+        file.doc.load_buffer_inplace(xml, size, pugi::parse_default, pugi::encoding_utf8);
+    if (!parsed) {
+        Fail(file, ByteWhere("", static_cast<std::size_t>(parsed.offset)),
+             std::string("XML error: ") + parsed.description());
+    }
+    file.root = file.doc.document_element();
+    if (std::strcmp(file.root.name(), "VTKFile") != 0)
+        Fail(file, "",
+             std::string("root element is <") + file.root.name() +
+                 ">, expected <VTKFile>");
+    file.type = file.root.attribute("type").value();
+
+    const std::string version = file.root.attribute("version").value();
+    if (!version.empty()) {
+        const auto dot = version.find('.');
+        const bool ok = dot != std::string::npos &&
+                        ParseInteger(version.substr(0, dot).c_str(), file.versionMajor) &&
+                        ParseInteger(version.substr(dot + 1).c_str(), file.versionMinor);
+        if (!ok)
+            Fail(file, "<VTKFile>", "version " + Quote(version) + " is not MAJOR.MINOR");
+    }
+
+    const std::string order = file.root.attribute("byte_order").value();
+    bool fileBig = HostIsBigEndian();
+    if (order == "LittleEndian")
+        fileBig = false;
+    else if (order == "BigEndian")
+        fileBig = true;
+    else if (!order.empty())
+        Fail(file, "<VTKFile>",
+             "byte_order " + Quote(order) + " is neither LittleEndian nor BigEndian");
+    file.swapBytes = fileBig != HostIsBigEndian();
+
+    const std::string header = file.root.attribute("header_type").value();
+    if (header == "UInt64")
+        file.headerUInt64 = true;
+    else if (!header.empty() && header != "UInt32")
+        Fail(file, "<VTKFile>",
+             "header_type " + Quote(header) + " is not UInt32 or UInt64");
+
+    const std::string compressor = file.root.attribute("compressor").value();
+    if (compressor == "vtkZLibDataCompressor")
+        file.zlib = true;
+    else if (!compressor.empty())
+        Fail(file, "<VTKFile>",
+             "compressor " + Quote(compressor) +
+                 " is not supported (only vtkZLibDataCompressor)");
+}
+
 std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     auto file = std::make_unique<XmlFile>();
     file->path = path;
@@ -364,57 +416,7 @@ std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
         xml = file->xmlCopy.data();
         xmlSize = file->xmlCopy.size();
     }
-    file->xmlBase = xml;
-    const pugi::xml_parse_result parsed = file->doc.load_buffer_inplace(
-        xml, xmlSize, pugi::parse_default, pugi::encoding_utf8);
-    if (!parsed) {
-        Fail(*file, ByteWhere("", static_cast<std::size_t>(parsed.offset)),
-             std::string("XML error: ") + parsed.description());
-    }
-    file->root = file->doc.document_element();
-    if (std::strcmp(file->root.name(), "VTKFile") != 0)
-        Fail(*file, "",
-             std::string("root element is <") + file->root.name() +
-                 ">, expected <VTKFile>");
-    file->type = file->root.attribute("type").value();
-
-    const std::string version = file->root.attribute("version").value();
-    if (!version.empty()) {
-        const auto dot = version.find('.');
-        const bool ok =
-            dot != std::string::npos &&
-            ParseInteger(version.substr(0, dot).c_str(), file->versionMajor) &&
-            ParseInteger(version.substr(dot + 1).c_str(), file->versionMinor);
-        if (!ok)
-            Fail(*file, "<VTKFile>", "version " + Quote(version) + " is not MAJOR.MINOR");
-    }
-
-    const std::string order = file->root.attribute("byte_order").value();
-    bool fileBig = HostIsBigEndian();
-    if (order == "LittleEndian")
-        fileBig = false;
-    else if (order == "BigEndian")
-        fileBig = true;
-    else if (!order.empty())
-        Fail(*file, "<VTKFile>",
-             "byte_order " + Quote(order) + " is neither LittleEndian nor BigEndian");
-    file->swapBytes = fileBig != HostIsBigEndian();
-
-    const std::string header = file->root.attribute("header_type").value();
-    if (header == "UInt64")
-        file->headerUInt64 = true;
-    else if (!header.empty() && header != "UInt32")
-        Fail(*file, "<VTKFile>",
-             "header_type " + Quote(header) + " is not UInt32 or UInt64");
-
-    const std::string compressor = file->root.attribute("compressor").value();
-    if (compressor == "vtkZLibDataCompressor")
-        file->zlib = true;
-    else if (!compressor.empty())
-        Fail(*file, "<VTKFile>",
-             "compressor " + Quote(compressor) +
-                 " is not supported (only vtkZLibDataCompressor)");
-
+    ParseHeader(*file, xml, xmlSize);
     if (file->hasAppended) {
         const pugi::xml_node appended = file->root.child("AppendedData");
         const std::string encoding = appended.attribute("encoding").value();

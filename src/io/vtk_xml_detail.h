@@ -138,6 +138,11 @@ struct XmlFile {
 /// element, byte order, header type and compressor. Throws InputError naming the file.
 std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path);
 
+/// Parses the XML text `xml` (size bytes, modified in place; it becomes file.xmlBase) into
+/// file.doc and reads the <VTKFile> attributes: type, version, byte order, header type,
+/// compressor. Fail with the file and a byte offset or the attribute on error.
+void ParseHeader(XmlFile& file, char* xml, std::size_t size);
+
 /// Throws InputError(file.path, where, what).
 [[noreturn]] void Fail(const XmlFile& file, const std::string& where,
                        const std::string& what);
