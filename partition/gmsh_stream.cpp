@@ -770,7 +770,7 @@ class GmshStreamer {
                                        (isNode ? "$Nodes" : "$Elements") +
                                        " it refers to");
         if (section == "ElementNodeData") {
-            if (options_.fields && gmsh::FieldWanted(options_, header.name))
+            if (options_.fields && options_.Wants(header.name))
                 in_.FailAt(sectionPos,
                            "field '" + header.name +
                                "' is $ElementNodeData, which hpray does not read; "
@@ -789,7 +789,7 @@ class GmshStreamer {
             in_.SkipTokens(count * (1 + header.components), "a value");
         in_.Expect(("$End" + section).c_str());
         (isNode ? pointNames_ : cellNames_).insert(header.name);
-        if (!gmsh::FieldWanted(options_, header.name)) return;
+        if (!options_.Wants(header.name)) return;
         // ReadGmsh's rule: the latest time step wins, sections of one step are merged.
         auto& plans = isNode ? pointPlans_ : cellPlans_;
         auto it = plans.find(header.name);

@@ -6,17 +6,6 @@
 
 namespace hpray::gmsh {
 
-bool FieldWanted(const ReadOptions& options, const std::string& name) {
-    if (!options.fields) return true;
-    for (const std::string& want : *options.fields) {
-        if (want == name) return true;
-        if (want.size() > name.size() && want.compare(0, name.size(), name) == 0 &&
-            (want[name.size()] == '.' || want[name.size()] == '['))
-            return true;
-    }
-    return false;
-}
-
 bool ParseUnsigned(std::string_view t, std::uint64_t& v) {
     auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
     return ec == std::errc() && end == t.data() + t.size();

@@ -33,9 +33,6 @@
 
 namespace hpray::gmsh {
 
-/// Whether a field of this name is to be loaded ("u.x" or "u[0]" in the set selects "u").
-bool FieldWanted(const ReadOptions& options, const std::string& name);
-
 /// Whole-token number parsers (MSH text numbers); false if `text` is not one number.
 /// ParseDouble accepts out-of-range values as strtod reads them (subnormals, +-inf).
 bool ParseUnsigned(std::string_view text, std::uint64_t& value);

@@ -371,7 +371,7 @@ void MshParser::ParseData(const std::string& section) {
         FailAt(sectionPos, "$" + section + " before the " +
                                (isNode ? "$Nodes" : "$Elements") + " it refers to");
     if (isElementNode) {
-        if (options_.fields && gmsh::FieldWanted(options_, name))
+        if (options_.fields && options_.Wants(name))
             FailAt(sectionPos, "field '" + name +
                                    "' is $ElementNodeData, which hpray does not read; "
                                    "write it as $NodeData");
@@ -381,7 +381,7 @@ void MshParser::ParseData(const std::string& section) {
         return;
     }
     CheckCount(static_cast<std::uint64_t>(count), itemBytes, "data entry");
-    const bool wanted = gmsh::FieldWanted(options_, name);
+    const bool wanted = options_.Wants(name);
     if (!wanted) {
         if (binary_) {
             pos_ += count * itemBytes;

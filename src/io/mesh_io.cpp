@@ -19,6 +19,17 @@ std::string LowerExtension(const std::string& path) {
 }
 }  // namespace
 
+bool ReadOptions::Wants(const std::string& name) const {
+    if (!fields) return true;
+    for (const std::string& want : *fields) {
+        if (want == name) return true;
+        if (want.size() > name.size() && want.compare(0, name.size(), name) == 0 &&
+            (want[name.size()] == '.' || want[name.size()] == '['))
+            return true;
+    }
+    return false;
+}
+
 Mesh ReadMesh(const std::string& path, const ReadOptions& options) {
     if (path.rfind("builtin:", 0) == 0) return MakeBuiltin(path);
     std::error_code ec;

@@ -13,6 +13,10 @@ struct ReadOptions {
     /// Fields to load (point or cell, by array name); std::nullopt loads every field.
     /// Names of vector components ("u.x") select their whole array.
     std::optional<std::set<std::string>> fields;
+
+    /// Whether the array `name` is to be loaded ("u", "u.x" or "u[0]" in the set selects
+    /// "u").
+    bool Wants(const std::string& name) const;
 };
 
 /// Reads `path`: builtin:NAME[?k=v&...], *.vtu, *.pvtu, *.vts, *.vtk (legacy), *.msh

@@ -79,17 +79,6 @@ std::string DecodeName(std::string_view s) {
     return out;
 }
 
-bool FieldWanted(const ReadOptions& options, const std::string& name) {
-    if (!options.fields) return true;
-    for (const std::string& want : *options.fields) {
-        if (want == name) return true;
-        if (want.size() > name.size() && want.compare(0, name.size(), name) == 0 &&
-            (want[name.size()] == '.' || want[name.size()] == '['))
-            return true;
-    }
-    return false;
-}
-
 // Cell types of dimension 0..2 (vtkCellType.h): skipped with one warning.
 bool IsLowerDimensional(int type) {
     switch (type) {
@@ -631,7 +620,7 @@ void LegacyParser::ParseFieldArrays(std::uint64_t arrays, Association assoc,
         const std::uint64_t tuples = Count(w[2], "numTuples");
         const std::string typeName = Lower(w[3]);
         if (typeName == "string" || typeName == "utf8_string" || typeName == "variant") {
-            if (binary_ || (!datasetLevel && FieldWanted(options_, name)))
+            if (binary_ || (!datasetLevel && options_.Wants(name)))
                 Fail("FIELD array '" + name + "' of type " + typeName +
                      " is not supported (numeric arrays only)");
             for (std::uint64_t i = 0; i < comps * tuples; ++i) {  // one string per line
@@ -643,7 +632,7 @@ void LegacyParser::ParseFieldArrays(std::uint64_t arrays, Association assoc,
         const DataType t = Type(w[3]);
         if (comps == 0 || comps > 1024) Fail("numComponents must be 1..1024");
         if (tuples > buf_.size()) CheckCount(tuples, t.bytes, "FIELD '" + name + "'");
-        if (datasetLevel || !FieldWanted(options_, name)) {
+        if (datasetLevel || !options_.Wants(name)) {
             SkipArray(comps * tuples, t, "FIELD array '" + name + "'");
             continue;
         }
@@ -727,7 +716,7 @@ void LegacyParser::ParseAttribute(const std::vector<std::string_view>& w,
     const std::string what = std::string(w[0]) + " " + name;
     if (entities > buf_.size()) CheckCount(entities, t.bytes, what);
     const std::uint64_t count = entities * comps;
-    if (!FieldWanted(options_, name)) {
+    if (!options_.Wants(name)) {
         SkipArray(count, t, what);
         return;
     }
