@@ -17,7 +17,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <sstream>
@@ -28,6 +27,7 @@
 
 #include "io/gmsh_detail.h"
 #include "io/gmsh_nodes.h"
+#include "io/file_bytes.h"
 #include "io/mesh_io.h"
 #include "util/check.h"
 #include "util/error.h"
@@ -35,19 +35,6 @@
 
 namespace hpray {
 namespace {
-
-std::string ReadWholeFile(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(path, "", "cannot open file");
-    in.seekg(0, std::ios::end);
-    const std::streamoff size = in.tellg();
-    if (size < 0) throw InputError(path, "", "cannot determine the file size");
-    std::string data(static_cast<std::size_t>(size), '\0');
-    in.seekg(0, std::ios::beg);
-    if (size > 0 && !in.read(data.data(), size))
-        throw InputError(path, "", "read failed");
-    return data;
-}
 
 // Values of one data section, by entity index (point or cell), before choosing a time
 // step.
@@ -69,16 +56,7 @@ class MshParser {
 
     // ---- the reader interface of io/gmsh_detail.h ----
     // positions and errors
-    std::string Where(std::size_t pos) const {
-        std::ostringstream os;
-        if (binary_) {
-            os << "byte " << pos;
-        } else {
-            const std::size_t end = std::min(pos, buf_.size());
-            os << "line " << 1 + std::count(buf_.begin(), buf_.begin() + end, '\n');
-        }
-        return os.str();
-    }
+    std::string Where(std::size_t pos) const { return ByteOrLineWhere(buf_, pos, binary_); }
     [[noreturn]] void FailAt(std::size_t pos, const std::string& message) const {
         throw InputError(path_, Where(pos), message);
     }

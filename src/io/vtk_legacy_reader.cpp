@@ -27,12 +27,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <sstream>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "io/file_bytes.h"
 #include "io/mesh_io.h"
 #include "io/vtk_cells.h"
 #include "util/check.h"
@@ -41,19 +41,6 @@
 
 namespace hpray {
 namespace {
-
-std::string ReadWholeFile(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(path, "", "cannot open file");
-    in.seekg(0, std::ios::end);
-    const std::streamoff size = in.tellg();
-    if (size < 0) throw InputError(path, "", "cannot determine the file size");
-    std::string data(static_cast<std::size_t>(size), '\0');
-    in.seekg(0, std::ios::beg);
-    if (size > 0 && !in.read(data.data(), size))
-        throw InputError(path, "", "read failed");
-    return data;
-}
 
 std::string Lower(std::string_view s) {
     std::string out(s);
@@ -138,16 +125,7 @@ class LegacyParser {
 
   private:
     // ---- positions and errors ----
-    std::string Where(std::size_t pos) const {
-        std::ostringstream os;
-        if (binary_) {
-            os << "byte " << pos;
-        } else {
-            const std::size_t end = std::min(pos, buf_.size());
-            os << "line " << 1 + std::count(buf_.begin(), buf_.begin() + end, '\n');
-        }
-        return os.str();
-    }
+    std::string Where(std::size_t pos) const { return ByteOrLineWhere(buf_, pos, binary_); }
     [[noreturn]] void FailAt(std::size_t pos, const std::string& message) const {
         throw InputError(path_, Where(pos), message);
     }

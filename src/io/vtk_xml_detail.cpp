@@ -9,13 +9,13 @@
 #include <charconv>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <set>
 #include <sstream>
 #include <type_traits>
 
 #include "io/base64.h"
+#include "io/file_bytes.h"
 #include "io/mesh_io.h"
 #include "util/error.h"
 #include "util/log.h"
@@ -380,19 +380,7 @@ void ParseHeader(XmlFile& file, char* xml, std::size_t size) {
 std::unique_ptr<XmlFile> LoadXmlFile(const std::string& path) {
     auto file = std::make_unique<XmlFile>();
     file->path = path;
-    {
-        std::ifstream in(path, std::ios::binary);
-        if (!in)
-            throw InputError(path, "",
-                             std::string("cannot open: ") + std::strerror(errno));
-        in.seekg(0, std::ios::end);
-        const std::streamoff size = in.tellg();
-        if (size < 0) throw InputError(path, "", "cannot determine the file size");
-        in.seekg(0, std::ios::beg);
-        file->bytes.resize(static_cast<std::size_t>(size));
-        if (size > 0 && !in.read(file->bytes.data(), size))
-            throw InputError(path, "", "read error");
-    }
+    file->bytes = ReadWholeFile(path);
     std::string& bytes = file->bytes;
 
     // Raw appended data may hold any bytes, so the XML parser only sees what precedes it.
