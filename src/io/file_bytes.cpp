@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 
@@ -21,6 +22,13 @@ std::string ReadWholeFile(const std::string& path) {
     in.seekg(0, std::ios::beg);
     if (size > 0 && !in.read(data.data(), size)) throw InputError(path, "", "read error");
     return data;
+}
+
+bool HostIsBigEndian() {
+    const std::uint16_t one = 1;
+    std::uint8_t first;
+    std::memcpy(&first, &one, 1);
+    return first == 0;
 }
 
 std::string ByteOrLineWhere(const std::string& bytes, std::size_t pos, bool binary) {

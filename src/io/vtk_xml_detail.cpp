@@ -23,13 +23,6 @@
 namespace hpray::vtkxml {
 namespace {
 
-bool HostIsBigEndian() {
-    const std::uint16_t one = 1;
-    std::uint8_t first;
-    std::memcpy(&first, &one, 1);
-    return first == 0;
-}
-
 std::string ByteWhere(const std::string& where, std::size_t offset) {
     std::ostringstream os;
     os << where << (where.empty() ? "" : " ") << "at byte " << offset;

@@ -8,20 +8,13 @@
 #include <fstream>
 #include <sstream>
 
+#include "io/file_bytes.h"
 #include "io/vtk_cells.h"
 #include "util/check.h"
 #include "util/error.h"
 
 namespace hpray {
 namespace {
-
-bool HostIsBigEndian() {
-    const std::uint16_t one = 1;
-    std::uint8_t first;
-    std::memcpy(&first, &one, 1);
-    return first == 0;
-}
-
 
 /// One appended array: its XML attributes and where its bytes come from.
 struct Block {

@@ -66,6 +66,16 @@ void RejectUnusedParams(const Spec& s) {
                          "unknown parameter for builtin:" + s.name);
 }
 
+/// Adds the point field `u` with the values u(x, y, z) at the mesh's points.
+template <typename FieldFn>
+void AddFieldU(Mesh& mesh, FieldFn u) {
+    Field f{"u", Association::Point, 1, {}};
+    f.values.resize(mesh.PointCount());
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i)
+        f.values[i] = u(mesh.points[3 * i], mesh.points[3 * i + 1], mesh.points[3 * i + 2]);
+    mesh.pointFields.push_back(std::move(f));
+}
+
 /// A structured block of n[0] x n[1] x n[2] hexahedra of order p whose vertex (a, b, c)
 /// sits at vertexPos(a, b, c); nodes inside a cell are placed by the trilinear map of its
 /// eight vertices, so neighbouring cells agree on shared faces exactly.
@@ -106,11 +116,7 @@ Mesh HexBlock(const int n[3], int p, VertexPos vertexPos, FieldFn u) {
                 mesh.AddCell(CellShape::Hex, p, CellFamily::Lagrange, nodes.data(),
                              static_cast<int>(nodes.size()));
             }
-    Field f{"u", Association::Point, 1, {}};
-    f.values.resize(mesh.PointCount());
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i)
-        f.values[i] = u(mesh.points[3 * i], mesh.points[3 * i + 1], mesh.points[3 * i + 2]);
-    mesh.pointFields.push_back(std::move(f));
+    AddFieldU(mesh, u);
     return mesh;
 }
 
@@ -219,11 +225,7 @@ Mesh CubeTets(int N, int p, double lo, double hi, FieldFn u) {
                                  static_cast<int>(nodes.size()));
                 }
             }
-    Field f{"u", Association::Point, 1, {}};
-    f.values.resize(mesh.PointCount());
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i)
-        f.values[i] = u(mesh.points[3 * i], mesh.points[3 * i + 1], mesh.points[3 * i + 2]);
-    mesh.pointFields.push_back(std::move(f));
+    AddFieldU(mesh, u);
     return mesh;
 }
 
