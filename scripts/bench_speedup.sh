@@ -5,7 +5,7 @@
 #        SCENES="name=config[;key=value;...] ...", HPRAY_BUILD=build dir).
 # Prints per scene, size and P the median total and render times and the speedup of the
 # medians, with the stats' wait (time the faster ranks wait for the slowest: imbalance)
-# and prepass (the cost-measuring pre-pass of an in-memory split).
+# and prepass (the cost-measuring pre-pass of an in-memory split in space).
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
 OUT="${1:-$HPRAY_BUILD/bench_speedup.csv}"
@@ -13,10 +13,15 @@ RANKS="${RANKS:-2}"
 REPS="${REPS:-5}"
 SIZES="${SIZES:-512 1024}"
 # name=config[;key=value overrides]: an opaque isosurface (early ray termination), the same
-# isosurface half transparent (every segment behind it is searched too), and a volume.
+# isosurface half transparent (every segment behind it is searched too), and a volume;
+# each split between ranks by image tiles (distribute: image, the default for a mesh) and
+# in space (distribute: space: k-d boxes and the binary swap, as for a partition).
 SCENES="${SCENES:-iso=configs/quickstart.yaml \
+iso_space=configs/quickstart.yaml;distribute=space \
 iso_transparent=configs/quickstart.yaml;isosurfaces.0.opacity=0.5 \
-volume=configs/volume_nk_sinc.yaml}"
+iso_transparent_space=configs/quickstart.yaml;isosurfaces.0.opacity=0.5;distribute=space \
+volume=configs/volume_nk_sinc.yaml \
+volume_space=configs/volume_nk_sinc.yaml;distribute=space}"
 
 step "building hpray in $HPRAY_BUILD"
 cmake -S "$HPRAY_ROOT" -B "$HPRAY_BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release > /dev/null

@@ -307,6 +307,48 @@ void ReduceStats(RenderStats& stats, int bricksLoaded) {
     }
 }
 
+/// Deals the tiles of an image out to ranks as they become free: a counter on rank 0
+/// that every rank advances with an atomic one-sided fetch-and-add (MPI-3 passive target),
+/// so no rank waits for another to hand out work. Collective to create and to destroy.
+class TileDealer {
+  public:
+    TileDealer(int tiles, int chunk) : tiles_(tiles), chunk_(chunk) {
+        MPI_Win_allocate(mpi::Root() ? sizeof(long long) : 0, sizeof(long long),
+                         MPI_INFO_NULL, MPI_COMM_WORLD, &counter_, &window_);
+        MPI_Win_lock_all(0, window_);
+        if (mpi::Root()) {
+            *counter_ = 0;
+            MPI_Win_sync(window_);
+        }
+        MPI_Barrier(MPI_COMM_WORLD);
+    }
+    ~TileDealer() {
+        MPI_Win_unlock_all(window_);
+        MPI_Win_free(&window_);
+    }
+    TileDealer(const TileDealer&) = delete;
+    TileDealer& operator=(const TileDealer&) = delete;
+
+    /// The next chunk [begin, end) of tiles for this rank; false when all are dealt.
+    bool Next(int& begin, int& end) {
+        const long long add = chunk_;
+        long long got = 0;
+        MPI_Fetch_and_op(&add, &got, MPI_LONG_LONG, 0, 0, MPI_SUM, window_);
+        MPI_Win_flush(0, window_);
+        if (got >= tiles_) return false;
+        begin = static_cast<int>(got);
+        end = static_cast<int>(std::min<long long>(got + chunk_, tiles_));
+        ++chunks_;
+        return true;
+    }
+    int Chunks() const { return chunks_; }
+
+  private:
+    int tiles_, chunk_, chunks_ = 0;
+    long long* counter_ = nullptr;
+    MPI_Win window_ = MPI_WIN_NULL;
+};
+
 /// Threads per rank when the scene does not say: the cores of this node shared by the
 /// ranks on it.
 int DefaultThreads() {
@@ -342,8 +384,16 @@ int RunRender(const RenderArgs& args) {
         return 0;
     }
     if (scene.threads == 0 && P > 1) scene.threads = DefaultThreads();
+    Distribution mode = scene.distribute;
+    if (mode == Distribution::Auto) mode = isPartition ? Distribution::Space : Distribution::Image;
+    if (mode == Distribution::Image && isPartition)
+        throw InputError(scene.data.mesh, "",
+                         "is a partition directory, but distribute: image needs the whole "
+                         "mesh on every rank; use distribute: space (or auto) for a "
+                         "partition, or give the mesh file");
     RenderStats stats = StartStats(scene);
     stats.ranks = P;
+    stats.distribute = mode == Distribution::Image ? "image" : "space";
 
     ReadOptions options;
     std::set<std::string> fields;
@@ -351,7 +401,8 @@ int RunRender(const RenderArgs& args) {
     options.fields = fields;
 
     // The plan: the partition's bricks, or an in-memory split of a small mesh into P boxes
-    // (every rank then holds the whole mesh and clips its rays to its own box).
+    // (every rank then holds the whole mesh and clips its rays to its own box), or, to
+    // split the image instead, the whole mesh on every rank.
     auto t0 = std::chrono::steady_clock::now();
     std::optional<partition::Partition> part;
     std::optional<Mesh> whole;
@@ -364,11 +415,11 @@ int RunRender(const RenderArgs& args) {
     }
     stats.timing.load += Seconds(t0);
     std::unique_ptr<PreparedBrick> prepared;
-    if (whole) {
-        // Every rank prepares the whole mesh; rank 0 renders a pre-pass at 1/8 of the
-        // resolution, measuring each segment's cost where it lies, and splits space so
-        // that each rank's box holds an equal share of the measured cost.
-        prepared = std::make_unique<PreparedBrick>(*whole, std::nullopt, scene, stats);
+    if (whole) prepared = std::make_unique<PreparedBrick>(*whole, std::nullopt, scene, stats);
+    if (whole && mode == Distribution::Space) {
+        // Rank 0 renders a pre-pass at 1/8 of the resolution, measuring each segment's
+        // cost where it lies, and splits space so that each rank's box holds an equal
+        // share of the measured cost.
         t0 = std::chrono::steady_clock::now();
         if (mpi::Root()) {
             SceneCamera low = scene.camera;
@@ -393,57 +444,76 @@ int RunRender(const RenderArgs& args) {
         BroadcastPlan(plan);
         stats.timing.prepass = Seconds(t0);
     }
-    t0 = std::chrono::steady_clock::now();
-    const int bricks = static_cast<int>(plan.boxes.size());
-    if (bricks < P)
-        throw InputError(scene.data.mesh, "",
-                         "has " + std::to_string(bricks) + " bricks, fewer than the " +
-                             std::to_string(P) + " MPI ranks; partition it into at least " +
-                             std::to_string(P) + " bricks");
-    plan.rank.assign(bricks, 0);
-    {
-        std::vector<int> leaves(plan.tree.size());
-        std::vector<double> cost(plan.tree.size());
-        SubtreeTotals(plan, 0, leaves, cost);
-        AssignRanks(plan, 0, 0, P, leaves, cost);
-    }
-    stats.bricksTotal = bricks;
-    stats.timing.load += Seconds(t0);
 
     const compositor::CompositeView view = compositor::ViewFromCamera(scene.camera);
-    std::vector<int> mine;
-    MyBricksFrontToBack(plan, 0, rank, view, mine);
-
     Image accumulated;
     accumulated.Resize(scene.camera.width, scene.camera.height);
     int loaded = 0;
-    for (int b : mine) {
-        if (part && !BrickMayContribute(scene, part->bricks[b], plan.boxes[b])) continue;
-        Image image;
-        if (part) {
-            t0 = std::chrono::steady_clock::now();
-            const Mesh mesh = partition::LoadBrick(*part, b, options);
-            stats.timing.load += Seconds(t0);
-            RenderOneBrick(mesh, plan.boxes[b], scene, image, stats);
-        } else {
-            prepared->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats);
+    std::unique_ptr<TileDealer> dealer;
+    compositor::CompositeTree rankTree;
+    if (mode == Distribution::Image) {
+        // Every pixel is rendered by exactly one rank, exactly as on one rank; the others
+        // leave it empty, which Over leaves unchanged, so any visibility order composites
+        // the single-rank image bit for bit.
+        const Camera camera(scene.camera);
+        const int tiles = RenderTileCount(camera);
+        const int chunk = std::max(1, std::min(8 * scene.threads, tiles / (16 * P)));
+        dealer = std::make_unique<TileDealer>(tiles, chunk);
+        int begin = 0, end = 0;
+        while (dealer->Next(begin, end))
+            prepared->RenderTiles(scene, camera, begin, end, accumulated, stats);
+        loaded = mpi::Root() ? 1 : 0;
+        stats.bricksTotal = 1;
+        const Box3& bounds = prepared->Geometry().bounds;
+        rankTree = compositor::RegularRankTree(P, bounds.lo, bounds.hi);
+    } else {
+        t0 = std::chrono::steady_clock::now();
+        const int bricks = static_cast<int>(plan.boxes.size());
+        if (bricks < P)
+            throw InputError(scene.data.mesh, "",
+                             "has " + std::to_string(bricks) + " bricks, fewer than the " +
+                                 std::to_string(P) + " MPI ranks; partition it into at least " +
+                                 std::to_string(P) + " bricks");
+        plan.rank.assign(bricks, 0);
+        {
+            std::vector<int> leaves(plan.tree.size());
+            std::vector<double> cost(plan.tree.size());
+            SubtreeTotals(plan, 0, leaves, cost);
+            AssignRanks(plan, 0, 0, P, leaves, cost);
         }
-        ++loaded;
-        compositor::CompositeOver(accumulated, image);
+        stats.bricksTotal = bricks;
+        stats.timing.load += Seconds(t0);
+
+        std::vector<int> mine;
+        MyBricksFrontToBack(plan, 0, rank, view, mine);
+        for (int b : mine) {
+            if (part && !BrickMayContribute(scene, part->bricks[b], plan.boxes[b])) continue;
+            Image image;
+            if (part) {
+                t0 = std::chrono::steady_clock::now();
+                const Mesh mesh = partition::LoadBrick(*part, b, options);
+                stats.timing.load += Seconds(t0);
+                RenderOneBrick(mesh, plan.boxes[b], scene, image, stats);
+            } else {
+                prepared->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats);
+            }
+            ++loaded;
+            compositor::CompositeOver(accumulated, image);
+        }
+        if (P > 1) {
+            std::vector<compositor::BrickTreeNode> tree = plan.tree;
+            rankTree = compositor::BuildRankTree(tree, 0, plan.rank, P);
+        }
     }
 
     // Waiting for the slowest rank is imbalance, not compositing: timed apart.
     t0 = std::chrono::steady_clock::now();
     MPI_Barrier(MPI_COMM_WORLD);
     stats.timing.wait = Seconds(t0);
+    dealer.reset();
     t0 = std::chrono::steady_clock::now();
     compositor::CompositeStats cs;
-    if (P > 1) {
-        std::vector<compositor::BrickTreeNode> tree = plan.tree;
-        const compositor::CompositeTree rankTree =
-            compositor::BuildRankTree(tree, 0, plan.rank, P);
-        cs = compositor::Composite(accumulated, rankTree, view, MPI_COMM_WORLD);
-    }
+    if (P > 1) cs = compositor::Composite(accumulated, rankTree, view, MPI_COMM_WORLD);
     stats.timing.composite = Seconds(t0);
     stats.timing.total = Seconds(start);
     ReduceStats(stats, loaded);
@@ -456,13 +526,19 @@ int RunRender(const RenderArgs& args) {
     }
     if (mpi::Root()) {
         WriteJobOutputs(scene, accumulated, stats);
+        char split[96];
+        if (mode == Distribution::Image)
+            std::snprintf(split, sizeof split, "the image split in tiles");
+        else
+            std::snprintf(split, sizeof split, "%d of %d bricks loaded", stats.bricksLoaded,
+                          stats.bricksTotal);
         char line[512];
         std::snprintf(line, sizeof line,
                       "rendered %dx%d on %d ranks x %d threads in %.3f s (render %.3f, "
-                      "composite %.3f): %d of %d bricks loaded, %.0f hits, max residual %.3g",
+                      "composite %.3f): %s, %.0f hits, max residual %.3g",
                       stats.width, stats.height, P, stats.threads, stats.timing.total,
-                      stats.timing.render, stats.timing.composite, stats.bricksLoaded,
-                      stats.bricksTotal, stats.counters.isoHits, stats.counters.isoResidualMax);
+                      stats.timing.render, stats.timing.composite, split,
+                      stats.counters.isoHits, stats.counters.isoResidualMax);
         log::Info(line);
     }
     return 0;

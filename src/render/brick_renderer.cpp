@@ -11,6 +11,7 @@
 #include <mutex>
 
 #include "render/ray_field.h"
+#include "util/check.h"
 #include "util/error.h"
 
 namespace hpray {
@@ -493,10 +494,14 @@ void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
     integrator.Integrate(setup, ray, sample, counters);
 }
 
-void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
-                 RenderCounters& counters, std::vector<SegmentCostSample>* costSamples) {
+namespace {
+
+/// Renders tiles [begin, end) of the camera's image (already sized) with `threads` threads.
+void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int begin,
+                 int end, Image& image, RenderCounters& counters,
+                 std::vector<SegmentCostSample>* costSamples) {
     const int W = camera.Width(), H = camera.Height();
-    image.Resize(W, H);
+    HPRAY_CHECK(image.width == W && image.height == H);
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(
@@ -507,14 +512,13 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
         std::vector<SegmentCostSample> costSamples;
     };
     tbb::enumerable_thread_specific<ThreadState> states;
-    constexpr int kTile = 16;
-    const int tilesX = (W + kTile - 1) / kTile, tilesY = (H + kTile - 1) / kTile;
-    tbb::parallel_for(0, tilesX * tilesY, [&](int tile) {
+    const int tilesX = (W + kRenderTile - 1) / kRenderTile;
+    tbb::parallel_for(begin, end, [&](int tile) {
         ThreadState& st = states.local();
-        const int x0 = (tile % tilesX) * kTile, y0 = (tile / tilesX) * kTile;
+        const int x0 = (tile % tilesX) * kRenderTile, y0 = (tile / tilesX) * kRenderTile;
         PixelSample s;
-        for (int j = y0; j < std::min(H, y0 + kTile); ++j)
-            for (int i = x0; i < std::min(W, x0 + kTile); ++i) {
+        for (int j = y0; j < std::min(H, y0 + kRenderTile); ++j)
+            for (int i = x0; i < std::min(W, x0 + kRenderTile); ++i) {
                 const CameraRay cr = camera.PixelRay(i, j);
                 Ray ray;
                 for (int d = 0; d < 3; ++d) {
@@ -543,6 +547,27 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
             costSamples->insert(costSamples->end(), st.costSamples.begin(),
                                 st.costSamples.end());
     }
+}
+
+}  // namespace
+
+int RenderTileCount(const Camera& camera) {
+    const int tilesX = (camera.Width() + kRenderTile - 1) / kRenderTile;
+    const int tilesY = (camera.Height() + kRenderTile - 1) / kRenderTile;
+    return tilesX * tilesY;
+}
+
+void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
+                 RenderCounters& counters, std::vector<SegmentCostSample>* costSamples) {
+    image.Resize(camera.Width(), camera.Height());
+    RenderTiles(setup, camera, threads, 0, RenderTileCount(camera), image, counters,
+                costSamples);
+}
+
+void RenderBrickTiles(const BrickSetup& setup, const Camera& camera, int threads, int begin,
+                      int end, Image& image, RenderCounters& counters) {
+    HPRAY_CHECK(0 <= begin && begin <= end && end <= RenderTileCount(camera));
+    RenderTiles(setup, camera, threads, begin, end, image, counters, nullptr);
 }
 
 }  // namespace hpray

@@ -121,6 +121,16 @@ void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Ima
                  RenderCounters& counters,
                  std::vector<SegmentCostSample>* costSamples = nullptr);
 
+/// The image is rendered in square tiles of kRenderTile pixels, numbered row by row.
+constexpr int kRenderTile = 16;
+/// How many tiles a camera's image has.
+int RenderTileCount(const Camera& camera);
+/// Renders only tiles [begin, end) into `image`, which must already have the camera's
+/// size; other pixels are left as they are. Each pixel is computed exactly as by
+/// RenderBrick, so rendering all tiles in any grouping gives the same image bit for bit.
+void RenderBrickTiles(const BrickSetup& setup, const Camera& camera, int threads, int begin,
+                      int end, Image& image, RenderCounters& counters);
+
 /// One ray (exposed for tests): fills `sample` and adds to `counters`.
 class RayIntegrator;
 void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,

@@ -135,6 +135,13 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
     stats.timing.render += Seconds(t0);
 }
 
+void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int begin,
+                                int end, Image& image, RenderStats& stats) {
+    const auto t0 = std::chrono::steady_clock::now();
+    RenderBrickTiles(impl_->setup, camera, scene.threads, begin, end, image, stats.counters);
+    stats.timing.render += Seconds(t0);
+}
+
 void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
                     std::vector<SegmentCostSample>* costSamples) {

@@ -54,6 +54,12 @@ class PreparedBrick {
                 Image& image, RenderStats& stats,
                 std::vector<SegmentCostSample>* costSamples = nullptr);
 
+    /// Renders only tiles [begin, end) of the camera's image (brick_renderer.h:
+    /// RenderBrickTiles) into `image`, which must have the camera's size; other pixels are
+    /// left as they are. For splitting the pixels of one view between ranks.
+    void RenderTiles(const Scene& scene, const Camera& camera, int begin, int end,
+                     Image& image, RenderStats& stats);
+
     const MeshGeometry& Geometry() const;
 
   private:

@@ -83,6 +83,7 @@ std::string StatsToJson(const RenderStats& s) {
                      {"render", s.timing.render},       {"composite", s.timing.composite},
                      {"write", s.timing.write},         {"total", s.timing.total}};
     if (s.ranks > 1) {
+        j["distribute"] = s.distribute;
         j["timing_s"]["prepass"] = s.timing.prepass;
         j["timing_s"]["wait"] = s.timing.wait;
         j["timing_s"]["render_min"] = s.timing.renderMin;

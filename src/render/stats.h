@@ -61,6 +61,7 @@ struct CompositeStats {
 
 struct RenderStats {
     int ranks = 1;
+    std::string distribute;  ///< on several ranks: "space" or "image" (scene.h: Distribution)
     int threads = 1;
     int width = 0, height = 0;
     PhaseTimes timing;

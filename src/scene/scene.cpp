@@ -76,6 +76,7 @@ const SchemaNode& Schema() {
             MapOf("clip", {"near", "far", "box"}),
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
             Leaf("threads"),
+            Leaf("distribute"),
             MapOf("edges", {"color", "width", "opacity"}),
         };
         return r;
@@ -834,6 +835,19 @@ void SceneParser::ReadExtras(const YAML::Node& root, Scene& scene) const {
                  "must be in [0, 4096] (0 = all hardware threads), got " +
                      std::to_string(t));
         scene.threads = static_cast<int>(t);
+    }
+    if (Has(root, "distribute")) {
+        const std::string d = String(Get(root, "distribute"), "distribute");
+        if (d == "auto") {
+            scene.distribute = Distribution::Auto;
+        } else if (d == "space") {
+            scene.distribute = Distribution::Space;
+        } else if (d == "image") {
+            scene.distribute = Distribution::Image;
+        } else {
+            Fail("distribute", Get(root, "distribute"),
+                 "must be auto, space or image, got '" + d + "'");
+        }
     }
     if (Has(root, "edges")) {
         const YAML::Node e = Get(root, "edges");

@@ -135,8 +135,21 @@ struct SceneEdges {
     double opacity = 1.0;                        ///< in [0, 1]
 };
 
+/// How several MPI ranks share a job (top-level key `distribute`).
+enum class Distribution {
+    /// `auto` (default): `image` for a mesh given directly, `space` for a partition.
+    Auto,
+    /// `space`: each rank renders its k-d box of the data (a partition's bricks, or an
+    /// in-memory split of the mesh); the binary-swap compositor orders the boxes.
+    Space,
+    /// `image`: every rank holds the whole mesh and renders a share of the pixels, dealt
+    /// out in tiles as ranks become free (a mesh given directly only).
+    Image,
+};
+
 /// A whole scene. Top-level keys besides design.md's: `threads` (worker threads per rank,
-/// 0 = all hardware threads; default 0) and `edges` (see SceneEdges).
+/// 0 = all hardware threads; default 0), `distribute` (see Distribution) and `edges` (see
+/// SceneEdges).
 struct Scene {
     std::string sourcePath;  ///< the scene file as given (for messages); empty if parsed
     SceneData data;
@@ -150,6 +163,7 @@ struct Scene {
     SceneClip clip;
     SceneOutput output;
     int threads = 0;                  ///< >= 0; 0 = all hardware threads
+    Distribution distribute = Distribution::Auto;
     std::optional<SceneEdges> edges;  ///< default off
 
     /// Names of the fields the scene uses (isosurfaces, slices, volume), each once, in

@@ -53,8 +53,10 @@ const Camera kCameras[] = {
               "--set camera.fov_y=null --set camera.ortho_height=2.4"},
 };
 
+/// `extra`: further --set options (e.g. the distribution of the job).
 std::vector<double> Render(const std::string& launcher, const std::string& mesh,
-                           const Camera& camera, const std::string& tag) {
+                           const Camera& camera, const std::string& tag,
+                           const std::string& extra = "") {
     const std::string rgba = (kDir / (tag + ".rgba.npy")).string();
     const std::string hits = (kDir / (tag + ".hits.npy")).string();
     const std::string cmd = launcher + HPRAY_BINARY + " render " +
@@ -63,7 +65,8 @@ std::vector<double> Render(const std::string& launcher, const std::string& mesh,
                             " --set camera.width=40 --set camera.height=36" +
                             " --set output.exr=null --set output.png=null" +
                             " --set output.stats=" + (kDir / (tag + ".json")).string() +
-                            " --set output.rgba=" + rgba + " --set output.hits=" + hits;
+                            " --set output.rgba=" + rgba + " --set output.hits=" + hits +
+                            " " + extra;
     std::string out;
     EXPECT_EQ(RunCommand(cmd, &out), 0) << cmd << "\n" << out;
     std::vector<std::size_t> shape;
@@ -91,6 +94,19 @@ void ExpectSame(const std::vector<double>& ref, const std::vector<double>& got,
     EXPECT_LE(worst, 1e-6) << what;
 }
 
+/// Bit for bit equal (NaN equal to NaN): an image split renders every pixel exactly as one
+/// rank does.
+void ExpectIdentical(const std::vector<double>& ref, const std::vector<double>& got,
+                     const std::string& what) {
+    ASSERT_EQ(ref.size(), got.size()) << what;
+    std::size_t differing = 0, first = ref.size();
+    for (std::size_t i = 0; i < ref.size(); ++i) {
+        const bool same = std::isnan(ref[i]) ? std::isnan(got[i]) : ref[i] == got[i];
+        if (!same && differing++ == 0) first = i;
+    }
+    EXPECT_EQ(differing, 0u) << what << ": first at entry " << first;
+}
+
 class MpiRender : public ::testing::Test {
 protected:
     static void TearDownTestSuite() { std::filesystem::remove_all(kDir); }
@@ -107,10 +123,17 @@ protected:
 TEST_F(MpiRender, AnyRankCountGivesTheSingleRankImage) {
     for (const Camera& camera : kCameras) {
         const auto reference = Render("", "builtin:ball-p2", camera, std::string("ref_") + camera.name);
+        // A mesh given directly: split in space (k-d boxes, binary swap in visibility
+        // order) or split in image tiles (the default), which must give the same bits.
         for (int ranks : {2, 3}) {
             const std::string tag = std::string(camera.name) + "_np" + std::to_string(ranks);
-            ExpectSame(reference, Render(Mpirun(ranks), "builtin:ball-p2", camera, "mesh_" + tag),
+            ExpectSame(reference,
+                       Render(Mpirun(ranks), "builtin:ball-p2", camera, "mesh_" + tag,
+                              "--set distribute=space"),
                        "mesh " + tag);
+            ExpectIdentical(reference,
+                            Render(Mpirun(ranks), "builtin:ball-p2", camera, "image_" + tag),
+                            "image split " + tag);
         }
         // A partition on one rank (bricks loaded one at a time) and on 2, 4 and 5 ranks
         // (5 ranks own 6 bricks: one rank holds a subtree of two).
@@ -127,7 +150,7 @@ TEST_F(MpiRender, TooFewBricksIsAClearError) {
     std::string out;
     const int code = RunCommand(Mpirun(2) + HPRAY_BINARY + " render " + std::string(HPRAY_SOURCE_DIR) +
                              "/configs/ball_p2.yaml --set data.mesh=builtin:cube-tets-1" +
-                             " --set output.exr=null --set output.png=null --set output.stats=null"
+                             " --set distribute=space --set output.exr=null --set output.png=null --set output.stats=null"
                              " --set output.hits=null --set camera.width=8 --set camera.height=8",
                          &out);
     // One cell is split into two boxes without trouble; fewer bricks than ranks only
@@ -140,6 +163,20 @@ TEST_F(MpiRender, TooFewBricksIsAClearError) {
                         &out);
     EXPECT_NE(bad, 0);
     EXPECT_NE(out.find("fewer than the 7 MPI ranks"), std::string::npos) << out;
+}
+
+TEST_F(MpiRender, ImageSplitOfAPartitionIsAClearError) {
+    std::string out;
+    const int code = RunCommand(Mpirun(2) + HPRAY_BINARY + " render " + std::string(HPRAY_SOURCE_DIR) +
+                             "/configs/ball_p2.yaml --set data.mesh=" + (kDir / "part6").string() +
+                             " --set distribute=image --set output.exr=null --set output.png=null"
+                             " --set output.stats=null --set output.hits=null"
+                             " --set camera.width=8 --set camera.height=8",
+                         &out);
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_NE(out.find("part6: is a partition directory, but distribute: image"),
+              std::string::npos)
+        << out;
 }
 
 TEST_F(MpiRender, CorruptBrickEndsTheJobWithAClearMessage) {
@@ -208,11 +245,13 @@ namespace {
 // split at brick boxes and composited across ranks; up to 8 ranks (oversubscribed).
 TEST_F(MpiRender, VolumeWithIsosurfacesOnUpToEightRanks) {
     for (const Camera& camera : {kCameras[0], kCameras[1]}) {
-        auto render = [&](const std::string& launcher, const std::string& tag) {
+        auto render = [&](const std::string& launcher, const std::string& tag,
+                          const std::string& extra = "") {
             const std::string rgba = (kDir / (tag + ".rgba.npy")).string();
             const std::string cmd = launcher + HPRAY_BINARY + " render " +
                                     std::string(HPRAY_SOURCE_DIR) +
                                     "/configs/volume_ball_p2_iso.yaml -q " + camera.settings +
+                                    " " + extra +
                                     " --set camera.width=32 --set camera.height=32" +
                                     " --set output.exr=null --set output.png=null" +
                                     " --set output.stats=null --set output.rgba=" + rgba;
@@ -224,8 +263,10 @@ TEST_F(MpiRender, VolumeWithIsosurfacesOnUpToEightRanks) {
         const auto reference = render("", std::string("vol_ref_") + camera.name);
         for (int ranks : {2, 3, 8}) {
             const std::string tag = std::string("vol_") + camera.name + "_np" + std::to_string(ranks);
-            ExpectSame(reference, render(Mpirun(ranks), tag), tag);
+            ExpectSame(reference, render(Mpirun(ranks), tag, "--set distribute=space"), tag);
         }
+        const std::string tag = std::string("vol_image_") + camera.name;
+        ExpectIdentical(reference, render(Mpirun(3), tag), tag);
     }
 }
 

@@ -361,6 +361,59 @@ isosurfaces:
     EXPECT_EQ(s1.counters.isoHits, s2.counters.isoHits);
 }
 
+// Splitting the pixels between ranks: tiles rendered in chunks of any size and in any
+// order (here random chunks, last first) fill the same image bit for bit as one render,
+// touch no pixel outside their tiles, and their counters add up to the whole render's.
+TEST(IsoRender, TilesInAnyGroupingGiveTheSameImage) {
+    const Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=4");
+    Scene scene = MakeScene(R"(
+data: {mesh: "builtin:nk-sinc?order=4"}
+camera: {position: [2.2, 1.6, 2.6], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 30,
+         width: 70, height: 45}
+isosurfaces:
+  - {field: u, value: 0.0, opacity: 0.7}
+volume: {color_field: u, extinction_field: u, color_tf: [[-1.6, 0, 0, 1], [1.1, 1, 0, 0]],
+         extinction_tf: [[-1.6, 0.5], [1.1, 2]]}
+)");
+    scene.threads = 2;
+    RenderStats wholeStats = StartStats(scene), tileStats = StartStats(scene);
+    PreparedBrick brick(mesh, std::nullopt, scene, wholeStats);
+    const Camera camera(scene.camera);
+    Image whole;
+    brick.Render(scene, camera, std::nullopt, whole, wholeStats);
+    const int tiles = RenderTileCount(camera);
+    ASSERT_EQ(tiles, 5 * 3);  // 16-pixel tiles, partial ones at the right and bottom edges
+    std::mt19937 rng(7);
+    std::vector<std::pair<int, int>> chunks;
+    for (int t = 0; t < tiles;) {
+        const int n = 1 + static_cast<int>(rng() % 4);
+        chunks.push_back({t, std::min(tiles, t + n)});
+        t += n;
+    }
+    std::reverse(chunks.begin(), chunks.end());
+    Image tiled;
+    tiled.Resize(camera.Width(), camera.Height());
+    for (std::size_t k = 0; k < chunks.size(); ++k) {
+        brick.RenderTiles(scene, camera, chunks[k].first, chunks[k].second, tiled, tileStats);
+        if (k == 0) {
+            // Only the chunk's own pixels are written: the first pixel of the image (tile 0)
+            // is still empty after the last chunk.
+            EXPECT_EQ(tiled.a[0], 0.0);
+            EXPECT_TRUE(std::isinf(tiled.z[0]));
+        }
+    }
+    const auto a = whole.Channels();
+    const auto b = tiled.Channels();
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t c = 0; c < a.size(); ++c)
+        EXPECT_TRUE(SameBits(*a[c].second, *b[c].second)) << a[c].first;
+    EXPECT_GT(wholeStats.counters.isoHits, 100);
+    EXPECT_EQ(wholeStats.counters.rays, tileStats.counters.rays);
+    EXPECT_EQ(wholeStats.counters.rays, 70.0 * 45.0);
+    EXPECT_EQ(wholeStats.counters.isoHits, tileStats.counters.isoHits);
+    EXPECT_EQ(wholeStats.counters.segments, tileStats.counters.segments);
+}
+
 // Nelson & Kirby's examples at default accuracy: the residual on the true field at every
 // hit is at the rounding level of the data (done-when: RMS <= 1e-12, max <= 1e-10 of the
 // field range).

@@ -105,6 +105,7 @@ TEST(SceneTest, DefaultsOfAMinimalScene) {
     EXPECT_TRUE(s.output.hits.empty());
     EXPECT_TRUE(s.output.rgba.empty());
     EXPECT_EQ(s.threads, 0);
+    EXPECT_EQ(s.distribute, Distribution::Auto);
     EXPECT_FALSE(s.edges.has_value());
     EXPECT_TRUE(s.FieldNames().empty());
 }
@@ -207,6 +208,7 @@ volume: {color_field: a, extinction_field: b, glow: wilhelms-van-gelder,
 accuracy: {projection_order: 12}
 clip: {near: 0.5, far: 10, box: [[0, 0, 0], [1, 2, 3]]}
 threads: 3
+distribute: space
 edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
 )",
                                "t.yaml");
@@ -225,6 +227,7 @@ edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
     EXPECT_EQ((*s.clip.box)[0], (Vec3{0, 0, 0}));
     EXPECT_EQ((*s.clip.box)[1], (Vec3{1, 2, 3}));
     EXPECT_EQ(s.threads, 3);
+    EXPECT_EQ(s.distribute, Distribution::Space);
     ASSERT_TRUE(s.edges.has_value());
     EXPECT_EQ(s.edges->width, 1.5);
 }
@@ -394,6 +397,7 @@ TEST(SceneValidationTest, EachRuleNamesKeyAndLine) {
         {"clip: {near: 2, far: 1}\n", "clip.far", "must be > clip.near", 2},
         {"clip: {box: [[0, 0, 0], [1, 0, 1]]}\n", "clip.box", "below the second", 2},
         {"threads: -1\n", "threads", "[0, 4096]", 2},
+        {"distribute: pixels\n", "distribute", "auto, space or image", 2},
         {"edges: {width: 0}\n", "edges.width", "(0, 64]", 2},
         // degenerate cameras
         {"camera: {position: [1, 2, 3], look_at: [1, 2, 3]}\n", "camera.look_at",
