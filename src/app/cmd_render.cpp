@@ -271,7 +271,9 @@ bool BrickMayContribute(const Scene& scene, const partition::BrickInfo& brick,
     return false;
 }
 
-void ReduceStats(RenderStats& stats, int bricksLoaded) {
+/// Reduces the stats of all ranks into rank 0's. `wholeMeshEverywhere`: every rank
+/// prepared the same whole mesh, so its non-conforming faces are counted once, not summed.
+void ReduceStats(RenderStats& stats, int bricksLoaded, bool wholeMeshEverywhere) {
     auto counters = stats.counters.ToArray();
     std::array<double, RenderCounters::kSize> sum{}, max{};
     MPI_Reduce(counters.data(), sum.data(), RenderCounters::kSize, MPI_DOUBLE, MPI_SUM, 0,
@@ -289,6 +291,13 @@ void ReduceStats(RenderStats& stats, int bricksLoaded) {
     MPI_Reduce(range, rangeMin, 2, MPI_DOUBLE, MPI_MIN, 0, MPI_COMM_WORLD);
     int loaded = 0;
     MPI_Reduce(&bricksLoaded, &loaded, 1, MPI_INT, MPI_SUM, 0, MPI_COMM_WORLD);
+    TraversalStats& tr = stats.traversal;
+    double meshCounts[3] = {tr.nonConformingFaces, tr.nonConformingEdges, tr.nonConformity};
+    double meshSum[3], meshMax[3];
+    MPI_Reduce(meshCounts, meshSum, 3, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+    MPI_Reduce(meshCounts, meshMax, 3, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    double walk[3] = {tr.walkRepairs, tr.walkFailures, tr.faceNewtonFailures}, walkSum[3];
+    MPI_Reduce(walk, walkSum, 3, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
     double bytes = stats.accelBytes, bytesSum = 0;
     MPI_Reduce(&bytes, &bytesSum, 1, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
     if (mpi::Root()) {
@@ -304,6 +313,12 @@ void ReduceStats(RenderStats& stats, int bricksLoaded) {
         stats.isoFieldRange = {rangeMin[0], -rangeMin[1]};
         stats.bricksLoaded = loaded;
         stats.accelBytes = bytesSum;
+        tr.nonConformingFaces = wholeMeshEverywhere ? meshMax[0] : meshSum[0];
+        tr.nonConformingEdges = wholeMeshEverywhere ? meshMax[1] : meshSum[1];
+        tr.nonConformity = meshMax[2];
+        tr.walkRepairs = walkSum[0];
+        tr.walkFailures = walkSum[1];
+        tr.faceNewtonFailures = walkSum[2];
     }
 }
 
@@ -516,7 +531,7 @@ int RunRender(const RenderArgs& args) {
     if (P > 1) cs = compositor::Composite(accumulated, rankTree, view, MPI_COMM_WORLD);
     stats.timing.composite = Seconds(t0);
     stats.timing.total = Seconds(start);
-    ReduceStats(stats, loaded);
+    ReduceStats(stats, loaded, !part.has_value());
     if (P > 1) {
         stats.composite.rounds = cs.rounds;
         stats.composite.bytesPerPixel = cs.bytesPerPixel;

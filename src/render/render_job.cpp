@@ -3,7 +3,9 @@
 
 #include <tbb/info.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <limits>
 #include <set>
 
@@ -17,6 +19,15 @@ namespace hpray {
 namespace {
 double Seconds(std::chrono::steady_clock::time_point since) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+/// Adds the walk events between two readings of a traverser's counters.
+void AddTraceCounters(const TraceCounters& before, const TraceCounters& after,
+                      TraversalStats& out) {
+    out.walkRepairs += static_cast<double>(after.walkRepairs - before.walkRepairs);
+    out.walkFailures += static_cast<double>(after.walkFailures - before.walkFailures);
+    out.faceNewtonFailures +=
+        static_cast<double>(after.newtonFailures - before.newtonFailures);
 }
 }  // namespace
 
@@ -94,6 +105,23 @@ PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box
     impl_->setup = MakeBrickSetup(mesh, geometry, *impl_->traverser, scene);
     stats.timing.accel += Seconds(t0);
     const TraverserStats& ts = impl_->traverser->Stats();
+    // Mismatches at the rounding level of single-precision files (deal.II writes
+    // Float32; copies of one node may differ by an ulp) are in the stats only.
+    if (ts.nonConformity > 1e-6) {
+        char text[160];
+        std::snprintf(text, sizeof text,
+                      "%lld shared faces and %lld edges are given different nodes by the "
+                      "cells that share them (up to %.3g of their size)",
+                      static_cast<long long>(ts.nonConformingFaces),
+                      static_cast<long long>(ts.nonConformingEdges), ts.nonConformity);
+        log::Warn(scene.data.mesh + ": " + text +
+                  ": the mesh is not conforming; the traversal uses one version of each, "
+                  "so points in the gaps between the versions are evaluated just outside "
+                  "the cell the ray is walking");
+    }
+    stats.traversal.nonConformingFaces += static_cast<double>(ts.nonConformingFaces);
+    stats.traversal.nonConformingEdges += static_cast<double>(ts.nonConformingEdges);
+    stats.traversal.nonConformity = std::max(stats.traversal.nonConformity, ts.nonConformity);
     stats.accelBytes += static_cast<double>(ts.Bytes());
     stats.accelBytesPerCell = ts.BytesPerCell();
     for (const ScalarSelector& f : impl_->setup.fields) {
@@ -130,7 +158,9 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
         }
         setup.clipBox = box;
     }
+    const TraceCounters before = impl_->traverser->Counters();
     RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples);
+    AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     setup.clipBox = sceneClip;
     stats.timing.render += Seconds(t0);
 }
@@ -138,7 +168,9 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
 void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int begin,
                                 int end, Image& image, RenderStats& stats) {
     const auto t0 = std::chrono::steady_clock::now();
+    const TraceCounters before = impl_->traverser->Counters();
     RenderBrickTiles(impl_->setup, camera, scene.threads, begin, end, image, stats.counters);
+    AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     stats.timing.render += Seconds(t0);
 }
 

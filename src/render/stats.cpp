@@ -113,6 +113,13 @@ std::string StatsToJson(const RenderStats& s) {
                     {"failures", c.inversionFailures}};
     j["volume"] = {{"rms_error_estimate", std::sqrt(safeDiv(c.volumeErrorSqSum, c.volumePixels))},
                    {"max_error_estimate", c.volumeErrorMax}};
+    const TraversalStats& tr = s.traversal;
+    j["traversal"] = {{"nonconforming_faces", tr.nonConformingFaces},
+                      {"nonconforming_edges", tr.nonConformingEdges},
+                      {"nonconformity", tr.nonConformity},
+                      {"walk_repairs", tr.walkRepairs},
+                      {"walk_failures", tr.walkFailures},
+                      {"face_newton_failures", tr.faceNewtonFailures}};
     j["composite"] = {{"rounds", s.composite.rounds},
                       {"bytes_per_pixel", s.composite.bytesPerPixel},
                       {"bytes_sent_max", s.composite.bytesSentMax},

@@ -51,6 +51,18 @@ struct RenderCounters {
     void Merge(const RenderCounters& other);
 };
 
+/// How the ray walk met the mesh: non-conforming input found when the traverser was
+/// built (trace/brick_traverser.h: TraverserStats), and the numerically hard events of
+/// the walks (TraceCounters), over all bricks and ranks.
+struct TraversalStats {
+    double nonConformingFaces = 0;
+    double nonConformingEdges = 0;
+    double nonConformity = 0;  ///< largest node mismatch over edge length / face size
+    double walkRepairs = 0;
+    double walkFailures = 0;
+    double faceNewtonFailures = 0;
+};
+
 struct CompositeStats {
     int rounds = 0;
     int bytesPerPixel = 0;
@@ -67,6 +79,7 @@ struct RenderStats {
     PhaseTimes timing;
     RenderCounters counters;
     CompositeStats composite;
+    TraversalStats traversal;
     int bricksLoaded = 0;
     int bricksTotal = 0;
     std::array<double, 2> isoFieldRange{0, 0};  ///< [min, max] of the isosurface fields

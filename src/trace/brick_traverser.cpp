@@ -15,6 +15,7 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <unordered_map>
 
 #include "elements/basis.h"
 #include "trace/bilinear_patch.h"
@@ -554,12 +555,43 @@ void BrickTraverser::Impl::BuildTopology() {
     // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
     // (from its lower corner by position), so that every face holding the edge sees the
     // same sequence; returns whether that reverses the face's counter-clockwise order.
+    // The inner nodes of an edge are those of the first face that registers it (keyed by
+    // its end points and order): cells that disagree on them (non-conforming output, such
+    // as deal.II's curved_boundary patches, where a curved boundary cell and its straight
+    // interior neighbour write different edge nodes) still give every face around the
+    // edge the same boundary curve, so the faces of each cell stay closed.
+    struct EdgeNodes {
+        int order = 0;
+        bool mismatched = false;
+        std::array<std::int32_t, kMaxEdgeNodes> ids{};
+    };
+    std::unordered_map<std::uint64_t, EdgeNodes> edgeNodes;
     auto canonicalEdge = [&](const std::vector<std::int32_t>& lattice, bool tri, int p,
                              int e, std::int32_t* ids) {
         for (int k = 0; k <= p; ++k)
             ids[k] = lattice[trace::EdgeLatticeIndex(tri, p, e, k)];
         const bool reversed = byPosition(ids[p], ids[0]);
         if (reversed) std::reverse(ids, ids + p + 1);
+        if (p > 1) {
+            const std::uint64_t key =
+                std::uint64_t(std::uint32_t(ids[0])) << 32 | std::uint32_t(ids[p]);
+            auto [it, inserted] = edgeNodes.try_emplace(key);
+            EdgeNodes& known = it->second;
+            if (inserted) {
+                known.order = p;
+                std::copy(ids, ids + p + 1, known.ids.begin());
+            } else if (known.order == p) {
+                for (int k = 1; k < p; ++k) {
+                    if (ids[k] == known.ids[k]) continue;
+                    if (!known.mismatched) ++stats.nonConformingEdges;
+                    known.mismatched = true;
+                    const double d = std::sqrt(Dist2(P(ids[k]), P(known.ids[k])));
+                    const double len = std::sqrt(Dist2(P(ids[0]), P(ids[p])));
+                    stats.nonConformity = std::max(stats.nonConformity, d / len);
+                    ids[k] = known.ids[k];
+                }
+            }
+        }
         return reversed;
     };
     // Whether an edge (canonical ids) is straight: a function of the edge alone, so that
@@ -575,6 +607,28 @@ void BrickTraverser::Impl::BuildTopology() {
         }
         return true;
     };
+    // Merged ids of cell c's nodes on the lattice of one of its faces, row by row from
+    // the face corner at local corner canonLocal[0] (-1: a serendipity face centre).
+    auto faceLattice = [&](std::int64_t c, const int* canonLocal, int n, int p,
+                           std::vector<std::int32_t>& out) {
+        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const CellFamily family = mesh.cellFamily[c];
+        const int* L[4];
+        for (int k = 0; k < n; ++k) L[k] = s.lattice[canonLocal[k]];
+        const std::int64_t* nodes = mesh.CellNodes(c);
+        out.clear();
+        for (int j = 0; j <= p; ++j)
+            for (int i = 0; i <= (n == 3 ? p - j : p); ++i) {
+                LatticeIndex ijk;
+                for (int d = 0; d < 3; ++d)
+                    ijk[d] = n == 3 ? (p - i - j) * L[0][d] + i * L[1][d] + j * L[2][d]
+                                    : p * L[0][d] + i * (L[1][d] - L[0][d]) +
+                                          j * (L[3][d] - L[0][d]);
+                const int node = InternalNodeIndex(mesh.cellShape[c], p, family, ijk);
+                out.push_back(node < 0 ? -1 : mergedOf[nodes[node]]);
+            }
+    };
+    std::vector<std::int32_t> neighbourLattice;
     auto outwardCycle = [&](std::int64_t c, int f, std::int32_t* ids, int* local) {
         const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
         const int n = s.faceSize[f];
@@ -645,25 +699,32 @@ void BrickTraverser::Impl::BuildTopology() {
             bool straight = true;
             std::vector<std::int32_t> lattice;  // merged ids on the tessellation lattice
             if (p > 1) {
-                const int* L[4];
-                for (int k = 0; k < n; ++k) L[k] = s.lattice[canonLocal[k]];
-                const std::int64_t* nodes = mesh.CellNodes(c);
-                for (int j = 0; j <= p; ++j)
-                    for (int i = 0; i <= (n == 3 ? p - j : p); ++i) {
-                        LatticeIndex ijk;
-                        for (int d = 0; d < 3; ++d)
-                            ijk[d] =
-                                n == 3 ? (p - i - j) * L[0][d] + i * L[1][d] + j * L[2][d]
-                                       : p * L[0][d] + i * (L[1][d] - L[0][d]) +
-                                             j * (L[3][d] - L[0][d]);
-                        const int node =
-                            InternalNodeIndex(mesh.cellShape[c], p, family, ijk);
-                        if (node < 0) {  // serendipity face centre
-                            lattice.push_back(-1);
-                            continue;
-                        }
-                        const std::int32_t id = mergedOf[nodes[node]];
-                        lattice.push_back(id);
+                faceLattice(c, canonLocal, n, p, lattice);
+                if (nb >= 0 && mesh.cellOrder[nb] == p && mesh.cellFamily[nb] == family) {
+                    // The neighbour's own nodes of the same face, in the same order.
+                    std::int32_t ids2[4];
+                    int local2[4], canonLocal2[4];
+                    outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                    for (int k = 0; k < n; ++k)
+                        for (int q = 0; q < n; ++q)
+                            if (ids2[q] == canon[k]) canonLocal2[k] = local2[q];
+                    faceLattice(nb, canonLocal2, n, p, neighbourLattice);
+                    double worst = 0;
+                    for (std::size_t k = 0; k < lattice.size(); ++k)
+                        if (lattice[k] != neighbourLattice[k] && lattice[k] >= 0 &&
+                            neighbourLattice[k] >= 0)
+                            worst = std::max(
+                                worst, Dist2(P(lattice[k]), P(neighbourLattice[k])));
+                    if (worst > 0) {
+                        ++stats.nonConformingFaces;
+                        stats.nonConformity =
+                            std::max(stats.nonConformity, std::sqrt(worst) / size);
+                    }
+                }
+                for (int j = 0, at = 0; j <= p; ++j)
+                    for (int i = 0; i <= (n == 3 ? p - j : p); ++i, ++at) {
+                        const std::int32_t id = lattice[at];
+                        if (id < 0) continue;  // serendipity face centre
                         const double u = double(i) / p, v = double(j) / p;
                         const double* X = P(id);
                         double dev2 = 0;

@@ -56,6 +56,16 @@ struct TraverserStats {
         0;  ///< faces with one cell (what the Embree scene holds)
     std::int64_t bilinearFaces = 0;  ///< non-planar straight quadrilaterals
     std::int64_t curvedFaces = 0;
+    /// Non-conforming input (cells that agree on their corners but not on the other
+    /// nodes of a shared face or edge): shared faces whose two cells give different
+    /// nodes, and edges whose inner nodes differ between the faces built around them
+    /// (a face is built from its lower-numbered cell). The traversal uses one
+    /// representation of each: a face's lower-numbered cell's, an edge's first face's.
+    /// nonConformity is the largest distance between two versions of a node over the
+    /// edge length or face size.
+    std::int64_t nonConformingEdges = 0;
+    std::int64_t nonConformingFaces = 0;
+    double nonConformity = 0;
 
     std::size_t Bytes() const { return topologyBytes + accelBytes; }
     double BytesPerCell() const { return cells ? double(Bytes()) / double(cells) : 0.0; }
