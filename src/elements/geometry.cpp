@@ -278,10 +278,31 @@ InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
         }
         NewtonOutcome o = Newton(cell, world, ref, ws, options, options.maxIterations);
         res.iterations = o.iterations;
-        if (o.status != InversionStatus::Converged) {
-            // A second start from the centre before declaring the point outside or failed.
-            const auto c = RefCenter(shape);
-            double ref2[3] = {c[0], c[1], c[2]};
+        // Further starts before declaring the point outside or failed: the node nearest to
+        // the point (in a strongly curved cell the affine fit can be far off: MFEM's
+        // order-9 spiral), then the centre.
+        for (int start = 0; start < 2 && o.status != InversionStatus::Converged; ++start) {
+            double ref2[3];
+            if (start == 0) {
+                const int n = cell.basis->nodeCount;
+                int nearest = 0;
+                double best = std::numeric_limits<double>::infinity();
+                for (int m = 0; m < n; ++m) {
+                    const double* x = cell.nodes + 3 * m;
+                    const double d2 = (x[0] - world[0]) * (x[0] - world[0]) +
+                                      (x[1] - world[1]) * (x[1] - world[1]) +
+                                      (x[2] - world[2]) * (x[2] - world[2]);
+                    if (d2 < best) {
+                        best = d2;
+                        nearest = m;
+                    }
+                }
+                std::copy(cell.basis->refNodes[nearest].begin(),
+                          cell.basis->refNodes[nearest].end(), ref2);
+            } else {
+                const auto c = RefCenter(shape);
+                std::copy(c.begin(), c.end(), ref2);
+            }
             NewtonOutcome o2 = Newton(cell, world, ref2, ws, options, options.maxIterations);
             res.iterations += o2.iterations;
             if (o2.status == InversionStatus::Converged ||

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <random>
 #include <vector>
 
@@ -13,6 +14,8 @@
 #include "elements/element_test_util.h"
 #include "elements/field.h"
 #include "elements/geometry.h"
+#include "elements/mesh_geometry.h"
+#include "io/mesh_io.h"
 #include "util/check.h"
 
 namespace hpray {
@@ -200,6 +203,39 @@ TEST(Geometry, InversionRoundTripsOnCurvedCells) {
         EXPECT_LT(worst, 1e-12) << Name(k);
         EXPECT_LT(maxIter, 30) << Name(k);
     }
+}
+
+// MFEM's order-9 spiral (shared data): 8 hexes swept around an axis, so curved that the
+// least-squares affine fit (the first Newton start) is off by a third of a cell and
+// Newton from it or from the centre leaves the cell for most interior points. Every
+// interior point must still be found (from the nearest node) and map back to the
+// reference point it came from.
+TEST(Geometry, InversionInMfemOrderNineSpiral) {
+    const std::string path = std::string(HPRAY_SHARED_DATA) + "/mfem_spiral_hex_p9.vtu";
+    if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
+    const Mesh mesh = ReadMesh(path);
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    ASSERT_EQ(geometry.cells.size(), 8u);
+    EvalWorkspace ws;
+    std::mt19937_64 rng(99);
+    double worst = 0, deviation = 0;
+    for (const CellGeometry& g : geometry.cells) {
+        ASSERT_EQ(g.basis->order, 9);
+        deviation = std::max(deviation, g.affineDeviation / g.size);
+        ASSERT_GT(MinDetJ(g, rng, ws), 0.0);
+        for (int q = 0; q < 100; ++q) {
+            const auto r = RandomRefPoint(CellShape::Hex, rng);
+            double x[3];
+            WorldFromRef(g, r.data(), ws, x, nullptr);
+            const InversionResult inv = RefFromWorld(g, x, ws);
+            ASSERT_TRUE(inv.converged) << "ref " << r[0] << " " << r[1] << " " << r[2]
+                                       << " status " << int(inv.status);
+            EXPECT_TRUE(inv.inside) << inv.outsideDistance;
+            for (int d = 0; d < 3; ++d) worst = std::max(worst, std::abs(inv.ref[d] - r[d]));
+        }
+    }
+    EXPECT_GT(deviation, 0.25);  // the hard case it is meant to be
+    EXPECT_LT(worst, 1e-10);
 }
 
 // Points 1e-6 (relative to the cell size) beyond a face along the outward world normal are
