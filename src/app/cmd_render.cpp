@@ -12,6 +12,8 @@
 #include <limits>
 #include <set>
 
+#include <unistd.h>
+
 #include "app/commands.h"
 #include "compositor.h"
 #include "elements/bounds.h"
@@ -372,7 +374,23 @@ int DefaultThreads() {
     int onNode = 1;
     MPI_Comm_size(node, &onNode);
     MPI_Comm_free(&node);
-    return std::max(1, tbb::info::default_concurrency() / onNode);
+    // The cores this rank may run on (its affinity mask) against the node's: a launcher
+    // that bound the rank to fewer cores has already given it its share.
+    const int allowed = tbb::info::default_concurrency();
+    const long online = sysconf(_SC_NPROCESSORS_ONLN);
+    if (online > 0 && allowed < online) return std::max(1, allowed);
+    return std::max(1, allowed / onNode);
+}
+
+/// Threads beyond the cores a rank may run on only share those cores: say so once.
+void WarnIfThreadsExceedBinding(int threads) {
+    const int allowed = tbb::info::default_concurrency();
+    if (threads <= allowed || !mpi::Root()) return;
+    log::Warn("threads is " + std::to_string(threads) + " but this process may run on " +
+              (allowed == 1 ? std::string("1 core, so its threads share it")
+                            : std::to_string(allowed) + " cores, so its threads share them") +
+              "; mpirun binds each rank to one core when it starts 2 ranks or fewer: add "
+              "--bind-to none, or a binding that gives each rank as many cores as threads");
 }
 
 }  // namespace
@@ -382,6 +400,7 @@ int RunRender(const RenderArgs& args) {
     Scene scene = LoadScene(args.scene, args.overrides);
     const int P = mpi::WorldSize(), rank = mpi::WorldRank();
     const bool isPartition = partition::IsPartitionDirectory(scene.data.mesh);
+    WarnIfThreadsExceedBinding(scene.threads);
     if (P == 1 && !isPartition) {
         RenderStats stats;
         RunRenderJob(scene, stats);

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <string>
+#include <thread>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -163,6 +164,28 @@ TEST_F(MpiRender, TooFewBricksIsAClearError) {
                         &out);
     EXPECT_NE(bad, 0);
     EXPECT_NE(out.find("fewer than the 7 MPI ranks"), std::string::npos) << out;
+}
+
+// More threads than the cores a rank is bound to only share those cores: the job says
+// so (mpirun binds each of up to 2 ranks to one core unless told otherwise).
+TEST_F(MpiRender, ThreadsBeyondTheBoundCoresAreReported) {
+    const std::string render = std::string(HPRAY_BINARY) + " render " +
+                               std::string(HPRAY_SOURCE_DIR) +
+                               "/configs/ball_p2.yaml --set threads=2 --set output.exr=null"
+                               " --set output.png=null --set output.stats=null"
+                               " --set camera.width=8 --set camera.height=8";
+    const std::string warning = "threads is 2 but this process may run on 1 core";
+    std::string out;
+    ASSERT_EQ(RunCommand(std::string(HPRAY_MPIEXEC) +
+                             " -n 1 --allow-run-as-root --bind-to core " + render,
+                         &out),
+              0)
+        << out;
+    EXPECT_NE(out.find(warning), std::string::npos) << out;
+    if (std::thread::hardware_concurrency() >= 2) {
+        ASSERT_EQ(RunCommand(Mpirun(1) + render, &out), 0) << out;  // --bind-to none
+        EXPECT_EQ(out.find("threads is 2 but"), std::string::npos) << out;
+    }
 }
 
 TEST_F(MpiRender, ImageSplitOfAPartitionIsAClearError) {
