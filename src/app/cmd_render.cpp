@@ -527,9 +527,11 @@ int RunRender(const RenderArgs& args) {
                 t0 = std::chrono::steady_clock::now();
                 const Mesh mesh = partition::LoadBrick(*part, b, options);
                 stats.timing.load += Seconds(t0);
-                RenderOneBrick(mesh, plan.boxes[b], scene, image, stats);
+                RenderOneBrick(mesh, plan.boxes[b], scene, image, stats, nullptr,
+                               &accumulated);
             } else {
-                prepared->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats);
+                prepared->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats,
+                                 nullptr, &accumulated);
             }
             ++loaded;
             compositor::CompositeOver(accumulated, image);

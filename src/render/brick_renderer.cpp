@@ -499,7 +499,7 @@ namespace {
 /// Renders tiles [begin, end) of the camera's image (already sized) with `threads` threads.
 void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int begin,
                  int end, Image& image, RenderCounters& counters,
-                 std::vector<SegmentCostSample>* costSamples) {
+                 std::vector<SegmentCostSample>* costSamples, const Image* front) {
     const int W = camera.Width(), H = camera.Height();
     HPRAY_CHECK(image.width == W && image.height == H);
     std::unique_ptr<tbb::global_control> limit;
@@ -519,6 +519,8 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
         PixelSample s;
         for (int j = y0; j < std::min(H, y0 + kRenderTile); ++j)
             for (int i = x0; i < std::min(W, x0 + kRenderTile); ++i) {
+                // Behind an opaque pixel nothing shows: leave it empty, untraced.
+                if (front && front->a[static_cast<std::size_t>(j) * W + i] >= 1.0) continue;
                 const CameraRay cr = camera.PixelRay(i, j);
                 Ray ray;
                 for (int d = 0; d < 3; ++d) {
@@ -558,16 +560,18 @@ int RenderTileCount(const Camera& camera) {
 }
 
 void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
-                 RenderCounters& counters, std::vector<SegmentCostSample>* costSamples) {
+                 RenderCounters& counters, std::vector<SegmentCostSample>* costSamples,
+                 const Image* front) {
     image.Resize(camera.Width(), camera.Height());
+    if (front) HPRAY_CHECK(front->width == image.width && front->height == image.height);
     RenderTiles(setup, camera, threads, 0, RenderTileCount(camera), image, counters,
-                costSamples);
+                costSamples, front);
 }
 
 void RenderBrickTiles(const BrickSetup& setup, const Camera& camera, int threads, int begin,
                       int end, Image& image, RenderCounters& counters) {
     HPRAY_CHECK(0 <= begin && begin <= end && end <= RenderTileCount(camera));
-    RenderTiles(setup, camera, threads, begin, end, image, counters, nullptr);
+    RenderTiles(setup, camera, threads, begin, end, image, counters, nullptr, nullptr);
 }
 
 }  // namespace hpray

@@ -116,10 +116,13 @@ struct SegmentCostSample {
 /// `costSamples` is given, the brick is rendered to measure cost, not to be seen: rays do
 /// not stop where they become opaque (their transmittance restarts at 1 and the stop is
 /// recorded), and one SegmentCostSample per traversed segment is appended to it (in no
-/// particular order).
+/// particular order). `front`: what lies in front of this brick, composited (same size);
+/// its fully opaque pixels (alpha 1) hide the brick there, so they are left empty and not
+/// traced — exactly what Over would keep of them.
 void RenderBrick(const BrickSetup& setup, const Camera& camera, int threads, Image& image,
                  RenderCounters& counters,
-                 std::vector<SegmentCostSample>* costSamples = nullptr);
+                 std::vector<SegmentCostSample>* costSamples = nullptr,
+                 const Image* front = nullptr);
 
 /// The image is rendered in square tiles of kRenderTile pixels, numbered row by row.
 constexpr int kRenderTile = 16;

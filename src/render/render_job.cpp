@@ -137,8 +137,8 @@ const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
 
 void PreparedBrick::Render(const Scene& scene, const Camera& camera,
                            const std::optional<AxisBox>& clip, Image& image,
-                           RenderStats& stats,
-                           std::vector<SegmentCostSample>* costSamples) {
+                           RenderStats& stats, std::vector<SegmentCostSample>* costSamples,
+                           const Image* front) {
     const auto t0 = std::chrono::steady_clock::now();
     BrickSetup& setup = impl_->setup;
     const std::optional<AxisBox> sceneClip = setup.clipBox;
@@ -159,7 +159,7 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
         setup.clipBox = box;
     }
     const TraceCounters before = impl_->traverser->Counters();
-    RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples);
+    RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples, front);
     AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     setup.clipBox = sceneClip;
     stats.timing.render += Seconds(t0);
@@ -176,9 +176,9 @@ void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int be
 
 void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
-                    std::vector<SegmentCostSample>* costSamples) {
+                    std::vector<SegmentCostSample>* costSamples, const Image* front) {
     PreparedBrick brick(mesh, box, scene, stats);
-    brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, costSamples);
+    brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, costSamples, front);
 }
 
 void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats) {

@@ -34,7 +34,8 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
 /// the measured cost of every segment is appended to it (brick_renderer.h).
 void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
-                    std::vector<SegmentCostSample>* costSamples = nullptr);
+                    std::vector<SegmentCostSample>* costSamples = nullptr,
+                    const Image* front = nullptr);
 
 /// A brick ready to render many times: geometry, traverser and per-field setup built once
 /// (the in-memory split renders a pre-pass and then its own box of the same mesh).
@@ -50,9 +51,12 @@ class PreparedBrick {
 
     /// Renders for `camera` with rays further clipped to `clip` (besides the scene's clip
     /// box), adding the render time and counters to `stats`; see RenderOneBrick.
+    /// `front`: the composite of what lies in front; pixels it makes opaque are not traced
+    /// (brick_renderer.h: RenderBrick).
     void Render(const Scene& scene, const Camera& camera, const std::optional<AxisBox>& clip,
                 Image& image, RenderStats& stats,
-                std::vector<SegmentCostSample>* costSamples = nullptr);
+                std::vector<SegmentCostSample>* costSamples = nullptr,
+                const Image* front = nullptr);
 
     /// Renders only tiles [begin, end) of the camera's image (brick_renderer.h:
     /// RenderBrickTiles) into `image`, which must have the camera's size; other pixels are

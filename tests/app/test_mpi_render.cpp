@@ -264,6 +264,35 @@ TEST_F(MpiRender, BricksThatCannotContributeAreNotRead) {
 namespace hpray {
 namespace {
 
+/// A number of a stats file: the value after the first "key": (a flat search, enough for
+/// the keys the tests read).
+double StatsNumber(const std::filesystem::path& file, const std::string& key) {
+    std::FILE* f = std::fopen(file.c_str(), "r");
+    EXPECT_NE(f, nullptr) << file;
+    if (!f) return -1;
+    std::array<char, 1 << 16> buf{};
+    const std::size_t n = std::fread(buf.data(), 1, buf.size() - 1, f);
+    std::fclose(f);
+    const std::string json(buf.data(), n);
+    const auto at = json.find("\"" + key + "\": ");
+    EXPECT_NE(at, std::string::npos) << key;
+    return at == std::string::npos ? -1 : std::stod(json.substr(at + key.size() + 4));
+}
+
+// A rank renders its bricks front to back; where the bricks in front are already opaque
+// (the inner sphere), the bricks behind are not traced: the same image, and exactly the
+// single-brick render's isosurface hits (hidden hits behind the opaque sphere used to be
+// found and counted).
+TEST_F(MpiRender, OccludedPixelsOfBackBricksAreNotTraced) {
+    const Camera& camera = kCameras[0];
+    const auto reference = Render("", "builtin:ball-p2", camera, "occl_ref");
+    const auto got = Render("", (kDir / "part6").string(), camera, "occl_part");
+    ExpectSame(reference, got, "occlusion");
+    const double hits = StatsNumber(kDir / "occl_ref.json", "hits");
+    EXPECT_GT(hits, 500);
+    EXPECT_EQ(StatsNumber(kDir / "occl_part.json", "hits"), hits);
+}
+
 // A volume with embedded semi-transparent isosurfaces and a clip box: the integral is
 // split at brick boxes and composited across ranks; up to 8 ranks (oversubscribed).
 TEST_F(MpiRender, VolumeWithIsosurfacesOnUpToEightRanks) {
