@@ -232,12 +232,34 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
     };
     std::vector<Work> stack;
     stack.push_back({p, p(p.a) - C, p(p.b) - C, false, 0});
+    // Windows examined before the rest is given up as one unresolved window: a bound on
+    // the work whatever the series (the flat test below handles the known cause).
+    constexpr int kMaxWindows = 20000;
+    int windows = 0;
+    double flatEnd = std::numeric_limits<double>::quiet_NaN();
     while (!stack.empty()) {
         Work w = std::move(stack.back());
         stack.pop_back();
         const double lo = w.q.a, hi = w.q.b;
+        if (++windows > kMaxWindows) {
+            double end = hi;
+            for (const Work& rest : stack) end = std::max(end, rest.q.b);
+            visit(lo, end, 4, 0.5 * (lo + end));
+            return;
+        }
         // |q - C| >= |c0 - C| - tail: exclude when that exceeds the projection error.
         if (!w.monotone && TailExcluded(w.q, C) > eps) continue;
+        // |q - C| <= |c0 - C| + tail: within twice the error of C over the whole window,
+        // the field touches the level along an interval, where no root can be told from
+        // another: one contact at the start of each run of such windows. (Twice: windows
+        // where q - C is near the error itself would otherwise be split to the root
+        // tolerance wherever q is flat, as at a contact of high multiplicity.)
+        if (std::abs(w.q.c[0] - C) + w.q.Tail() <= 2 * eps) {
+            const bool continues = lo == flatEnd;
+            flatEnd = hi;
+            if (!continues && visit(lo, hi, 2, lo)) return;
+            continue;
+        }
         LegendreSeries d;
         bool monotone = w.monotone;
         if (!monotone) {

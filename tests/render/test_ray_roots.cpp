@@ -208,6 +208,52 @@ TEST(RayRoots, RandomPolynomialsWithKnownRoots) {
 namespace hpray {
 namespace {
 
+// A field that stays within rounding of the level over a whole interval (a flat contact
+// of high multiplicity, or a field equal to the level along the ray: nodal values that
+// sit exactly on a transfer-function breakpoint, as deal.II's material_ids do) has no
+// isolated roots there. Root isolation must treat such an interval as one contact rather
+// than bisect it down to the root tolerance (which took minutes per ray), and report it.
+TEST(RayRoots, FieldEqualToTheLevelOverAnIntervalIsOneContact) {
+    for (int power : {12, 0}) {
+        long evaluations = 0;
+        auto f = [&](double t) {
+            ++evaluations;
+            return 0.7 + (power > 0 ? std::pow(t - 0.5, power) : 0.0);
+        };
+        ProjectionOptions projection;
+        RootOptions options;
+        std::vector<ProjectedPiece> pieces;
+        ProjectionStats stats;
+        std::vector<double> scratch;
+        ProjectSegment(f, 0.0, 1.0, projection, pieces, stats, scratch);
+        std::vector<RootResult> found;
+        const int failures = FindRoots(f, pieces, 0.7, options, scratch, [&](const RootResult& r) {
+            found.push_back(r);
+            return false;
+        });
+        SCOPED_TRACE(power);
+        EXPECT_EQ(failures, 0);
+        ASSERT_FALSE(found.empty());
+        EXPECT_LT(found.size(), 200u);
+        EXPECT_LT(evaluations, 100000);
+        double eps = 0;
+        for (const ProjectedPiece& piece : pieces) eps = std::max(eps, piece.eps);
+        EXPECT_LT(eps, 1e-12);
+        for (const RootResult& r : found) {
+            // Every contact lies where the field is within its error of the level, and
+            // reports that residual.
+            EXPECT_LE(std::abs(f(r.t) - 0.7), 2 * eps + 1e-16) << r.t;
+            EXPECT_EQ(r.residual, std::abs(f(r.t) - 0.7)) << r.t;
+        }
+        // One contact per run: the flat interval is not reported piece by piece.
+        EXPECT_EQ(found.size(), 1u);
+        // Without stopping, FirstRoot gives the first contact.
+        const RootResult first = FirstRoot(f, pieces, 0.7, options, scratch);
+        EXPECT_NE(first.kind, RootKind::None);
+        EXPECT_EQ(first.t, found.front().t);
+    }
+}
+
 TEST(RayRoots, FindRootsReturnsEveryRootInOrder) {
     // sin(20 t) = 0.3 on [0.05, 2]: roots at (asin(0.3) + 2 pi k) / 20 and
     // (pi - asin(0.3) + 2 pi k) / 20.
