@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <string>
 #include <sys/wait.h>
 
@@ -289,6 +290,74 @@ TEST(CliRender, NonConformingDealiiOutputRendersCleanly) {
     EXPECT_GT(j["mapping"]["inversions"].get<double>(), 10000);
     EXPECT_EQ(j["mapping"]["failures"], 0);
     EXPECT_GT(j["segments"].get<double>(), 1000);
+}
+
+// Every curved and mixed mesh of the shared data (all but the 1.25M-tet one), with every
+// scalar point field, rendered as a volume spanning the field's range with a
+// semi-transparent isosurface at its middle and transfer-function breakpoints at its
+// extremes: every inversion converges, every ray walks without repair, no root window is
+// left unresolved, and every hit has a residual at the rounding level of the field. This
+// is what caught step-44's non-conforming faces, the order-9 spiral's inversions and
+// step-65's material_ids (constant per cell, equal to the breakpoints), which ran for
+// minutes.
+TEST(CliRender, EverySharedMeshAndFieldRendersCleanly) {
+    const std::vector<std::string> files = {
+        "gmsh_boolean_tet_p4.vtu",       "mfem_escher_tet_p3.vtu",
+        "mfem_toroid_wedge_p3.vtu",      "mfem_toroid_hex_p3.vtu",
+        "mfem_spiral_hex_p9.vtu",        "mfem_fichera_mixed_p3.vtu",
+        "mfem_escher_quadtet_p2.vtu",    "dealii_step65_hex_q3.vtu",
+        "dealii_step44_hex_q2.vtu",      "mfem_beam_hex_elasticity_p3.vtu",
+        "mfem_fichera_mixed16_linear.vtu", "gmsh_hybrid_pyr_p3.msh",
+        "gmsh_pripyrtet_p2.msh"};
+    const auto dir = std::filesystem::temp_directory_path() / "hpray_test_cli";
+    std::filesystem::create_directories(dir);
+    int renders = 0;
+    for (const std::string& file : files) {
+        const std::string path = std::string(HPRAY_SHARED_DATA) + "/" + file;
+        if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
+        const auto info = InfoJson(path);
+        std::array<double, 3> lo, hi, centre;
+        double size = 0;
+        for (int d = 0; d < 3; ++d) {
+            lo[d] = info["bounds"][0][d].get<double>();
+            hi[d] = info["bounds"][1][d].get<double>();
+            centre[d] = 0.5 * (lo[d] + hi[d]);
+            size = std::max(size, hi[d] - lo[d]);
+        }
+        for (const auto& [name, field] : info["fields"].items()) {
+            if (field["association"] != "point" || field["components"] != 1) continue;
+            const double f0 = field["range"][0].get<double>(), f1 = field["range"][1].get<double>();
+            if (!(f1 > f0)) continue;
+            const auto scene = dir / "shared.yaml";
+            const auto stats = dir / "shared.json";
+            std::ofstream(scene) << std::setprecision(17) << "data: {mesh: " << path << "}\n"
+                                 << "camera: {position: [" << centre[0] + 1.7 * size << ", "
+                                 << centre[1] + 1.3 * size << ", " << centre[2] + 2.1 * size
+                                 << "], look_at: [" << centre[0] << ", " << centre[1] << ", "
+                                 << centre[2] << "], up: [0, 1, 0], fov_y: 35, width: 20, "
+                                 << "height: 20}\n"
+                                 << "isosurfaces: [{field: " << name << ", value: "
+                                 << 0.5 * (f0 + f1) << ", opacity: 0.6}]\n"
+                                 << "volume: {color_field: " << name << ", color_tf: [[" << f0
+                                 << ", 0, 0, 1], [" << f1 << ", 1, 0, 0]], extinction_tf: [["
+                                 << f0 << ", " << 1 / size << "], [" << f1 << ", " << 4 / size
+                                 << "]]}\n"
+                                 << "output: {stats: " << stats.string() << "}\nthreads: 2\n";
+            const RunResult r = RunHpray("render " + scene.string() + " -q");
+            ASSERT_EQ(r.code, 0) << file << " " << name << "\n" << r.out;
+            std::ifstream in(stats);
+            const auto j = nlohmann::json::parse(in);
+            const std::string what = file + " " + name;
+            EXPECT_EQ(j["mapping"]["failures"], 0) << what;
+            EXPECT_EQ(j["traversal"]["walk_repairs"], 0) << what;
+            EXPECT_EQ(j["traversal"]["walk_failures"], 0) << what;
+            EXPECT_EQ(j["iso"]["root_failures"], 0) << what;
+            EXPECT_LE(j["iso"]["max_residual_relative"].get<double>(), 1e-11) << what;
+            EXPECT_GT(j["segments"].get<double>(), 0) << what;
+            ++renders;
+        }
+    }
+    EXPECT_GE(renders, 20);
 }
 
 TEST(CliInfo, VectorFieldsReportComponents) {
