@@ -220,17 +220,16 @@ TEST(RayRoots, FieldEqualToTheLevelOverAnIntervalIsOneContact) {
             ++evaluations;
             return 0.7 + (power > 0 ? std::pow(t - 0.5, power) : 0.0);
         };
-        ProjectionOptions projection;
-        RootOptions options;
-        std::vector<ProjectedPiece> pieces;
-        ProjectionStats stats;
-        std::vector<double> scratch;
-        ProjectSegment(f, 0.0, 1.0, projection, pieces, stats, scratch);
+        Finder finder;
+        const std::vector<ProjectedPiece>& pieces = finder.pieces;
+        ProjectSegment(f, 0.0, 1.0, finder.projection, finder.pieces, finder.stats,
+                       finder.scratch);
         std::vector<RootResult> found;
-        const int failures = FindRoots(f, pieces, 0.7, options, scratch, [&](const RootResult& r) {
-            found.push_back(r);
-            return false;
-        });
+        const int failures = FindRoots(f, pieces, 0.7, finder.roots, finder.scratch,
+                                       [&](const RootResult& r) {
+                                           found.push_back(r);
+                                           return false;
+                                       });
         SCOPED_TRACE(power);
         EXPECT_EQ(failures, 0);
         ASSERT_FALSE(found.empty());
@@ -248,7 +247,7 @@ TEST(RayRoots, FieldEqualToTheLevelOverAnIntervalIsOneContact) {
         // One contact per run: the flat interval is not reported piece by piece.
         EXPECT_EQ(found.size(), 1u);
         // Without stopping, FirstRoot gives the first contact.
-        const RootResult first = FirstRoot(f, pieces, 0.7, options, scratch);
+        const RootResult first = FirstRoot(f, pieces, 0.7, finder.roots, finder.scratch);
         EXPECT_NE(first.kind, RootKind::None);
         EXPECT_EQ(first.t, found.front().t);
     }
