@@ -2,6 +2,7 @@
 #include "cost_model.h"
 
 #include <array>
+#include <cmath>
 #include <map>
 #include <mutex>
 #include <tuple>
@@ -14,26 +15,25 @@
 namespace hpray::partition {
 namespace {
 
-double TriangleArea(const double* a, const double* b, const double* c) {
+/// Half the length of (p1 - p0) x (q1 - q0): a triangle's area from two edges, or a
+/// planar-ish quadrilateral's from its diagonals.
+double HalfCrossNorm(const double* p0, const double* p1, const double* q0, const double* q1) {
     double u[3], v[3];
     for (int d = 0; d < 3; ++d) {
-        u[d] = b[d] - a[d];
-        v[d] = c[d] - a[d];
+        u[d] = p1[d] - p0[d];
+        v[d] = q1[d] - q0[d];
     }
     const double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
                  z = u[0] * v[1] - u[1] * v[0];
     return 0.5 * std::sqrt(x * x + y * y + z * z);
 }
 
+double TriangleArea(const double* a, const double* b, const double* c) {
+    return HalfCrossNorm(a, b, a, c);
+}
+
 double QuadArea(const double* a, const double* b, const double* c, const double* d) {
-    double p[3], q[3];
-    for (int k = 0; k < 3; ++k) {
-        p[k] = c[k] - a[k];
-        q[k] = d[k] - b[k];
-    }
-    const double x = p[1] * q[2] - p[2] * q[1], y = p[2] * q[0] - p[0] * q[2],
-                 z = p[0] * q[1] - p[1] * q[0];
-    return 0.5 * std::sqrt(x * x + y * y + z * z);
+    return HalfCrossNorm(a, c, b, d);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include "render/render_job.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
+#include "trace/trace_test_meshes.h"
 
 namespace hpray {
 namespace {
@@ -194,24 +195,8 @@ isosurfaces:
 
 // A field that is the world x coordinate of an isoparametric, strongly curved hex mesh is
 // exactly x, whatever the curvature: its isosurface is the plane x = C.
-Mesh CurvedHexMesh(int n, int p, double amplitude) {
-    Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=" + std::to_string(p));
-    (void)n;
-    const double pi = std::acos(-1.0);
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
-        double* x = &mesh.points[3 * i];
-        const double bump = std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
-        const double X = x[0], Y = x[1], Z = x[2];
-        x[0] = X + amplitude * bump * std::cos(3 * Y);
-        x[1] = Y + amplitude * bump * std::sin(2 * Z);
-        x[2] = Z + amplitude * bump * std::cos(2 * X);
-    }
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) mesh.pointFields[0].values[i] = mesh.points[3 * i];
-    return mesh;
-}
-
 TEST(IsoRender, HighlyCurvedHexesGiveTheExactPlaneOfAnIsoparametricField) {
-    const Mesh mesh = CurvedHexMesh(5, 4, 0.08);
+    const Mesh mesh = testing::CurvedHexesWithFieldX(0.08, 4);
     Scene scene = MakeScene(R"(
 data: {mesh: "builtin:nk-sinc"}
 camera: {position: [2.6, 1.7, 2.2], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 32,

@@ -481,18 +481,7 @@ volume:
 // depth is a L + b integral x dt in closed form, while the renderer takes the Kronrod
 // path.
 TEST(VolumeConstant, LinearExtinctionOfXOnCurvedHexes) {
-    Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=4");
-    const double pi = std::acos(-1.0);
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
-        double* x = &mesh.points[3 * i];
-        const double bump =
-            std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
-        const double X = x[0], Y = x[1], Z = x[2];
-        x[0] = X + 0.06 * bump * std::cos(3 * Y);
-        x[1] = Y + 0.06 * bump * std::sin(2 * Z);
-        x[2] = Z + 0.06 * bump * std::cos(2 * X);
-        mesh.pointFields[0].values[i] = x[0];
-    }
+    const Mesh mesh = testing::CurvedHexesWithFieldX(0.06);
     Scene scene = MakeScene(R"(
 data: {mesh: "builtin:nk-sinc"}
 volume:

@@ -15,6 +15,7 @@
 #include "render/test_volume_reference.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
+#include "trace/trace_test_meshes.h"
 
 namespace hpray {
 namespace {
@@ -459,18 +460,7 @@ slices:
 // world x coordinate, so the slice colour is the transfer function of x at the plane
 // point (found through Newton inversion in the curved cell).
 TEST(VolumeHighOrder, SliceOfCurvedCellsIsExact) {
-    Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=4");
-    const double pi = std::acos(-1.0);
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
-        double* x = &mesh.points[3 * i];
-        const double bump =
-            std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
-        const double X = x[0], Y = x[1], Z = x[2];
-        x[0] = X + 0.08 * bump * std::cos(3 * Y);
-        x[1] = Y + 0.08 * bump * std::sin(2 * Z);
-        x[2] = Z + 0.08 * bump * std::cos(2 * X);
-        mesh.pointFields[0].values[i] = x[0];
-    }
+    const Mesh mesh = testing::CurvedHexesWithFieldX(0.08);
     const Scene scene = MakeScene(R"(
 data: {mesh: "builtin:nk-sinc"}
 camera: {position: [2.2, 1.6, 2.6], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 30,

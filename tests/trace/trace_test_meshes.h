@@ -8,8 +8,10 @@
 #include <cstdint>
 #include <functional>
 #include <random>
+#include <string>
 #include <vector>
 
+#include "mesh/builtin.h"
 #include "mesh/mesh.h"
 #include "trace/ray.h"
 
@@ -150,6 +152,24 @@ inline Ray MakeRayDir(const Vec3& through, Vec3 dir, double back = 3.0) {
         r.origin[d] = through[d] - back * r.dir[d];
     }
     return r;
+}
+
+/// Isoparametric curved hexes: builtin nk-sinc's hexes of `order` with every node moved by
+/// a smooth bump of `amplitude` that vanishes on the cube's faces, and its field u set to
+/// the moved node's x, so u is exactly the world x coordinate inside the curved cells.
+inline Mesh CurvedHexesWithFieldX(double amplitude, int order = 4) {
+    Mesh mesh = MakeBuiltin("builtin:nk-sinc?order=" + std::to_string(order));
+    const double pi = std::acos(-1.0);
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        double* x = &mesh.points[3 * i];
+        const double bump = std::sin(pi * x[0]) * std::sin(pi * x[1]) * std::sin(pi * x[2]);
+        const double X = x[0], Y = x[1], Z = x[2];
+        x[0] = X + amplitude * bump * std::cos(3 * Y);
+        x[1] = Y + amplitude * bump * std::sin(2 * Z);
+        x[2] = Z + amplitude * bump * std::cos(2 * X);
+        mesh.pointFields[0].values[i] = x[0];
+    }
+    return mesh;
 }
 
 }  // namespace hpray::testing
