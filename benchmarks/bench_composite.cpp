@@ -3,7 +3,7 @@
 //   mpiexec -n P bench_composite [--sizes 512,1024,2048,4096] [--scenes dense,boxes]
 //                                [--methods swap,direct,gather] [--reps 5]
 //
-// Every rank owns one leaf of RegularRankTree over the unit cube. Scenes: "dense", every
+// Every rank owns one leaf of RegularKdTree over the unit cube. Scenes: "dense", every
 // pixel of every rank's image non-empty (the worst case, no run-length gain); "boxes",
 // each rank's fog fills only the pixels whose ray crosses its box, seen by a perspective
 // camera that frames the cube (what a renderer produces). Rank 0 prints one CSV row per
@@ -79,7 +79,7 @@ void MakeImage(Image& image, const std::string& scene, const Camera& camera,
 }
 
 /// Leaf box of `rank` in `tree` over the unit cube.
-void LeafBox(const CompositeTree& tree, int rank, std::array<double, 3>& lo,
+void LeafBox(const KdTree& tree, int rank, std::array<double, 3>& lo,
              std::array<double, 3>& hi) {
     lo = {0, 0, 0};
     hi = {1, 1, 1};
@@ -87,9 +87,9 @@ void LeafBox(const CompositeTree& tree, int rank, std::array<double, 3>& lo,
     std::vector<int> parent(tree.nodes.size(), -1);
     int leaf = -1;
     for (std::size_t id = 0; id < tree.nodes.size(); ++id) {
-        const CompositeNode& node = tree.nodes[id];
+        const KdNode& node = tree.nodes[id];
         if (node.IsLeaf()) {
-            if (node.rank == rank) leaf = static_cast<int>(id);
+            if (node.leaf == rank) leaf = static_cast<int>(id);
         } else {
             parent[node.low] = parent[node.high] = static_cast<int>(id);
         }
@@ -97,7 +97,7 @@ void LeafBox(const CompositeTree& tree, int rank, std::array<double, 3>& lo,
     std::vector<int> path;
     for (int id = leaf; id >= 0; id = parent[id]) path.push_back(id);
     for (std::size_t k = path.size() - 1; k > 0; --k) {
-        const CompositeNode& node = tree.nodes[path[k]];
+        const KdNode& node = tree.nodes[path[k]];
         if (node.low == path[k - 1])
             hi[node.axis] = node.split;
         else
@@ -127,7 +127,7 @@ int main(int argc, char** argv) {
             mpi::Abort("unknown option " + key, 2);
     }
     const int rank = mpi::WorldRank(), size = mpi::WorldSize();
-    const CompositeTree tree = RegularRankTree(size, {0, 0, 0}, {1, 1, 1});
+    const KdTree tree = RegularKdTree(size, hpray::Box{{0, 0, 0}, {1, 1, 1}});
     std::array<double, 3> lo, hi;
     LeafBox(tree, rank, lo, hi);
     if (rank == 0)
@@ -139,7 +139,7 @@ int main(int argc, char** argv) {
         if (n < 1) mpi::Abort("bad size " + sizeText, 2);
         const SceneCamera settings = BenchCamera(n);
         const Camera camera(settings);
-        const CompositeView view = ViewFromCamera(settings);
+        const ViewOrigin view = ViewOriginOf(settings);
         for (const std::string& scene : scenes) {
             for (const std::string& methodName : methods) {
                 const Method method = methodName == "swap"     ? Method::TreeSwap

@@ -87,8 +87,8 @@ std::vector<hpray::Ray> ViewRays(const Mesh& mesh, int n, unsigned seed) {
     const auto b = mesh.Bounds();
     double c[3], r = 0;
     for (int d = 0; d < 3; ++d) {
-        c[d] = 0.5 * (b[0][d] + b[1][d]);
-        r += 0.25 * (b[1][d] - b[0][d]) * (b[1][d] - b[0][d]);
+        c[d] = 0.5 * (b.lo[d] + b.hi[d]);
+        r += 0.25 * (b.hi[d] - b.lo[d]) * (b.hi[d] - b.lo[d]);
     }
     r = std::sqrt(r);
     std::mt19937_64 rng(seed);

@@ -100,8 +100,8 @@ Scene CalibrationScene(const Mesh& mesh, const std::string& field, int size) {
     const auto b = mesh.Bounds();
     double c[3], diag = 0;
     for (int d = 0; d < 3; ++d) {
-        c[d] = 0.5 * (b[0][d] + b[1][d]);
-        diag += (b[1][d] - b[0][d]) * (b[1][d] - b[0][d]);
+        c[d] = 0.5 * (b.lo[d] + b.hi[d]);
+        diag += (b.hi[d] - b.lo[d]) * (b.hi[d] - b.lo[d]);
     }
     diag = std::sqrt(diag);
     const double dir[3] = {1.3 / 2.34, 0.9 / 2.34, 1.7 / 2.34};  // ~unit

@@ -41,16 +41,16 @@ struct Fnv {
     }
 };
 
-std::uint64_t Fingerprint(const CompositeTree& tree, const CompositeView& view,
+std::uint64_t Fingerprint(const KdTree& tree, const ViewOrigin& view,
                           Method method) {
     Fnv f;
     f.Add(tree.root);
-    for (const CompositeNode& node : tree.nodes) {
+    for (const KdNode& node : tree.nodes) {
         f.Add(node.axis);
         f.Add(node.split);
         f.Add(node.low);
         f.Add(node.high);
-        f.Add(node.rank);
+        f.Add(node.leaf);
     }
     f.Add(view.orthographic);
     for (int d = 0; d < 3; ++d) {
@@ -63,9 +63,9 @@ std::uint64_t Fingerprint(const CompositeTree& tree, const CompositeView& view,
 
 /// Checks that all ranks agree on everything the message pattern depends on. Every rank
 /// learns the outcome, so on failure all throw together and none is left waiting.
-void CheckAgreement(const Image& image, const CompositeTree& tree,
-                    const CompositeView& view, Method method, MPI_Comm comm, int size) {
-    std::string problem = TreeProblem(tree, size);
+void CheckAgreement(const Image& image, const KdTree& tree,
+                    const ViewOrigin& view, Method method, MPI_Comm comm, int size) {
+    std::string problem = tree.Problem(size);
     const std::size_t n = image.PixelCount();
     if (problem.empty() && image.width > 0 && image.height > 0) {
         for (const auto& [name, channel] : image.Channels())
@@ -281,8 +281,8 @@ std::uint64_t GatherReference(const std::vector<int>& visibility, int me, Image&
 
 }  // namespace
 
-CompositeStats Composite(Image& image, const CompositeTree& tree,
-                         const CompositeView& view, MPI_Comm comm, Method method) {
+CompositeStats Composite(Image& image, const KdTree& tree,
+                         const ViewOrigin& view, MPI_Comm comm, Method method) {
     int me = 0, size = 1;
     MPI_Comm_rank(comm, &me);
     MPI_Comm_size(comm, &size);
@@ -294,7 +294,7 @@ CompositeStats Composite(Image& image, const CompositeTree& tree,
     // From here on a failure on one rank would leave others blocked: end the job instead.
     try {
         DupComm work(comm);
-        const std::vector<int> visibility = VisibilityOrder(tree, view);
+        const std::vector<int> visibility = tree.FrontToBack(view);
         if (method == Method::GatherReference) {
             const double t0 = MPI_Wtime();
             gatherLocal = GatherReference(visibility, me, image, work.Get());

@@ -64,8 +64,8 @@ struct CompositeStats {
 /// ranks and `tree` valid for P ranks: a rank that finds otherwise (or mismatched image
 /// sizes) makes every rank throw InternalError together, before any exchange. A failure
 /// during the exchange ends the job through mpi::Abort, so no rank waits forever.
-CompositeStats Composite(Image& image, const CompositeTree& tree,
-                         const CompositeView& view, MPI_Comm comm,
+CompositeStats Composite(Image& image, const KdTree& tree,
+                         const ViewOrigin& view, MPI_Comm comm,
                          Method method = Method::TreeSwap);
 
 }  // namespace hpray::compositor

@@ -18,11 +18,11 @@ PixelRange EqualCut(std::size_t pixels, std::size_t count, std::size_t k) {
 /// orders evenly (the k-th of g ranks of a child sits at fraction (k + 1/2) / g; ties put
 /// the low child first), so that every subtree's ranks are spread across the image.
 /// Filled bottom-up; `orders[id]` for every node below and at `id`.
-void SwapOrders(const CompositeTree& tree, int id,
+void SwapOrders(const KdTree& tree, int id,
                 std::vector<std::vector<int>>& orders) {
-    const CompositeNode& node = tree.nodes[id];
+    const KdNode& node = tree.nodes[id];
     if (node.IsLeaf()) {
-        orders[id] = {node.rank};
+        orders[id] = {node.leaf};
         return;
     }
     SwapOrders(tree, node.low, orders);
@@ -70,10 +70,10 @@ std::vector<Piece> ChildTiling(const std::vector<Piece>& parent,
 
 /// Top-down: records the step of node `id`, whose ranks hold `tiling` after it, and
 /// recurses into its children. Steps are stored in post-order afterwards.
-void PlanNode(const CompositeTree& tree, int id, int depth, std::size_t pixels,
+void PlanNode(const KdTree& tree, int id, int depth, std::size_t pixels,
               const std::vector<Piece>& tiling, std::vector<char>& inChild,
               const std::vector<std::vector<int>>& orders, CompositePlan& plan) {
-    const CompositeNode& node = tree.nodes[id];
+    const KdNode& node = tree.nodes[id];
     if (node.IsLeaf()) return;
     MergeStep step;
     step.node = id;
@@ -92,7 +92,7 @@ void PlanNode(const CompositeTree& tree, int id, int depth, std::size_t pixels,
 
 }  // namespace
 
-CompositePlan PlanTreeSwap(const CompositeTree& tree, int ranks, std::size_t pixels) {
+CompositePlan PlanTreeSwap(const KdTree& tree, int ranks, std::size_t pixels) {
     ValidateTree(tree, ranks);
     CompositePlan plan;
     plan.pixels = pixels;
@@ -109,7 +109,7 @@ CompositePlan PlanTreeSwap(const CompositeTree& tree, int ranks, std::size_t pix
     }
     std::vector<char> inChild(ranks, 0);
     PlanNode(tree, tree.root, 0, pixels, last, inChild, orders, plan);
-    plan.rounds = TreeHeight(tree);
+    plan.rounds = tree.Height();
     return plan;
 }
 

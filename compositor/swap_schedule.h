@@ -21,7 +21,7 @@ struct Piece {
 /// sends the part of its old piece that lies in another rank's new piece to that rank,
 /// and composites what it receives for its new piece in the children's visibility order.
 struct MergeStep {
-    int node = -1;  ///< the CompositeTree node merged here; -1 for direct send
+    int node = -1;  ///< the KdTree node merged here; -1 for direct send
     int tag = 0;    ///< message tag: the node's depth, unique along any leaf's path
     /// Per child group, in tree order (low, high) or, for direct send, one per rank: the
     /// pieces its ranks hold before the step, in increasing range order.
@@ -49,7 +49,7 @@ struct CompositePlan {
 /// (to a pixel of rounding) for every tree shape, balanced or not, with the tree's height
 /// as the number of rounds. A balanced tree over P = 2^k ranks gives classic binary swap
 /// (halves at every round).
-CompositePlan PlanTreeSwap(const CompositeTree& tree, int ranks, std::size_t pixels);
+CompositePlan PlanTreeSwap(const KdTree& tree, int ranks, std::size_t pixels);
 
 /// Direct send: one step in which rank k receives range k of P equal ranges from every
 /// other rank. Also S (1 - 1/P) per rank, but P - 1 messages per rank instead of log2 P.

@@ -61,56 +61,18 @@ struct Best {
 
 }  // namespace
 
-int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]) {
-    int n = 0;
+int OwnerBrick(const KdTree& tree, const double x[3]) {
+    const std::vector<KdNode>& nodes = tree.nodes;
+    int n = tree.root;
     while (nodes[n].axis >= 0) n = GoesLow(nodes[n], x) ? nodes[n].low : nodes[n].high;
-    return nodes[n].brick;
+    return nodes[n].leaf;
 }
 
-void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3],
-                      const double hi[3], std::vector<int>& bricks) {
-    int stack[128];
-    int top = 0;
-    stack[top++] = 0;
-    while (top > 0) {
-        const KdNode& node = nodes[stack[--top]];
-        if (node.axis < 0) {
-            bricks.push_back(node.brick);
-            continue;
-        }
-        HPRAY_CHECK_LT(top, 126);
-        if (hi[node.axis] >= node.split) stack[top++] = node.high;
-        if (lo[node.axis] <= node.split) stack[top++] = node.low;
-    }
-}
-
-std::vector<int> OrderedBricks(const std::vector<KdNode>& nodes,
-                               const std::function<bool(const KdNode&)>& lowFirst) {
-    std::vector<int> order;
-    std::vector<int> stack{0};
-    while (!stack.empty()) {
-        const KdNode& node = nodes[stack.back()];
-        stack.pop_back();
-        if (node.axis < 0) {
-            order.push_back(node.brick);
-            continue;
-        }
-        if (lowFirst(node)) {
-            stack.push_back(node.high);
-            stack.push_back(node.low);
-        } else {
-            stack.push_back(node.low);
-            stack.push_back(node.high);
-        }
-    }
-    return order;
-}
-
-std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
-                                std::size_t collectLimit) {
+KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
+                   std::size_t collectLimit) {
     HPRAY_CHECK_GE(leaves, 1);
     std::vector<KdNode> nodes(1);
-    nodes[0].box = root;
+    std::vector<Box> boxes{root};  // each node's region (closed; for the search only)
     std::vector<int> leafCount{leaves};
     // Exclusive upper ends of each node's region per axis: the root's region is closed,
     // so its end is the next double above the box.
@@ -128,7 +90,7 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             s.node = n;
             s.leaves = leafCount[n];
             s.lowLeaves = leafCount[n] / 2;
-            const Box& box = nodes[n].box;
+            const Box& box = boxes[n];
             int axis = 0;
             for (int d = 1; d < 3; ++d)
                 if (box.hi[d] - box.lo[d] > box.hi[axis] - box.lo[axis]) axis = d;
@@ -195,8 +157,8 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             });
             for (Search& s : searches) {
                 if (s.done) continue;
-                const double lo = nodes[s.node].box.lo[s.axis];
-                const double hi = nodes[s.node].box.hi[s.axis];
+                const double lo = boxes[s.node].lo[s.axis];
+                const double hi = boxes[s.node].hi[s.axis];
                 auto finish = [&](double split) {
                     s.split = std::clamp(split, lo, hi);
                     s.done = true;
@@ -314,10 +276,9 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             const int low = static_cast<int>(nodes.size());
             const int high = low + 1;
             KdNode lowNode, highNode;
-            lowNode.box = nodes[n].box;
-            lowNode.box.hi[s.axis] = s.split;
-            highNode.box = nodes[n].box;
-            highNode.box.lo[s.axis] = s.split;
+            Box lowBox = boxes[n], highBox = boxes[n];
+            lowBox.hi[s.axis] = s.split;
+            highBox.lo[s.axis] = s.split;
             std::array<double, 3> lowEnd = ends[n], highEnd = ends[n];
             // With a tie-break the low child also holds centroids on the plane.
             lowEnd[s.axis] =
@@ -332,6 +293,8 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
             nodes[n].high = high;
             nodes.push_back(lowNode);
             nodes.push_back(highNode);
+            boxes.push_back(lowBox);
+            boxes.push_back(highBox);
             ends.push_back(lowEnd);
             ends.push_back(highEnd);
             leafCount.push_back(s.lowLeaves);
@@ -348,14 +311,17 @@ std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass&
         const int n = stack.back();
         stack.pop_back();
         if (nodes[n].axis < 0) {
-            nodes[n].brick = brick++;
+            nodes[n].leaf = brick++;
             continue;
         }
         stack.push_back(nodes[n].high);
         stack.push_back(nodes[n].low);
     }
     HPRAY_CHECK_EQ(brick, leaves);
-    return nodes;
+    KdTree tree;
+    tree.nodes = std::move(nodes);
+    tree.box = root;
+    return tree;
 }
 
 }  // namespace hpray::partition

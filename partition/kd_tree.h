@@ -29,18 +29,10 @@ using CentroidPass = std::function<void(
 /// `collectLimit` centroids, which the next pass collects and sorts for the exact split
 /// (between two distinct coordinates). Leaves get brick numbers 0..leaves-1 low side
 /// first. nodes[0] is the root.
-std::vector<KdNode> BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
-                                std::size_t collectLimit);
+KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
+                   std::size_t collectLimit);
 
-/// The leaf (brick) owning a point: descend low when x[axis] < split, else high.
-int OwnerBrick(const std::vector<KdNode>& nodes, const double x[3]);
-
-/// Appends to `bricks` every brick whose closed box intersects the closed box [lo, hi].
-void OverlappedBricks(const std::vector<KdNode>& nodes, const double lo[3],
-                      const double hi[3], std::vector<int>& bricks);
-
-/// Front-to-back leaf order: `lowFirst(node)` says whether the low child comes first.
-std::vector<int> OrderedBricks(const std::vector<KdNode>& nodes,
-                               const std::function<bool(const KdNode&)>& lowFirst);
+/// The brick owning a cell of centroid `x`: descend low when GoesLow, else high.
+int OwnerBrick(const KdTree& tree, const double x[3]);
 
 }  // namespace hpray::partition

@@ -184,16 +184,14 @@ Partition ReadPartition(const std::string& dir) {
     }
 
     // Root box: given, or the union of the leaf boxes.
+    Box& rootBox = p.tree.box;
     if (m.contains("root_box")) {
-        p.rootBox = check.ParseBox(m["root_box"], "root_box");
+        rootBox = check.ParseBox(m["root_box"], "root_box");
     } else {
-        p.rootBox = p.bricks[0].box;
-        for (const BrickInfo& b : p.bricks)
-            for (int d = 0; d < 3; ++d) {
-                p.rootBox.lo[d] = std::min(p.rootBox.lo[d], b.box.lo[d]);
-                p.rootBox.hi[d] = std::max(p.rootBox.hi[d], b.box.hi[d]);
-            }
+        rootBox = Box::Empty();
+        for (const BrickInfo& b : p.bricks) rootBox.Extend(b.box);
     }
+    std::vector<KdNode>& nodes = p.tree.nodes;
 
     // The tree: every brick exactly once, leaf boxes carved out of the root box.
     std::vector<int> seen(p.bricks.size(), 0);
@@ -202,12 +200,11 @@ Partition ReadPartition(const std::string& dir) {
         [&](const json& node, const std::string& where, const Box& box,
             int depth) -> int {
         if (depth > 200) check.Fail(where, "is nested too deeply");
-        if (p.nodes.size() >= maxNodes)
+        if (nodes.size() >= maxNodes)
             check.Fail(where, "has more nodes than the bricks allow");
         if (!node.is_object()) check.Fail(where, "is not an object");
-        const int index = static_cast<int>(p.nodes.size());
-        p.nodes.emplace_back();
-        p.nodes[index].box = box;
+        const int index = static_cast<int>(nodes.size());
+        nodes.emplace_back();
         if (node.contains("brick")) {
             const std::int64_t b = check.Count(node["brick"], where + ".brick");
             if (b >= static_cast<std::int64_t>(p.bricks.size()))
@@ -217,7 +214,7 @@ Partition ReadPartition(const std::string& dir) {
             if (!SameBox(p.bricks[b].box, box))
                 check.Fail("bricks[" + std::to_string(b) + "].box",
                            "differs from the box the tree's splits give");
-            p.nodes[index].brick = static_cast<int>(b);
+            nodes[index].leaf = static_cast<int>(b);
             return index;
         }
         const std::int64_t axis =
@@ -234,7 +231,7 @@ Partition ReadPartition(const std::string& dir) {
             parse(check.Member(node, "low", where), where + ".low", lowBox, depth + 1);
         const int high =
             parse(check.Member(node, "high", where), where + ".high", highBox, depth + 1);
-        KdNode& n = p.nodes[index];
+        KdNode& n = nodes[index];
         n.axis = static_cast<int>(axis);
         n.split = split;
         if (node.contains("tie")) {
@@ -249,9 +246,12 @@ Partition ReadPartition(const std::string& dir) {
         n.high = high;
         return index;
     };
-    parse(check.Member(m, "tree", ""), "tree", p.rootBox, 0);
+    parse(check.Member(m, "tree", ""), "tree", rootBox, 0);
     for (std::size_t b = 0; b < seen.size(); ++b)
         if (!seen[b]) check.Fail("tree", "has no leaf for brick " + std::to_string(b));
+    // The bricks' regions under the ownership rule (open faces on inner split planes).
+    const std::vector<Box> leafBoxes = p.tree.LeafBoxes();
+    for (std::size_t b = 0; b < p.bricks.size(); ++b) p.bricks[b].box = leafBoxes[b];
     return p;
 }
 
@@ -281,32 +281,12 @@ Mesh LoadBrick(const Partition& partition, int brick, const ReadOptions& options
     return mesh;
 }
 
-std::vector<int> FrontToBackOrder(const Partition& partition,
-                                  const std::array<double, 3>& eye) {
-    return OrderedBricks(partition.nodes,
-                         [&](const KdNode& n) { return eye[n.axis] < n.split; });
-}
-
-std::vector<int> FrontToBackOrderForDirection(const Partition& partition,
-                                              const std::array<double, 3>& direction) {
-    return OrderedBricks(partition.nodes,
-                         [&](const KdNode& n) { return direction[n.axis] >= 0; });
-}
-
 json SummarizePartition(const std::string& dir) {
     const Partition p = ReadPartition(dir);
     std::int64_t cells = 0, ghosts = 0;
     std::uint64_t bytes = 0;
     double maxCost = 0, sumCost = 0;
-    int depth = 0;
-    std::function<void(int, int)> walk = [&](int n, int d) {
-        depth = std::max(depth, d);
-        if (p.nodes[n].axis >= 0) {
-            walk(p.nodes[n].low, d + 1);
-            walk(p.nodes[n].high, d + 1);
-        }
-    };
-    walk(0, 0);
+    const int depth = p.tree.Height();
     bool checksumsOk = true;
     json failures = json::array();
     for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
@@ -342,8 +322,7 @@ json SummarizePartition(const std::string& dir) {
     j["bytes"] = bytes + (ec ? 0 : indexBytes) + manifestBytes;
     j["brick_bytes"] = bytes;
     j["tree_depth"] = depth;
-    j["bounds"] = {{p.rootBox.lo[0], p.rootBox.lo[1], p.rootBox.lo[2]},
-                   {p.rootBox.hi[0], p.rootBox.hi[1], p.rootBox.hi[2]}};
+    j["bounds"] = {p.tree.box.lo, p.tree.box.hi};
     j["fields"] = p.manifest.contains("fields") ? p.manifest["fields"] : json::object();
     j["checksums_ok"] = checksumsOk;
     if (!checksumsOk) j["checksum_failures"] = failures;

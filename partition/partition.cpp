@@ -221,7 +221,7 @@ class ScanSink : public MeshSink {
             r.centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
         if (order > 1 || family != CellFamily::Lagrange) {
             // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
-            const Box3 g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
+            const Box g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
             for (int d = 0; d < 3; ++d) {
                 r.lo[d] = std::min(r.lo[d], g.lo[d]);
                 r.hi[d] = std::max(r.hi[d], g.hi[d]);
@@ -357,7 +357,7 @@ nlohmann::json BrickRanges(const Mesh& mesh) {
 
 nlohmann::json TreeJson(const std::vector<KdNode>& nodes, int n) {
     const KdNode& node = nodes[n];
-    if (node.axis < 0) return {{"brick", node.brick}};
+    if (node.axis < 0) return {{"brick", node.leaf}};
     nlohmann::json j = {{"axis", node.axis},
                         {"split", node.split},
                         {"low", TreeJson(nodes, node.low)},
@@ -546,8 +546,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const std::size_t collectLimit = std::clamp<std::size_t>(
         budget / 8 / (2 * sizeof(double)) / static_cast<std::size_t>(options.bricks), 256,
         std::size_t(1) << 20);
-    const std::vector<KdNode> tree =
-        BuildKdTree(scan.root, options.bricks, pass, collectLimit);
+    const KdTree tree = BuildKdTree(scan.root, options.bricks, pass, collectLimit);
+    const std::vector<Box> leafBoxes = tree.LeafBoxes();
 
     // 3. Distribute cells to brick spills (owner + ghost copies).
     const int nBricks = options.bricks;
@@ -572,7 +572,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 throw InternalError("cell spill ends inside a record");
             const int owner = OwnerBrick(tree, r.centroid);
             hits.clear();
-            OverlappedBricks(tree, r.lo, r.hi, hits);
+            tree.TouchedLeaves(Box{{r.lo[0], r.lo[1], r.lo[2]}, {r.hi[0], r.hi[1], r.hi[2]}},
+                               hits);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
             for (int b : hits) {
                 if (b < first || b >= last) continue;
@@ -720,12 +721,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             const std::uint64_t bytes = fs::file_size(path);
             bytesWritten += bytes;
             storedCells += mesh.CellCount();
-            const KdNode* leaf = nullptr;
-            for (const KdNode& n : tree)
-                if (n.axis < 0 && n.brick == b) leaf = &n;
-            HPRAY_CHECK(leaf != nullptr);
             bricksJson.push_back({{"file", file},
-                                  {"box", BoxJson(leaf->box)},
+                                  {"box", BoxJson(leafBoxes[b])},
                                   {"cells", mesh.CellCount()},
                                   {"ghosts", t.ghosts},
                                   {"points", static_cast<std::int64_t>(nPoints)},
@@ -767,7 +764,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     manifest["root_box"] = BoxJson(scan.root);
     manifest["fields"] = fields;
     manifest["bricks"] = bricksJson;
-    manifest["tree"] = TreeJson(tree, 0);
+    manifest["tree"] = TreeJson(tree.nodes, tree.root);
     manifest["cost_model"] =
         "estimated render cost, 1 = one linear tet (partition/cost_model.h)";
     manifest["stats"] = {{"input_cells", scan.cells},

@@ -8,7 +8,7 @@
 //  leaf
 //    containing its centroid, where a centroid on a split plane belongs to the high side
 //    (low child: x[axis] < split, high child: x[axis] >= split) unless the node carries
-//    a tie-break (KdNode, GoesLow) dividing the centroids on the plane.
+//    a tie-break (KdNode::tieBreak, GoesLow) dividing the centroids on the plane.
 //  - A cell is stored in every brick whose closed leaf box intersects the cell's
 //  guaranteed
 //    geometry box (exact vertex bounds for order-1 cells, the Bernstein hull of
@@ -18,7 +18,7 @@
 //    exactly the bounds of the points; for curved cells it also covers their bulges
 //    beyond the nodes (the Bernstein hull is conservative, so it may exceed the true
 //    extent by the hull's slack but never misses any part of a cell). Leaf boxes tile the
-//    root box.
+//    root box under the ownership rule of geom/box.h (half-open at split planes).
 //  - "cost" of a brick is the estimated render cost of the cells it owns (the quantity
 //  the
 //    splits balance); "cost_with_ghosts" adds the replicated cells.
@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "geom/kd_tree.h"
 #include "io/mesh_io.h"
 #include "mesh/mesh.h"
 
@@ -79,29 +80,9 @@ std::size_t ParseMemorySize(const std::string& text);
 /// A quarter of the physical memory, in bytes.
 std::size_t DefaultMemoryLimit();
 
-/// Axis-aligned box in world units.
-struct Box {
-    std::array<double, 3> lo{};
-    std::array<double, 3> hi{};
-};
-
-/// One node of the k-d tree: an inner node splits `axis` at `split` (low: x < split,
-/// high: x >= split); a leaf names its brick. Centroids exactly on the plane (common in
-/// structured meshes) may be divided by a tie-break on the other two coordinates: with
-/// `tieBreak`, x on the plane goes low when (x[(axis+1)%3], x[(axis+2)%3]) < tie
-/// lexicographically. The boxes are unaffected; such a centroid lies in both closed
-/// boxes.
-struct KdNode {
-    int axis = -1;  ///< -1 for a leaf
-    double split = 0;
-    bool tieBreak = false;
-    std::array<double, 2> tie{};
-    int low = -1, high = -1;  ///< child node indices
-    int brick = -1;           ///< leaf: brick index
-    Box box;                  ///< the node's region (closed box)
-};
-
-/// Whether centroid `x` belongs to the low child of inner node `node`.
+/// Whether the cell of centroid `x` belongs to the low child of inner node `node` (the
+/// plane, then the node's tie-break; see KdNode). A partition's k-d tree numbers its
+/// leaves by brick.
 inline bool GoesLow(const KdNode& node, const double x[3]) {
     const double v = x[node.axis];
     if (v != node.split || !node.tieBreak) return v < node.split;
@@ -112,7 +93,7 @@ inline bool GoesLow(const KdNode& node, const double x[3]) {
 /// One brick of a partition as the manifest describes it.
 struct BrickInfo {
     std::string file;  ///< file name inside the partition directory
-    Box box;
+    Box box;           ///< the leaf's region, with the ownership rule's open faces
     std::int64_t cells = 0;   ///< all cells in the file, ghosts included
     std::int64_t ghosts = 0;  ///< cells with vtkGhostType = 1
     double cost = 0;          ///< estimated render cost of the owned cells
@@ -126,9 +107,8 @@ struct BrickInfo {
 /// A partition directory read back; nodes[0] is the root of the k-d tree.
 struct Partition {
     std::string dir;
-    Box rootBox;
+    KdTree tree;  ///< leaves numbered by brick; tree.box is the root box
     std::vector<BrickInfo> bricks;
-    std::vector<KdNode> nodes;
     nlohmann::json manifest;  ///< the whole manifest (fields, statistics, ...)
 
     std::string BrickPath(int brick) const;
@@ -150,16 +130,6 @@ void VerifyBrick(const Partition& partition, int brick);
 /// Verifies the checksum, then reads brick `brick` (only the requested fields) and checks
 /// its cell and ghost counts against the manifest. Throws InputError on any mismatch.
 Mesh LoadBrick(const Partition& partition, int brick, const ReadOptions& options = {});
-
-/// Bricks in front-to-back order for a perspective camera at `eye` (world units): at
-/// every node the child on the eye's side comes first.
-std::vector<int> FrontToBackOrder(const Partition& partition,
-                                  const std::array<double, 3>& eye);
-
-/// Bricks in front-to-back order for parallel rays travelling along `direction` (an
-/// orthographic camera's forward vector).
-std::vector<int> FrontToBackOrderForDirection(const Partition& partition,
-                                              const std::array<double, 3>& direction);
 
 /// The summary `hpray info DIR --json` prints: bricks, cells (stored, owned, ghosts),
 /// ghost_fraction, balance (max / mean cost), bytes, root box, fields, tree depth,

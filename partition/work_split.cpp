@@ -11,15 +11,15 @@
 
 namespace hpray::partition {
 
-WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisBox& root,
+WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const Box& root,
                     const std::array<std::vector<double>, 3>& bounds) {
     HPRAY_CHECK_GE(count, 1);
     WorkSplit plan;
     const double inf = std::numeric_limits<double>::infinity();
-    std::function<int(AxisBox, std::vector<std::size_t>, int)> build =
-        [&](AxisBox box, std::vector<std::size_t> index, int leaves) -> int {
-        const int node = static_cast<int>(plan.tree.size());
-        plan.tree.emplace_back();
+    std::function<int(Box, std::vector<std::size_t>, int)> build =
+        [&](Box box, std::vector<std::size_t> index, int leaves) -> int {
+        const int node = static_cast<int>(plan.tree.nodes.size());
+        plan.tree.nodes.emplace_back();
         // Whether each extent's stop lies in this box (it is then hidden here).
         std::vector<char> hidden(index.size(), 0);
         double visible = 0;
@@ -27,13 +27,12 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
             const WorkExtent& x = items[index[k]];
             bool inside = x.occluded;
             for (int d = 0; d < 3 && inside; ++d)
-                inside = x.occluder[d] >= box[0][d] && x.occluder[d] <= box[1][d];
+                inside = x.occluder[d] >= box.lo[d] && x.occluder[d] <= box.hi[d];
             hidden[k] = inside;
             if (!inside) visible += x.weight;
         }
         if (leaves == 1) {
-            plan.tree[node].brick = static_cast<int>(plan.boxes.size());
-            plan.boxes.push_back(box);
+            plan.tree.nodes[node].leaf = static_cast<int>(plan.cost.size());
             plan.cost.push_back(visible);
             return node;
         }
@@ -42,14 +41,14 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
         // wins only if it balances strictly better.
         std::array<int, 3> axes{0, 1, 2};
         std::stable_sort(axes.begin(), axes.end(), [&](int p, int q) {
-            return box[1][p] - box[0][p] > box[1][q] - box[0][q];
+            return box.hi[p] - box.lo[p] > box.hi[q] - box.lo[q];
         });
         int axis = axes[0];
-        double split = 0.5 * (box[0][axis] + box[1][axis]);
+        double split = 0.5 * (box.lo[axis] + box.hi[axis]);
         double best = inf;
         for (int d : axes) {
             if (index.empty()) break;
-            const double a = box[0][d], b = box[1][d];
+            const double a = box.lo[d], b = box.hi[d];
             // low(x) = sum of [lo < x] - [qLow < x]; high(x) = [qHigh <= x] - [hi <= x].
             std::vector<std::pair<double, double>> lowOn, lowOff, highOn, highOff;
             std::vector<double> candidates;
@@ -102,7 +101,7 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
                 }
             }
         }
-        const double a = box[0][axis], b = box[1][axis];
+        const double a = box.lo[axis], b = box.hi[axis];
         const std::vector<double>& faces = bounds[axis];
         const double tolerance = 1e-9 * (b - a);
         auto near = std::lower_bound(faces.begin(), faces.end(), split - tolerance);
@@ -117,20 +116,22 @@ WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisB
         }
         index.clear();
         index.shrink_to_fit();
-        AxisBox lowBox = box, highBox = box;
-        lowBox[1][axis] = split;
-        highBox[0][axis] = split;
-        plan.tree[node].axis = axis;
-        plan.tree[node].split = split;
+        Box lowBox = box, highBox = box;
+        lowBox.hi[axis] = split;
+        highBox.lo[axis] = split;
+        plan.tree.nodes[node].axis = axis;
+        plan.tree.nodes[node].split = split;
         const int lo = build(lowBox, std::move(lowIndex), lowLeaves);
         const int hi = build(highBox, std::move(highIndex), highLeaves);
-        plan.tree[node].low = lo;
-        plan.tree[node].high = hi;
+        plan.tree.nodes[node].low = lo;
+        plan.tree.nodes[node].high = hi;
         return node;
     };
     std::vector<std::size_t> all(items.size());
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
-    build(root, std::move(all), count);
+    plan.tree.box = root;
+    plan.tree.root = build(root, std::move(all), count);
+    plan.boxes = plan.tree.LeafBoxes();
     return plan;
 }
 

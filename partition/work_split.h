@@ -5,7 +5,7 @@
 #include <array>
 #include <vector>
 
-#include "trace/ray.h"
+#include "geom/kd_tree.h"
 
 namespace hpray::partition {
 
@@ -18,18 +18,11 @@ struct WorkExtent {
     std::array<double, 3> occluder{};
 };
 
-/// A node of the split: inner (axis 0..2, plane, children) or leaf (its box index).
-struct WorkSplitNode {
-    int axis = -1;  ///< -1 for a leaf
-    double split = 0;
-    int low = -1, high = -1;
-    int brick = -1;  ///< leaf: its box index
-};
-
-/// The k-d tree (node 0 is the root), the leaf boxes and the work estimated in each.
+/// The k-d tree (leaves numbered by box), the leaf boxes (under the ownership rule of
+/// geom/box.h) and the work estimated in each.
 struct WorkSplit {
-    std::vector<WorkSplitNode> tree;
-    std::vector<AxisBox> boxes;
+    KdTree tree;
+    std::vector<Box> boxes;
     std::vector<double> cost;
 };
 
@@ -50,7 +43,7 @@ struct WorkSplit {
 /// opaque surfaces only work a brick really does is counted. A plane within 1e-9 of the
 /// box size of a node coordinate (`bounds[axis]`, sorted) is moved onto it, so planes
 /// through axis-aligned faces lie exactly on them.
-WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const AxisBox& root,
+WorkSplit SplitWork(const std::vector<WorkExtent>& items, int count, const Box& root,
                     const std::array<std::vector<double>, 3>& bounds);
 
 }  // namespace hpray::partition

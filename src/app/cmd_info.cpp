@@ -32,7 +32,7 @@ nlohmann::json MeshSummaryJson(const Mesh& mesh) {
     j["serendipity_cells"] = serendipity;
     j["ghost_cells"] = ghosts;
     const auto b = mesh.Bounds();
-    j["bounds"] = {{b[0][0], b[0][1], b[0][2]}, {b[1][0], b[1][1], b[1][2]}};
+    j["bounds"] = {b.lo, b.hi};
     json fields = json::object();
     auto addField = [&](const Field& f) {
         json e;

@@ -36,40 +36,22 @@ double Seconds(std::chrono::steady_clock::time_point since) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-/// The bricks of a job: a k-d tree over bricks (node 0 is the root), their boxes and
-/// estimated costs, and which rank renders each.
+/// The bricks of a job: a k-d tree over bricks (leaves numbered by brick), their boxes
+/// (the ownership rule of geom/box.h) and estimated costs, and which rank renders each.
 struct BrickPlan {
-    std::vector<compositor::BrickTreeNode> tree;
-    std::vector<AxisBox> boxes;
+    KdTree tree;
+    std::vector<Box> boxes;
     std::vector<double> cost;
     std::vector<int> rank;
 };
 
-AxisBox ToAxisBox(const partition::Box& b) { return {b.lo, b.hi}; }
-
-/// The compositor's tree of a k-d tree (a partition's or an in-memory split's nodes).
-template <class KdNode>
-std::vector<compositor::BrickTreeNode> ToBrickTree(const std::vector<KdNode>& nodes) {
-    std::vector<compositor::BrickTreeNode> tree;
-    for (const KdNode& n : nodes) {
-        compositor::BrickTreeNode b;
-        b.axis = n.axis;
-        b.split = n.split;
-        b.low = n.low;
-        b.high = n.high;
-        b.brick = n.brick;
-        tree.push_back(b);
-    }
-    return tree;
-}
-
 /// Leaves and cost under each node.
 void SubtreeTotals(const BrickPlan& plan, int node, std::vector<int>& leaves,
                    std::vector<double>& cost) {
-    const auto& n = plan.tree[node];
+    const KdNode& n = plan.tree.nodes[node];
     if (n.axis < 0) {
         leaves[node] = 1;
-        cost[node] = std::max(plan.cost[n.brick], 1e-12);
+        cost[node] = std::max(plan.cost[n.leaf], 1e-12);
         return;
     }
     SubtreeTotals(plan, n.low, leaves, cost);
@@ -82,12 +64,12 @@ void SubtreeTotals(const BrickPlan& plan, int node, std::vector<int>& leaves,
 /// proportion to their cost, at least one each and no more than each has leaves.
 void AssignRanks(BrickPlan& plan, int node, int r0, int ranks, const std::vector<int>& leaves,
                  const std::vector<double>& cost) {
-    const auto& n = plan.tree[node];
+    const KdNode& n = plan.tree.nodes[node];
     if (ranks == 1 || n.axis < 0) {
         std::function<void(int)> own = [&](int x) {
-            const auto& m = plan.tree[x];
+            const KdNode& m = plan.tree.nodes[x];
             if (m.axis < 0) {
-                plan.rank[m.brick] = r0;
+                plan.rank[m.leaf] = r0;
             } else {
                 own(m.low);
                 own(m.high);
@@ -124,7 +106,7 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
             items.push_back(x);
         }
     } else {
-        for (const Box3& b : geometry.boxes) items.push_back({b.lo, b.hi, 1.0, false, {}});
+        for (const Box& b : geometry.boxes) items.push_back({b.lo, b.hi, 1.0, false, {}});
     }
     // Planes snap to node coordinates: exactly where axis-aligned faces lie.
     std::array<std::vector<double>, 3> bounds;
@@ -135,10 +117,10 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
         std::sort(bounds[d].begin(), bounds[d].end());
         bounds[d].erase(std::unique(bounds[d].begin(), bounds[d].end()), bounds[d].end());
     }
-    const AxisBox root{geometry.bounds.lo, geometry.bounds.hi};
-    const partition::WorkSplit split = partition::SplitWork(items, count, root, bounds);
+    const partition::WorkSplit split =
+        partition::SplitWork(items, count, geometry.bounds, bounds);
     BrickPlan plan;
-    plan.tree = ToBrickTree(split.tree);
+    plan.tree = split.tree;
     plan.boxes = split.boxes;
     plan.cost = split.cost;
     return plan;
@@ -148,16 +130,15 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
 void BroadcastPlan(BrickPlan& plan) {
     std::vector<double> buffer;
     if (mpi::Root()) {
-        buffer.push_back(static_cast<double>(plan.tree.size()));
-        buffer.push_back(static_cast<double>(plan.boxes.size()));
-        for (const auto& n : plan.tree)
+        buffer.push_back(static_cast<double>(plan.tree.nodes.size()));
+        buffer.push_back(static_cast<double>(plan.cost.size()));
+        buffer.push_back(static_cast<double>(plan.tree.root));
+        buffer.insert(buffer.end(), plan.tree.box.lo.begin(), plan.tree.box.lo.end());
+        buffer.insert(buffer.end(), plan.tree.box.hi.begin(), plan.tree.box.hi.end());
+        for (const KdNode& n : plan.tree.nodes)
             buffer.insert(buffer.end(), {double(n.axis), n.split, double(n.low),
-                                         double(n.high), double(n.brick)});
-        for (std::size_t b = 0; b < plan.boxes.size(); ++b) {
-            for (int k = 0; k < 2; ++k)
-                for (int d = 0; d < 3; ++d) buffer.push_back(plan.boxes[b][k][d]);
-            buffer.push_back(plan.cost[b]);
-        }
+                                         double(n.high), double(n.leaf)});
+        buffer.insert(buffer.end(), plan.cost.begin(), plan.cost.end());
     }
     long long size = static_cast<long long>(buffer.size());
     MPI_Bcast(&size, 1, MPI_LONG_LONG, 0, MPI_COMM_WORLD);
@@ -167,57 +148,37 @@ void BroadcastPlan(BrickPlan& plan) {
     std::size_t at = 0;
     const auto nodes = static_cast<std::size_t>(buffer[at++]);
     const auto boxes = static_cast<std::size_t>(buffer[at++]);
-    plan.tree.assign(nodes, {});
-    for (auto& n : plan.tree) {
+    plan.tree.root = static_cast<int>(buffer[at++]);
+    for (int d = 0; d < 3; ++d) plan.tree.box.lo[d] = buffer[at++];
+    for (int d = 0; d < 3; ++d) plan.tree.box.hi[d] = buffer[at++];
+    plan.tree.nodes.assign(nodes, {});
+    for (KdNode& n : plan.tree.nodes) {
         n.axis = static_cast<int>(buffer[at++]);
         n.split = buffer[at++];
         n.low = static_cast<int>(buffer[at++]);
         n.high = static_cast<int>(buffer[at++]);
-        n.brick = static_cast<int>(buffer[at++]);
+        n.leaf = static_cast<int>(buffer[at++]);
     }
-    plan.boxes.assign(boxes, {});
-    plan.cost.assign(boxes, 0.0);
-    for (std::size_t b = 0; b < boxes; ++b) {
-        for (int k = 0; k < 2; ++k)
-            for (int d = 0; d < 3; ++d) plan.boxes[b][k][d] = buffer[at++];
-        plan.cost[b] = buffer[at++];
-    }
+    plan.cost.assign(buffer.begin() + at, buffer.begin() + at + boxes);
+    plan.boxes = plan.tree.LeafBoxes();
 }
 
 BrickPlan PlanFromPartition(const partition::Partition& part) {
     BrickPlan plan;
-    plan.tree = ToBrickTree(part.nodes);
+    plan.tree = part.tree;
     for (const partition::BrickInfo& b : part.bricks) {
-        plan.boxes.push_back(ToAxisBox(b.box));
+        plan.boxes.push_back(b.box);
         plan.cost.push_back(b.cost);
     }
     return plan;
 }
 
-/// This rank's bricks, front to back for the view.
-void MyBricksFrontToBack(const BrickPlan& plan, int node, int rank,
-                         const compositor::CompositeView& view, std::vector<int>& out) {
-    const auto& n = plan.tree[node];
-    if (n.axis < 0) {
-        if (plan.rank[n.brick] == rank) out.push_back(n.brick);
-        return;
-    }
-    const bool lowFirst = compositor::LowInFront(n.axis, n.split, view);
-    MyBricksFrontToBack(plan, lowFirst ? n.low : n.high, rank, view, out);
-    MyBricksFrontToBack(plan, lowFirst ? n.high : n.low, rank, view, out);
-}
-
-bool BoxesOverlap(const AxisBox& a, const std::array<std::array<double, 3>, 2>& b) {
-    for (int d = 0; d < 3; ++d)
-        if (a[1][d] < b[0][d] || b[1][d] < a[0][d]) return false;
-    return true;
-}
 
 /// True when the box lies entirely outside the camera's view: all its corners are on the
 /// outer side of one bounding plane of the view volume (perspective: the four side planes
 /// through the eye and the near/far distances along the view direction; orthographic: the
 /// four side slabs). Conservative: a box that may be seen is never reported outside.
-bool OutsideView(const Scene& scene, const AxisBox& box) {
+bool OutsideView(const Scene& scene, const Box& box) {
     const Camera camera(scene.camera);
     const auto& f = camera.Forward();
     const auto& r = camera.Right();
@@ -226,7 +187,7 @@ bool OutsideView(const Scene& scene, const AxisBox& box) {
     const double aspect = double(scene.camera.width) / scene.camera.height;
     std::array<std::array<double, 3>, 8> rel;
     for (int q = 0; q < 8; ++q)
-        for (int d = 0; d < 3; ++d) rel[q][d] = box[(q >> d) & 1][d] - e[d];
+        for (int d = 0; d < 3; ++d) rel[q][d] = ((q >> d) & 1 ? box.hi : box.lo)[d] - e[d];
     auto dot = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
         return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     };
@@ -260,8 +221,8 @@ bool OutsideView(const Scene& scene, const AxisBox& box) {
 /// A brick of a partition can contribute unless it lies outside the view or the clip box
 /// or, in a scene of isosurfaces only, no isovalue lies in its guaranteed field ranges.
 bool BrickMayContribute(const Scene& scene, const partition::BrickInfo& brick,
-                        const AxisBox& box) {
-    if (scene.clip.box && !BoxesOverlap(box, *scene.clip.box)) return false;
+                        const Box& box) {
+    if (scene.clip.box && !box.Touches(*scene.clip.box)) return false;
     if (OutsideView(scene, box)) return false;
     if (scene.volume || !scene.slices.empty()) return true;
     for (const SceneIsosurface& iso : scene.isosurfaces) {
@@ -466,7 +427,7 @@ int RunRender(const RenderArgs& args) {
             prepared->Render(scene, Camera(low), std::nullopt, preview, ignored, &samples);
             plan = SplitMesh(*whole, prepared->Geometry(), P, samples);
             std::string planes;
-            for (const auto& n : plan.tree)
+            for (const KdNode& n : plan.tree.nodes)
                 if (n.axis >= 0) {
                     char text[64];
                     std::snprintf(text, sizeof text, " %c=%.17g", "xyz"[n.axis], n.split);
@@ -479,12 +440,12 @@ int RunRender(const RenderArgs& args) {
         stats.timing.prepass = Seconds(t0);
     }
 
-    const compositor::CompositeView view = compositor::ViewFromCamera(scene.camera);
+    const ViewOrigin view = ViewOriginOf(scene.camera);
     Image accumulated;
     accumulated.Resize(scene.camera.width, scene.camera.height);
     int loaded = 0;
     std::unique_ptr<TileDealer> dealer;
-    compositor::CompositeTree rankTree;
+    KdTree rankTree;
     if (mode == Distribution::Image) {
         // Every pixel is rendered by exactly one rank, exactly as on one rank; the others
         // leave it empty, which Over leaves unchanged, so any visibility order composites
@@ -498,8 +459,7 @@ int RunRender(const RenderArgs& args) {
             prepared->RenderTiles(scene, camera, begin, end, accumulated, stats);
         loaded = mpi::Root() ? 1 : 0;
         stats.bricksTotal = 1;
-        const Box3& bounds = prepared->Geometry().bounds;
-        rankTree = compositor::RegularRankTree(P, bounds.lo, bounds.hi);
+        rankTree = RegularKdTree(P, prepared->Geometry().bounds);
     } else {
         t0 = std::chrono::steady_clock::now();
         const int bricks = static_cast<int>(plan.boxes.size());
@@ -510,17 +470,16 @@ int RunRender(const RenderArgs& args) {
                                  std::to_string(P) + " bricks");
         plan.rank.assign(bricks, 0);
         {
-            std::vector<int> leaves(plan.tree.size());
-            std::vector<double> cost(plan.tree.size());
-            SubtreeTotals(plan, 0, leaves, cost);
-            AssignRanks(plan, 0, 0, P, leaves, cost);
+            std::vector<int> leaves(plan.tree.nodes.size());
+            std::vector<double> cost(plan.tree.nodes.size());
+            SubtreeTotals(plan, plan.tree.root, leaves, cost);
+            AssignRanks(plan, plan.tree.root, 0, P, leaves, cost);
         }
         stats.bricksTotal = bricks;
         stats.timing.load += Seconds(t0);
 
-        std::vector<int> mine;
-        MyBricksFrontToBack(plan, 0, rank, view, mine);
-        for (int b : mine) {
+        for (int b : plan.tree.FrontToBack(view)) {
+            if (plan.rank[b] != rank) continue;
             if (part && !BrickMayContribute(scene, part->bricks[b], plan.boxes[b])) continue;
             Image image;
             if (part) {
@@ -536,10 +495,7 @@ int RunRender(const RenderArgs& args) {
             ++loaded;
             compositor::CompositeOver(accumulated, image);
         }
-        if (P > 1) {
-            std::vector<compositor::BrickTreeNode> tree = plan.tree;
-            rankTree = compositor::BuildRankTree(tree, 0, plan.rank, P);
-        }
+        if (P > 1) rankTree = compositor::BuildRankTree(plan.tree, plan.rank, P);
     }
 
     // Waiting for the slowest rank is imbalance, not compositing: timed apart.

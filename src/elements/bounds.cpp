@@ -449,8 +449,8 @@ Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride) 
     return Bounds(basis, coeffs, stride);
 }
 
-Box3 GeometryBox(const BasisTable& basis, const double* nodeXyz) {
-    Box3 box;
+Box GeometryBox(const BasisTable& basis, const double* nodeXyz) {
+    Box box;
     for (int d = 0; d < 3; ++d) {
         const Interval i = Bounds(basis, nodeXyz + d, 3);
         box.lo[d] = i.lo;

@@ -22,17 +22,13 @@
 #include <array>
 
 #include "elements/basis.h"
+#include "geom/box.h"
 
 namespace hpray {
 
 struct Interval {
     double lo = 0.0;
     double hi = 0.0;
-};
-
-struct Box3 {
-    std::array<double, 3> lo{};
-    std::array<double, 3> hi{};
 };
 
 /// An interval containing f(x) for every x of the closed reference cell, where f is the
@@ -42,6 +38,6 @@ Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride =
 
 /// An axis-aligned box containing the image of the whole reference cell; `nodeXyz` holds
 /// x y z interleaved per node, internal order.
-Box3 GeometryBox(const BasisTable& basis, const double* nodeXyz);
+Box GeometryBox(const BasisTable& basis, const double* nodeXyz);
 
 }  // namespace hpray

@@ -71,7 +71,7 @@ PointLocator::PointLocator(const Mesh& mesh, const MeshGeometry& geometry)
         cellSize_[d] = ext[d] / dims_[d];
     }
     const std::int64_t gridCells = std::int64_t(dims_[0]) * dims_[1] * dims_[2];
-    auto range = [&](const Box3& b, std::array<int, 3>& i0, std::array<int, 3>& i1) {
+    auto range = [&](const Box& b, std::array<int, 3>& i0, std::array<int, 3>& i1) {
         for (int d = 0; d < 3; ++d) {
             i0[d] = std::clamp(static_cast<int>(std::floor((b.lo[d] - lo_[d]) / cellSize_[d])), 0,
                                dims_[d] - 1);
@@ -115,7 +115,7 @@ PointLocator::Hit PointLocator::Locate(const double world[3], EvalWorkspace& ws,
     double best = std::numeric_limits<double>::infinity();
     for (std::int64_t i = start_[k]; i < start_[k + 1]; ++i) {
         const std::int64_t c = items_[i];
-        const Box3& b = geometry_.boxes[c];
+        const Box& b = geometry_.boxes[c];
         bool inBox = true;
         for (int d = 0; d < 3; ++d) inBox &= world[d] >= b.lo[d] && world[d] <= b.hi[d];
         if (!inBox) continue;

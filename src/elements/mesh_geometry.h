@@ -17,8 +17,8 @@ struct MeshGeometry {
     std::vector<double> nodeXyz;         ///< x y z per node of each cell, cell by cell
     std::vector<std::int64_t> offsets;   ///< cell c's nodes start at nodeXyz[3 * offsets[c]]
     std::vector<CellGeometry> cells;
-    std::vector<Box3> boxes;             ///< guaranteed world boxes (Bernstein hull)
-    Box3 bounds;                         ///< union of the boxes
+    std::vector<Box> boxes;             ///< guaranteed world boxes (Bernstein hull)
+    Box bounds;                         ///< union of the boxes
     std::int64_t affineCells = 0;
 
     MeshGeometry() = default;

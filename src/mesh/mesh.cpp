@@ -56,14 +56,9 @@ const Field* Mesh::FindField(const std::string& name) const {
     return FindCellField(name);
 }
 
-std::array<std::array<double, 3>, 2> Mesh::Bounds() const {
-    const double inf = std::numeric_limits<double>::infinity();
-    std::array<std::array<double, 3>, 2> b{{{inf, inf, inf}, {-inf, -inf, -inf}}};
-    for (std::size_t i = 0; i + 2 < points.size(); i += 3)
-        for (int a = 0; a < 3; ++a) {
-            b[0][a] = std::min(b[0][a], points[i + a]);
-            b[1][a] = std::max(b[1][a], points[i + a]);
-        }
+Box Mesh::Bounds() const {
+    Box b = Box::Empty();
+    for (std::size_t i = 0; i + 2 < points.size(); i += 3) b.Extend(&points[i]);
     return b;
 }
 

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "geom/box.h"
 #include "mesh/cell.h"
 
 namespace hpray {
@@ -63,7 +64,7 @@ struct Mesh {
     const Field* FindField(const std::string& name) const;
 
     /// Axis-aligned bounds of the points: {{xmin,ymin,zmin},{xmax,ymax,zmax}}.
-    std::array<std::array<double, 3>, 2> Bounds() const;
+    Box Bounds() const;
 
     /// Bytes held by the arrays (for `hpray info`).
     std::size_t MemoryBytes() const;

@@ -73,9 +73,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.roots.rootTolerance = acc.rootTolerance;
     s.roots.polish = acc.polish;
     s.inversion.tolerance = acc.mappingTolerance;
-    const auto b = mesh.Bounds();
-    const double diag =
-        std::hypot(b[1][0] - b[0][0], b[1][1] - b[0][1], b[1][2] - b[0][2]);
+    const double diag = mesh.Bounds().Diagonal();
     s.duplicateDistance = 1e-9 * diag;
     s.sliverLength = 1e-12 * diag;
     s.tNear = std::max(0.0, scene.clip.near);
@@ -269,14 +267,17 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                               std::vector<SegmentCostSample>* costSamples) {
     out = PixelSample{};
     counters.rays += 1;
-    double tMin = setup.tNear, tMax = setup.tFar;
-    if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, tMin, tMax)) return;
+    RaySpan span{setup.tNear, setup.tFar};
+    if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, span)) return;
     const bool hasVolume = setup.volume.has_value();
     const std::size_t nSlices = setup.slices.size();
-    if (!(tMin < tMax) || (setup.isos.empty() && !hasVolume && nSlices == 0)) return;
+    if (!(span.t0 < span.t1) || (setup.isos.empty() && !hasVolume && nSlices == 0)) return;
     // The traverser clips to its brick box by the same arithmetic, so segments cut by a
-    // clip plane start or end exactly at tMin / tMax.
-    if (!ClipRayToBox(ray, setup.traverser->GetBrick().box, tMin, tMax)) return;
+    // clip plane start or end exactly at tMin / tMax. The brick owns the points of the
+    // span (geom/box.h): where an end is open, a neighbouring brick owns that point, so
+    // an isosurface hit or a slice exactly there is left to it.
+    if (!ClipRayToBox(ray, setup.traverser->GetBrick().box, span)) return;
+    const double tMin = span.t0, tMax = span.t1;
     const CostClock::time_point traceStart =
         costSamples ? CostClock::now() : CostClock::time_point{};
     setup.traverser->Trace(ray, tMin, tMax, segments_);
@@ -329,12 +330,14 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
         // the last segment of a run inside the mesh is closed.
         bool anySlice = false;
         const bool closedEnd =
-            si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
-        for (std::size_t k = 0; k < nSlices; ++k) {
-            const double t = sliceT_[k];
-            anySlice |=
-                t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit));
-        }
+            (si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit) &&
+            (seg.tExit != tMax || span.closed1);
+        const bool openStart = seg.tEnter == tMin && !span.closed0;
+        auto sliceHere = [&](double t) {
+            return (t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
+                   (t < seg.tExit || (closedEnd && t == seg.tExit));
+        };
+        for (std::size_t k = 0; k < nSlices; ++k) anySlice |= sliceHere(sliceT_[k]);
         // Empty-space skipping: BeginSegment evaluates nothing in cells whose guaranteed
         // ranges map to no extinction (and no glow).
         const bool volumeHere =
@@ -403,6 +406,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
                         FindRoots(field_, pieces_[f], iso.value, setup.roots, scratch_,
                                   [&](const RootResult& r) {
                                       if (r.t > cutoff) return true;
+                                      if (!span.Holds(r.t)) return false;
                                       if (r.t - previous <= setup.duplicateDistance)
                                           return false;
                                       previous = r.t;
@@ -420,8 +424,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
         if (anySlice)
             for (std::size_t k = 0; k < nSlices; ++k) {
                 const double t = sliceT_[k];
-                if (t >= seg.tEnter && (t < seg.tExit || (closedEnd && t == seg.tExit)))
-                    events_.push_back({t, -1, 0.0, int(k)});
+                if (sliceHere(t)) events_.push_back({t, -1, 0.0, int(k)});
             }
         std::sort(events_.begin(), events_.end(), [](const Event& a, const Event& b) {
             return a.t < b.t || (a.t == b.t && (a.iso < b.iso ||

@@ -59,7 +59,7 @@ struct BrickSetup {
 
     double tNear = 0;
     double tFar = std::numeric_limits<double>::infinity();
-    std::optional<AxisBox> clipBox;
+    std::optional<Box> clipBox;
 
     /// The volume integral (design.md "Volume semantics"), when the scene has a volume.
     std::optional<VolumeSetup> volume;

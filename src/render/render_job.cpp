@@ -85,7 +85,7 @@ struct PreparedBrick::Impl {
     BrickSetup setup;
 };
 
-PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box,
+PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
                              const Scene& scene, RenderStats& stats)
     : impl_(std::make_unique<Impl>()) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -96,8 +96,7 @@ PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box
         brick.box = *box;
     } else {
         // The guaranteed boxes of the cells: curved cells may bulge beyond their nodes.
-        brick.box = {{{geometry.bounds.lo[0], geometry.bounds.lo[1], geometry.bounds.lo[2]},
-                      {geometry.bounds.hi[0], geometry.bounds.hi[1], geometry.bounds.hi[2]}}};
+        brick.box = geometry.bounds;
     }
     TraceOptions traceOptions;
     traceOptions.mappingTolerance = scene.accuracy.mappingTolerance;
@@ -136,22 +135,17 @@ PreparedBrick::~PreparedBrick() = default;
 const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
 
 void PreparedBrick::Render(const Scene& scene, const Camera& camera,
-                           const std::optional<AxisBox>& clip, Image& image,
+                           const std::optional<Box>& clip, Image& image,
                            RenderStats& stats, std::vector<SegmentCostSample>* costSamples,
                            const Image* front) {
     const auto t0 = std::chrono::steady_clock::now();
     BrickSetup& setup = impl_->setup;
-    const std::optional<AxisBox> sceneClip = setup.clipBox;
+    const std::optional<Box> sceneClip = setup.clipBox;
     if (clip) {
-        AxisBox box = *clip;
-        bool empty = false;
-        if (sceneClip)
-            for (int d = 0; d < 3; ++d) {
-                box[0][d] = std::max(box[0][d], (*sceneClip)[0][d]);
-                box[1][d] = std::min(box[1][d], (*sceneClip)[1][d]);
-                empty |= box[0][d] > box[1][d];
-            }
-        if (empty) {
+        // The points of the leaf box that the scene's clip box keeps (the ownership rule
+        // of geom/box.h: an upper face stays open where the leaf's is).
+        const Box box = sceneClip ? clip->Intersect(*sceneClip) : *clip;
+        if (box.IsEmpty()) {
             image.Resize(camera.Width(), camera.Height());
             stats.timing.render += Seconds(t0);
             return;
@@ -174,7 +168,7 @@ void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int be
     stats.timing.render += Seconds(t0);
 }
 
-void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+void RenderOneBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
                     std::vector<SegmentCostSample>* costSamples, const Image* front) {
     PreparedBrick brick(mesh, box, scene, stats);

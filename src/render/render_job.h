@@ -32,7 +32,7 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
 /// bounds of all its cells) — into `image` (resized to the camera), adding the accel and
 /// render times, counters, field range and accel bytes to `stats`. With `costSamples`,
 /// the measured cost of every segment is appended to it (brick_renderer.h).
-void RenderOneBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+void RenderOneBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
                     std::vector<SegmentCostSample>* costSamples = nullptr,
                     const Image* front = nullptr);
@@ -43,7 +43,7 @@ class PreparedBrick {
   public:
     /// Builds for `mesh` with rays clipped to `box` (std::nullopt: the guaranteed bounds
     /// of all cells); adds the build time to stats.timing.accel and the accel bytes.
-    PreparedBrick(const Mesh& mesh, const std::optional<AxisBox>& box, const Scene& scene,
+    PreparedBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene& scene,
                   RenderStats& stats);
     ~PreparedBrick();
     PreparedBrick(const PreparedBrick&) = delete;
@@ -53,7 +53,7 @@ class PreparedBrick {
     /// box), adding the render time and counters to `stats`; see RenderOneBrick.
     /// `front`: the composite of what lies in front; pixels it makes opaque are not traced
     /// (brick_renderer.h: RenderBrick).
-    void Render(const Scene& scene, const Camera& camera, const std::optional<AxisBox>& clip,
+    void Render(const Scene& scene, const Camera& camera, const std::optional<Box>& clip,
                 Image& image, RenderStats& stats,
                 std::vector<SegmentCostSample>* costSamples = nullptr,
                 const Image* front = nullptr);

@@ -68,4 +68,12 @@ CameraRay Camera::RayAt(double x, double y) const {
     return ray;
 }
 
+ViewOrigin ViewOriginOf(const SceneCamera& camera) {
+    if (!camera.orthographic) return ViewOrigin::Perspective(camera.position);
+    // Only the sign of each component matters, so no normalisation is needed.
+    return ViewOrigin::Orthographic({camera.lookAt[0] - camera.position[0],
+                                     camera.lookAt[1] - camera.position[1],
+                                     camera.lookAt[2] - camera.position[2]});
+}
+
 }  // namespace hpray

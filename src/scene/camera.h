@@ -3,6 +3,7 @@
 
 #include <array>
 
+#include "geom/kd_tree.h"
 #include "scene/scene.h"
 
 namespace hpray {
@@ -53,5 +54,9 @@ class Camera {
     double aspect_ = 1.0;      ///< W / H
     double halfExtent_ = 1.0;  ///< tan(fov_y / 2), or ortho_height / 2
 };
+
+/// What orders k-d leaves front to back for this camera: its position (perspective), or
+/// look_at - position (orthographic, the ray direction).
+ViewOrigin ViewOriginOf(const SceneCamera& camera);
 
 }  // namespace hpray

@@ -804,7 +804,7 @@ void SceneParser::ReadClip(const YAML::Node& root, Scene& scene) const {
             if (!(lo[k] < hi[k]))
                 Fail("clip.box", box,
                      "the first corner must be below the second on every axis");
-        c.box = std::array<Vec3, 2>{lo, hi};
+        c.box = Box{lo, hi};
     }
 }
 

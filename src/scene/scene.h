@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "geom/box.h"
+
 namespace hpray {
 
 // Every struct below is plain data with the documented default of each key. LoadScene
@@ -113,7 +115,7 @@ struct SceneClip {
     double near = 0.0;
     double far = std::numeric_limits<double>::infinity();
     /// `clip.box: [[x0, y0, z0], [x1, y1, z1]]` with x0 < x1, y0 < y1, z0 < z1.
-    std::optional<std::array<std::array<double, 3>, 2>> box;
+    std::optional<Box> box;  ///< closed
 };
 
 /// `output:` absolute paths (relative ones resolved against the working directory);

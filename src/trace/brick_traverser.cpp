@@ -296,7 +296,7 @@ struct BrickTraverser::Impl {
     std::vector<double> curvedNet;  // control points of curved faces, 3 per point
     std::vector<std::int32_t> boundaryFaces;
     std::vector<float> boundaryBoxes;  // 6 per boundary face: lower, upper
-    AxisBox queryBox{};                // mesh bounds, padded for the float query ray
+    Box queryBox{};                // mesh bounds, padded for the float query ray
     double queryPad = 0;
 
     RTCDevice device = nullptr;
@@ -371,7 +371,7 @@ void BrickTraverser::Impl::BuildTopology() {
     const auto bounds = mesh.Bounds();
     double diag = 0;
     if (mesh.PointCount() > 0)
-        diag = std::sqrt(Dist2(bounds[0].data(), bounds[1].data()));
+        diag = bounds.Diagonal();
 
     // 1. Coincident points.
     std::vector<std::int32_t> mergedOf;
@@ -872,11 +872,11 @@ void BrickTraverser::Impl::BuildTopology() {
     // 6e-8 of the coordinates) never culls a face the exact test would hit.
     double maxAbs = 0;
     for (int d = 0; d < 3; ++d)
-        maxAbs = std::max({maxAbs, std::fabs(bounds[0][d]), std::fabs(bounds[1][d])});
+        maxAbs = std::max({maxAbs, std::fabs(bounds.lo[d]), std::fabs(bounds.hi[d])});
     queryPad = 1e-6 * (maxAbs + diag) + 1e-30;
     for (int d = 0; d < 3; ++d) {
-        queryBox[0][d] = bounds[0][d] - queryPad;
-        queryBox[1][d] = bounds[1][d] + queryPad;
+        queryBox.lo[d] = bounds.lo[d] - queryPad;
+        queryBox.hi[d] = bounds.hi[d] + queryPad;
     }
     // Curved faces may bulge out of their node hull: they are boxed by their control net
     // (which holds the face); straight faces by their corners.
@@ -1315,11 +1315,13 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                            std::vector<Segment>& out) const {
     out.clear();
     const Impl& im = *impl_;
-    double tLo = tMin, tHi = tMax;
-    if (!(tLo <= tHi) || !ClipRayToBox(ray, im.brick.box, tLo, tHi)) return;
+    RaySpan span{tMin, tMax};
+    if (!(tMin <= tMax) || !ClipRayToBox(ray, im.brick.box, span)) return;
+    const double tLo = span.t0, tHi = span.t1;
     if (im.boundaryFaces.empty()) return;
-    double q0 = -kInf, q1 = tHi;
-    if (!ClipRayToBox(ray, im.queryBox, q0, q1)) return;
+    RaySpan query{-kInf, tHi};
+    if (!ClipRayToBox(ray, im.queryBox, query)) return;
+    const double q0 = query.t0, q1 = query.t1;
     const RayFrame frame(ray);
     ++tScratch.ray;  // a new ray for the curved-face cache
 

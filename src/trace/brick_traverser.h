@@ -18,7 +18,7 @@ namespace hpray {
 /// outlive every traverser built from it and must not change meanwhile.
 struct Brick {
     const Mesh* mesh = nullptr;
-    AxisBox box{};
+    Box box{};
 
     /// The whole mesh as one brick: box = the mesh bounds.
     static Brick WholeMesh(const Mesh& mesh) { return Brick{&mesh, mesh.Bounds()}; }

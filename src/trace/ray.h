@@ -6,6 +6,8 @@
 #include <type_traits>
 #include <utility>
 
+#include "geom/box.h"
+
 namespace hpray {
 
 /// A ray in world coordinates. `dir` must be a unit vector, so the ray parameter t is the
@@ -27,27 +29,10 @@ struct Segment {
 static_assert(std::is_trivially_copyable_v<Segment>);
 static_assert(std::is_trivially_copyable_v<Ray>);
 
-/// An axis-aligned box {{xmin, ymin, zmin}, {xmax, ymax, zmax}} in world units.
-using AxisBox = std::array<std::array<double, 3>, 2>;
-
-/// Clips the ray to the closed box (slab method). Returns false when the ray misses it or
-/// the clipped range is empty; otherwise narrows [tLow, tHigh] to the part inside. Each
-/// box plane's t is computed as (plane - origin) / dir from that plane's value alone, so
-/// two boxes sharing a plane (neighbouring bricks) cut a ray at bitwise the same t.
-/// A ray parallel to a slab is inside it iff its origin is in the closed slab.
-inline bool ClipRayToBox(const Ray& ray, const AxisBox& box, double& tLow, double& tHigh) {
-    for (int a = 0; a < 3; ++a) {
-        const double o = ray.origin[a], d = ray.dir[a];
-        if (d == 0) {
-            if (o < box[0][a] || o > box[1][a]) return false;
-            continue;
-        }
-        double t0 = (box[0][a] - o) / d, t1 = (box[1][a] - o) / d;
-        if (t0 > t1) std::swap(t0, t1);
-        if (t0 > tLow) tLow = t0;
-        if (t1 < tHigh) tHigh = t1;
-    }
-    return tLow <= tHigh;
+/// Narrows `span` to the part of the ray inside `box` under the ownership rule of
+/// geom/box.h (ClipRay); false when nothing is left.
+inline bool ClipRayToBox(const Ray& ray, const Box& box, RaySpan& span) {
+    return ClipRay(ray.origin, ray.dir, box, span);
 }
 
 }  // namespace hpray

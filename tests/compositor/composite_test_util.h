@@ -34,17 +34,17 @@ inline Vec3 Cross(const Vec3& a, const Vec3& b) {
 /// Appends a random subtree of `count` leaves over `box`, leaf ranks taken in order from
 /// `ranks[first, first + count)`: random axis, split at a random 20-80 % of the box, a
 /// random number of leaves on each side. Returns the node index.
-inline int AppendRandomSubtree(CompositeTree& tree, const std::vector<int>& ranks,
+inline int AppendRandomSubtree(KdTree& tree, const std::vector<int>& ranks,
                                int first, int count, const Box& box, std::mt19937& rng) {
     if (count == 1) {
-        CompositeNode leaf;
-        leaf.rank = ranks[first];
+        KdNode leaf;
+        leaf.leaf = ranks[first];
         tree.nodes.push_back(leaf);
         return static_cast<int>(tree.nodes.size()) - 1;
     }
     std::uniform_int_distribution<int> axisDist(0, 2), lowDist(1, count - 1);
     std::uniform_real_distribution<double> fracDist(0.2, 0.8);
-    CompositeNode node;
+    KdNode node;
     node.axis = axisDist(rng);
     node.split =
         box.lo[node.axis] + fracDist(rng) * (box.hi[node.axis] - box.lo[node.axis]);
@@ -63,26 +63,26 @@ inline int AppendRandomSubtree(CompositeTree& tree, const std::vector<int>& rank
 }
 
 /// A random tree over `count` ranks covering `box`; leaf ranks shuffled if `shuffle`.
-inline CompositeTree RandomRankTree(int count, std::mt19937& rng, const Box& box,
+inline KdTree RandomRankTree(int count, std::mt19937& rng, const Box& box,
                                     bool shuffle) {
     std::vector<int> ranks(count);
     std::iota(ranks.begin(), ranks.end(), 0);
     if (shuffle) std::shuffle(ranks.begin(), ranks.end(), rng);
-    CompositeTree tree;
+    KdTree tree;
     tree.root = AppendRandomSubtree(tree, ranks, 0, count, box, rng);
     return tree;
 }
 
 /// The box of every rank's leaf, the root covering `root`.
-inline std::vector<Box> LeafBoxes(const CompositeTree& tree, const Box& root, int ranks) {
+inline std::vector<Box> LeafBoxes(const KdTree& tree, const Box& root, int ranks) {
     std::vector<Box> boxes(ranks);
     std::vector<std::pair<int, Box>> stack{{tree.root, root}};
     while (!stack.empty()) {
         const auto [id, box] = stack.back();
         stack.pop_back();
-        const CompositeNode& node = tree.nodes[id];
+        const KdNode& node = tree.nodes[id];
         if (node.IsLeaf()) {
-            boxes[node.rank] = box;
+            boxes[node.leaf] = box;
             continue;
         }
         Box low = box, high = box;
@@ -153,9 +153,9 @@ struct TestCamera {
                          forward[2] + sx * right[2] + sy * up[2]});
     }
 
-    CompositeView View() const {
-        return ortho ? CompositeView::Orthographic(forward)
-                     : CompositeView::Perspective(position);
+    ViewOrigin View() const {
+        return ortho ? ViewOrigin::Orthographic(forward)
+                     : ViewOrigin::Perspective(position);
     }
 };
 

@@ -44,7 +44,7 @@ double Hash01(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
 /// on some pixels an isosurface hit inside the box, and a volume error proportional to L.
 /// A fraction 1 - fill of each rank's pixels is left empty.
 struct SyntheticScene {
-    CompositeTree tree;
+    KdTree tree;
     std::vector<Box> boxes;
     TestCamera camera;
     double fill = 1.0;
@@ -152,7 +152,7 @@ int CompareImages(const Image& got, const Image& expected, double tol,
 /// The cameras of the test: outside, inside the data, on the root split plane looking
 /// along it (perspective and orthographic), on that plane looking across it, oblique
 /// orthographic. Width even, so no pixel ray lies in a split plane through the eye.
-std::vector<std::pair<std::string, TestCamera>> Cameras(const CompositeTree& tree) {
+std::vector<std::pair<std::string, TestCamera>> Cameras(const KdTree& tree) {
     const int w = 36, h = 24;
     std::vector<std::pair<std::string, TestCamera>> cams;
     cams.push_back(
@@ -164,7 +164,7 @@ std::vector<std::pair<std::string, TestCamera>> Cameras(const CompositeTree& tre
     cams.push_back(
         {"orthographic oblique", TestCamera::Make(true, {2.5, -1.2, 2.0}, {0.5, 0.5, 0.5},
                                                   {0, 0, 1}, 2.2, w, h)});
-    const CompositeNode& root = tree.nodes[tree.root];
+    const KdNode& root = tree.nodes[tree.root];
     if (!root.IsLeaf()) {
         const int a = root.axis, f = (a + 1) % 3, u = (a + 2) % 3;
         Vec3 eye{0.5, 0.5, 0.5}, look{0.5, 0.5, 0.5}, up{0, 0, 0};
@@ -187,9 +187,9 @@ std::vector<std::pair<std::string, TestCamera>> Cameras(const CompositeTree& tre
 }
 
 /// Trees used at every P: the regular one, and random shapes with shuffled leaf ranks.
-std::vector<std::pair<std::string, CompositeTree>> Trees(int ranks) {
-    std::vector<std::pair<std::string, CompositeTree>> trees;
-    trees.push_back({"regular", RegularRankTree(ranks, {0, 0, 0}, {1, 1, 1})});
+std::vector<std::pair<std::string, KdTree>> Trees(int ranks) {
+    std::vector<std::pair<std::string, KdTree>> trees;
+    trees.push_back({"regular", RegularKdTree(ranks, hpray::Box{{0, 0, 0}, {1, 1, 1}})});
     for (int s = 0; s < 2; ++s) {
         std::mt19937 rng(1000 * ranks + s);  // same seed, same tree, on every rank
         trees.push_back({"random " + std::to_string(s),
@@ -223,7 +223,7 @@ TEST(CompositeMpi, EqualsGeometricSerialCompositeForEveryCameraAndTree) {
                 const std::string what =
                     treeName + ", " + camName + ", " + MethodName(method);
                 if (method == Method::TreeSwap) {
-                    EXPECT_EQ(stats.rounds, TreeHeight(tree)) << what;
+                    EXPECT_EQ(stats.rounds, tree.Height()) << what;
                 }
                 if (Rank() != 0) continue;
                 CompareImages(image, expected, 1e-12, what);
@@ -258,7 +258,7 @@ TEST(CompositeMpi, BytesStayWithinTheBoundAndFallWithEmptyPixels) {
                 StorePixel(image, p, px);
             }
             Image copy = image;
-            const CompositeView view = CompositeView::Perspective({-0.7, 2.2, 0.4});
+            const ViewOrigin view = ViewOrigin::Perspective({-0.7, 2.2, 0.4});
             const CompositeStats stats = Composite(image, tree, view, MPI_COMM_WORLD);
             const CompositeStats ref =
                 Composite(copy, tree, view, MPI_COMM_WORLD, Method::GatherReference);
@@ -303,18 +303,18 @@ TEST(CompositeMpi, BytesStayWithinTheBoundAndFallWithEmptyPixels) {
 
 TEST(CompositeMpi, DisagreementMakesEveryRankThrowTogether) {
     const int ranks = Size();
-    const CompositeTree tree = RegularRankTree(ranks, {0, 0, 0}, {1, 1, 1});
-    const CompositeView view = CompositeView::Perspective({2, 2, 2});
+    const KdTree tree = RegularKdTree(ranks, hpray::Box{{0, 0, 0}, {1, 1, 1}});
+    const ViewOrigin view = ViewOrigin::Perspective({2, 2, 2});
     Image image;
     image.Resize(Rank() == 0 ? 10 : 12, 8);
     EXPECT_THROW(Composite(image, tree, view, MPI_COMM_WORLD), InternalError);
     // A tree that misses the last rank: every rank sees the same problem.
     image.Resize(12, 8);
-    const CompositeTree small = RegularRankTree(ranks - 1, {0, 0, 0}, {1, 1, 1});
+    const KdTree small = RegularKdTree(ranks - 1, hpray::Box{{0, 0, 0}, {1, 1, 1}});
     EXPECT_THROW(Composite(image, small, view, MPI_COMM_WORLD), InternalError);
     // One rank with a different view.
-    const CompositeView other =
-        CompositeView::Perspective({2, 2, Rank() == 0 ? 2.0 : 3.0});
+    const ViewOrigin other =
+        ViewOrigin::Perspective({2, 2, Rank() == 0 ? 2.0 : 3.0});
     EXPECT_THROW(Composite(image, tree, other, MPI_COMM_WORLD), InternalError);
     // And the communicator still works afterwards.
     Image ok;

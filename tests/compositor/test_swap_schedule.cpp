@@ -71,9 +71,9 @@ TEST(SwapSchedule, RegularTreesMeetTheBoundForAnyP) {
     for (int ranks = 1; ranks <= 64; ++ranks)
         for (std::size_t pixels :
              {std::size_t{5}, std::size_t{640 * 480}, std::size_t{1} << 20}) {
-            const CompositeTree tree = RegularRankTree(ranks, {0, 0, 0}, {1, 1, 1});
+            const KdTree tree = RegularKdTree(ranks, hpray::Box{{0, 0, 0}, {1, 1, 1}});
             const CompositePlan plan = PlanTreeSwap(tree, ranks, pixels);
-            EXPECT_EQ(plan.rounds, TreeHeight(tree));
+            EXPECT_EQ(plan.rounds, tree.Height());
             CheckPlan(plan,
                       "P=" + std::to_string(ranks) + " N=" + std::to_string(pixels));
         }
@@ -83,7 +83,7 @@ TEST(SwapSchedule, RandomTreeShapesMeetTheBound) {
     for (int seed = 0; seed < 200; ++seed) {
         std::mt19937 rng(seed);
         const int ranks = 2 + seed % 40;
-        const CompositeTree tree =
+        const KdTree tree =
             testutil::RandomRankTree(ranks, rng, testutil::Box{}, seed % 2 == 0);
         const std::size_t pixels = 1000 + 7919 * static_cast<std::size_t>(seed);
         CheckPlan(PlanTreeSwap(tree, ranks, pixels), "seed " + std::to_string(seed));
@@ -96,7 +96,7 @@ TEST(SwapSchedule, BalancedPowerOfTwoIsClassicBinarySwap) {
         const int ranks = 1 << log2p;
         const std::size_t pixels = std::size_t{1} << 16;
         const CompositePlan plan =
-            PlanTreeSwap(RegularRankTree(ranks, {0, 0, 0}, {1, 1, 1}), ranks, pixels);
+            PlanTreeSwap(RegularKdTree(ranks, hpray::Box{{0, 0, 0}, {1, 1, 1}}), ranks, pixels);
         EXPECT_EQ(plan.rounds, log2p);
         const std::vector<std::size_t> sent = DensePixelsSent(plan);
         for (int r = 0; r < ranks; ++r) EXPECT_EQ(sent[r], pixels - pixels / ranks);
@@ -118,7 +118,7 @@ TEST(SwapSchedule, TinyImagesWithFewerPixelsThanRanks) {
     for (int ranks = 2; ranks <= 9; ++ranks)
         for (std::size_t pixels = 0; pixels < 4; ++pixels)
             CheckPlan(
-                PlanTreeSwap(RegularRankTree(ranks, {0, 0, 0}, {1, 1, 1}), ranks, pixels),
+                PlanTreeSwap(RegularKdTree(ranks, hpray::Box{{0, 0, 0}, {1, 1, 1}}), ranks, pixels),
                 "tiny");
 }
 

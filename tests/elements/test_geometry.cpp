@@ -428,7 +428,7 @@ TEST(Bounds, ContainEverySampleOfCurvedCells) {
             }
             const Interval bs = FieldBounds(basis, smooth.data());
             const Interval br = FieldBounds(basis, rough.data());
-            const Box3 box = GeometryBox(basis, c.nodes.data());
+            const Box box = GeometryBox(basis, c.nodes.data());
             double lo[5], hi[5];
             for (int i = 0; i < 5; ++i) {
                 lo[i] = 1e300;

@@ -100,8 +100,8 @@ TEST(Builtin, BallP2IsQuadraticTetsWithExactSquareField) {
         EXPECT_DOUBLE_EQ(u->values[i], x * x + y * y + z * z);
     }
     auto b = m.Bounds();
-    EXPECT_EQ(b[0], (std::array<double, 3>{-1, -1, -1}));
-    EXPECT_EQ(b[1], (std::array<double, 3>{1, 1, 1}));
+    EXPECT_EQ(b.lo, (std::array<double, 3>{-1, -1, -1}));
+    EXPECT_EQ(b.hi, (std::array<double, 3>{1, 1, 1}));
 }
 
 TEST(Builtin, NkSincIsFiveCubedOrderEightHexes) {
@@ -139,8 +139,8 @@ TEST(Builtin, NkQuarticFillsTheUnitCubeWithDisplacedInteriorVertices) {
     Mesh m = MakeBuiltin("builtin:nk-quartic?order=4");
     EXPECT_EQ(m.CellCount(), 8);
     auto b = m.Bounds();
-    EXPECT_EQ(b[0], (std::array<double, 3>{0, 0, 0}));
-    EXPECT_EQ(b[1], (std::array<double, 3>{1, 1, 1}));
+    EXPECT_EQ(b.lo, (std::array<double, 3>{0, 0, 0}));
+    EXPECT_EQ(b.hi, (std::array<double, 3>{1, 1, 1}));
     // The centre vertex (global lattice index (p, p, p)) is displaced off (0.5, 0.5, 0.5).
     const std::int64_t centre = 4 + 9 * (4 + 9 * 4);
     double off = 0;

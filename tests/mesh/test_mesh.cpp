@@ -70,7 +70,7 @@ TEST(Mesh, RangesAndScalarSelection) {
     EXPECT_FALSE(SelectScalar(m, "u.y"));
     EXPECT_TRUE(SelectScalar(m, "id"));
     auto b = m.Bounds();
-    EXPECT_EQ(b[1], (std::array<double, 3>{1, 1, 1}));
+    EXPECT_EQ(b.hi, (std::array<double, 3>{1, 1, 1}));
 }
 
 }  // namespace

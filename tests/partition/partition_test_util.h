@@ -66,10 +66,10 @@ inline std::array<double, 3> Centroid(const Mesh& mesh, std::int64_t c) {
 
 /// The guaranteed geometry box: node bounds for order-1 Lagrange cells, the Bernstein
 /// hull (plus the nodes) otherwise.
-inline Box3 CellBox(const Mesh& mesh, std::int64_t c) {
+inline Box CellBox(const Mesh& mesh, std::int64_t c) {
     const int n = mesh.CellNodeCount(c);
     std::vector<double> xyz(3 * n);
-    Box3 box;
+    Box box;
     box.lo = {1e300, 1e300, 1e300};
     box.hi = {-1e300, -1e300, -1e300};
     for (int k = 0; k < n; ++k)
@@ -80,7 +80,7 @@ inline Box3 CellBox(const Mesh& mesh, std::int64_t c) {
             box.hi[d] = std::max(box.hi[d], v);
         }
     if (mesh.cellOrder[c] > 1 || mesh.cellFamily[c] != CellFamily::Lagrange) {
-        const Box3 g = GeometryBox(
+        const Box g = GeometryBox(
             GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]),
             xyz.data());
         for (int d = 0; d < 3; ++d) {

@@ -537,8 +537,8 @@ void ExpectSamePartition(const std::string& a, const std::string& b) {
     ASSERT_EQ(p.bricks.size(), q.bricks.size());
     EXPECT_EQ(p.manifest.at("tree"), q.manifest.at("tree"));
     EXPECT_EQ(p.manifest.at("fields"), q.manifest.at("fields"));
-    EXPECT_EQ(p.rootBox.lo, q.rootBox.lo);
-    EXPECT_EQ(p.rootBox.hi, q.rootBox.hi);
+    EXPECT_EQ(p.tree.box.lo, q.tree.box.lo);
+    EXPECT_EQ(p.tree.box.hi, q.tree.box.hi);
     for (std::size_t i = 0; i < p.bricks.size(); ++i) {
         SCOPED_TRACE("brick " + std::to_string(i));
         const int b = static_cast<int>(i);

@@ -23,7 +23,6 @@
 namespace hpray {
 namespace {
 
-using partition::Box;
 using partition::Partition;
 using test::ScratchDir;
 
@@ -149,7 +148,7 @@ TEST(VtuStream, TruncatedFileIsAnInputError) {
 }
 
 /// The cost model's estimate for cell c of `mesh` in a partition of root box `root`.
-double ModelCost(const Mesh& mesh, std::int64_t c, const partition::Box& root) {
+double ModelCost(const Mesh& mesh, std::int64_t c, const Box& root) {
     std::vector<double> xyz;
     for (std::int64_t k = mesh.cellOffsets[c]; k < mesh.cellOffsets[c + 1]; ++k)
         for (int d = 0; d < 3; ++d) xyz.push_back(mesh.points[3 * mesh.connectivity[k] + d]);
@@ -166,11 +165,12 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
     std::vector<double> cost(p.bricks.size(), 0.0);
     for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
         const auto x = test::Centroid(mesh, c);
-        int n = 0;
-        while (p.nodes[n].axis >= 0) {
+        const std::vector<KdNode>& nodes = p.tree.nodes;
+        int n = p.tree.root;
+        while (nodes[n].axis >= 0) {
             // The documented rule: low when x[axis] < split; on the plane, by the
             // tie-break on the next two coordinates when the node has one.
-            const auto& node = p.nodes[n];
+            const auto& node = nodes[n];
             const int a = node.axis;
             bool low = x[a] < node.split;
             if (x[a] == node.split && node.tieBreak) {
@@ -179,7 +179,7 @@ double IndependentBalance(const Mesh& mesh, const Partition& p) {
             }
             n = low ? node.low : node.high;
         }
-        cost[p.nodes[n].brick] += ModelCost(mesh, c, p.rootBox);
+        cost[nodes[n].leaf] += ModelCost(mesh, c, p.tree.box);
     }
     double sum = 0, max = 0;
     for (double v : cost) {
@@ -294,7 +294,7 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
     for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
         EXPECT_EQ(owners[c], 1) << "cell " << c;
         // Ghosts exactly cover each leaf box.
-        const Box3 box = test::CellBox(mesh, c);
+        const Box box = test::CellBox(mesh, c);
         std::set<int> expected;
         for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
             bool meets = true;
@@ -313,8 +313,8 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
     for (std::size_t i = 0; i < p.bricks.size(); ++i) {
         volume += vol(p.bricks[i].box);
         for (int d = 0; d < 3; ++d) {
-            EXPECT_GE(p.bricks[i].box.lo[d], p.rootBox.lo[d]);
-            EXPECT_LE(p.bricks[i].box.hi[d], p.rootBox.hi[d]);
+            EXPECT_GE(p.bricks[i].box.lo[d], p.tree.box.lo[d]);
+            EXPECT_LE(p.bricks[i].box.hi[d], p.tree.box.hi[d]);
         }
         for (std::size_t j = i + 1; j < p.bricks.size(); ++j) {
             bool overlap = true;
@@ -324,18 +324,18 @@ void ExpectValidPartition(const std::string& path, const std::string& dir) {
             EXPECT_FALSE(overlap) << i << " " << j;
         }
     }
-    EXPECT_NEAR(volume, vol(p.rootBox), 1e-12 * vol(p.rootBox));
+    EXPECT_NEAR(volume, vol(p.tree.box), 1e-12 * vol(p.tree.box));
     // Root box: the union of the guaranteed cell boxes.
-    Box3 all = test::CellBox(mesh, 0);
+    Box all = test::CellBox(mesh, 0);
     for (std::int64_t c = 1; c < mesh.CellCount(); ++c) {
-        const Box3 b = test::CellBox(mesh, c);
+        const Box b = test::CellBox(mesh, c);
         for (int d = 0; d < 3; ++d) {
             all.lo[d] = std::min(all.lo[d], b.lo[d]);
             all.hi[d] = std::max(all.hi[d], b.hi[d]);
         }
     }
-    EXPECT_EQ(p.rootBox.lo, all.lo);
-    EXPECT_EQ(p.rootBox.hi, all.hi);
+    EXPECT_EQ(p.tree.box.lo, all.lo);
+    EXPECT_EQ(p.tree.box.hi, all.hi);
 }
 
 TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
@@ -357,14 +357,14 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
     const Mesh linear = ReadMesh(kData + "/mfem_fichera_mixed16_linear.vtu");
     const Partition p = partition::ReadPartition(dir / "mfem_fichera_mixed16_linear.vtu");
     const auto bounds = linear.Bounds();
-    EXPECT_EQ(p.rootBox.lo, bounds[0]);
-    EXPECT_EQ(p.rootBox.hi, bounds[1]);
+    EXPECT_EQ(p.tree.box.lo, bounds.lo);
+    EXPECT_EQ(p.tree.box.hi, bounds.hi);
     // Curved mesh: cells bulge beyond their nodes; the root box covers the hulls.
     const Mesh curved = ReadMesh(kData + "/gmsh_boolean_tet_p4.vtu");
     const Partition q = partition::ReadPartition(dir / "gmsh_boolean_tet_p4.vtu");
     for (int d = 0; d < 3; ++d) {
-        EXPECT_LE(q.rootBox.lo[d], curved.Bounds()[0][d]);
-        EXPECT_GE(q.rootBox.hi[d], curved.Bounds()[1][d]);
+        EXPECT_LE(q.tree.box.lo[d], curved.Bounds().lo[d]);
+        EXPECT_GE(q.tree.box.hi[d], curved.Bounds().hi[d]);
     }
 }
 
@@ -430,7 +430,7 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
             }
             EXPECT_LE(max / (sum / n), 1.05) << n << " leaves, collect limit " << limit;
             // Each subtree's cost is close to its share by leaf count.
-            EXPECT_EQ(static_cast<int>(nodes.size()), 2 * n - 1);
+            EXPECT_EQ(static_cast<int>(nodes.nodes.size()), 2 * n - 1);
         }
     }
 }
@@ -457,7 +457,7 @@ TEST(Partition, FrontToBackOrderForAnyCamera) {
     std::uniform_real_distribution<double> u(-2, 3);
     for (int trial = 0; trial < 200; ++trial) {
         const std::array<double, 3> eye{u(rng), u(rng), u(rng)};
-        const auto order = partition::FrontToBackOrder(p, eye);
+        const auto order = p.tree.FrontToBack(ViewOrigin::Perspective(eye));
         ASSERT_EQ(order.size(), 11u);
         EXPECT_EQ(std::set<int>(order.begin(), order.end()).size(), 11u);
         for (std::size_t i = 0; i < order.size(); ++i)
@@ -467,7 +467,7 @@ TEST(Partition, FrontToBackOrderForAnyCamera) {
                     << trial << ": " << order[i] << " before " << order[j];
         // Parallel rays: an eye far away against the direction gives a valid order too.
         std::array<double, 3> dir{u(rng), u(rng), u(rng)};
-        const auto ortho = partition::FrontToBackOrderForDirection(p, dir);
+        const auto ortho = p.tree.FrontToBack(ViewOrigin::Orthographic(dir));
         std::array<double, 3> far;
         for (int d = 0; d < 3; ++d) far[d] = 0.5 - 1e6 * dir[d];
         for (std::size_t i = 0; i < ortho.size(); ++i)

@@ -17,15 +17,15 @@ WorkExtent Along(double x0, double x1, double weight, double y = 0.5) {
     return e;
 }
 
-const AxisBox kUnitX{{{0, 0, 0}, {4, 1, 1}}};
+const Box kUnitX{{0, 0, 0}, {4, 1, 1}};
 const std::array<std::vector<double>, 3> kFaces{std::vector<double>{0, 1, 2, 3, 4},
                                                 std::vector<double>{0, 1},
                                                 std::vector<double>{0, 1}};
 
 TEST(WorkSplit, OneLeafHoldsAllTheWork) {
     const WorkSplit s = SplitWork({Along(0, 1, 2), Along(1, 2, 3)}, 1, kUnitX, kFaces);
-    ASSERT_EQ(s.tree.size(), 1u);
-    EXPECT_EQ(s.tree[0].brick, 0);
+    ASSERT_EQ(s.tree.nodes.size(), 1u);
+    EXPECT_EQ(s.tree.nodes[0].leaf, 0);
     EXPECT_DOUBLE_EQ(s.cost[0], 5);
     EXPECT_EQ(s.boxes[0], kUnitX);
 }
@@ -34,8 +34,8 @@ TEST(WorkSplit, PlanesFallOnFacesWhenThatBalances) {
     const WorkSplit s =
         SplitWork({Along(0, 1, 1), Along(1, 2, 1), Along(2, 3, 1), Along(3, 4, 1)}, 2,
                   kUnitX, kFaces);
-    ASSERT_EQ(s.tree[0].axis, 0);
-    EXPECT_EQ(s.tree[0].split, 2.0);
+    ASSERT_EQ(s.tree.nodes[0].axis, 0);
+    EXPECT_EQ(s.tree.nodes[0].split, 2.0);
     EXPECT_DOUBLE_EQ(s.cost[0], 2);
     EXPECT_DOUBLE_EQ(s.cost[1], 2);
 }
@@ -45,15 +45,15 @@ TEST(WorkSplit, ACutCellCountsOnBothSides) {
     // plane goes through the face at 2 although the weighted median lies inside [1, 2].
     const WorkSplit s =
         SplitWork({Along(0, 1, 4), Along(1, 2, 1), Along(2, 3, 6)}, 2, kUnitX, kFaces);
-    ASSERT_EQ(s.tree[0].axis, 0);
-    EXPECT_EQ(s.tree[0].split, 2.0);
+    ASSERT_EQ(s.tree.nodes[0].axis, 0);
+    EXPECT_EQ(s.tree.nodes[0].split, 2.0);
     EXPECT_DOUBLE_EQ(s.cost[0], 5);
     EXPECT_DOUBLE_EQ(s.cost[1], 6);
     // One heavy cell: only cutting it balances, and its work then counts twice.
     const WorkSplit c = SplitWork({Along(0, 4, 8)}, 2, kUnitX, kFaces);
-    ASSERT_EQ(c.tree[0].axis, 0);
-    EXPECT_GT(c.tree[0].split, 0.0);
-    EXPECT_LT(c.tree[0].split, 4.0);
+    ASSERT_EQ(c.tree.nodes[0].axis, 0);
+    EXPECT_GT(c.tree.nodes[0].split, 0.0);
+    EXPECT_LT(c.tree.nodes[0].split, 4.0);
     EXPECT_DOUBLE_EQ(c.cost[0], 8);
     EXPECT_DOUBLE_EQ(c.cost[1], 8);
 }
@@ -74,8 +74,8 @@ TEST(WorkSplit, WorkBehindAStopCountsOnlyWhereTheStopIsNotInTheBox) {
     EXPECT_DOUBLE_EQ(one.cost[0], 1);
     // x = 3: low [0, 3] renders the first cell only, high [3, 4] its one visible cell.
     const WorkSplit two = SplitWork(items, 2, kUnitX, kFaces);
-    ASSERT_EQ(two.tree[0].axis, 0);
-    EXPECT_EQ(two.tree[0].split, 3.0);
+    ASSERT_EQ(two.tree.nodes[0].axis, 0);
+    EXPECT_EQ(two.tree.nodes[0].split, 3.0);
     EXPECT_DOUBLE_EQ(two.cost[0], 1);
     EXPECT_DOUBLE_EQ(two.cost[1], 1);
     // The same rays travelling along -x (stop at 3.5 in the last cell): mirrored, x = 1.
@@ -89,8 +89,8 @@ TEST(WorkSplit, WorkBehindAStopCountsOnlyWhereTheStopIsNotInTheBox) {
         back.push_back(e);
     }
     const WorkSplit mirrored = SplitWork(back, 2, kUnitX, kFaces);
-    ASSERT_EQ(mirrored.tree[0].axis, 0);
-    EXPECT_EQ(mirrored.tree[0].split, 1.0);
+    ASSERT_EQ(mirrored.tree.nodes[0].axis, 0);
+    EXPECT_EQ(mirrored.tree.nodes[0].split, 1.0);
     EXPECT_DOUBLE_EQ(mirrored.cost[0], 1);
     EXPECT_DOUBLE_EQ(mirrored.cost[1], 1);
 }
@@ -100,7 +100,7 @@ TEST(WorkSplit, PlanesSnapOntoNodeCoordinates) {
     const double off = 2 + 4e-16 * 4;
     const WorkSplit s =
         SplitWork({Along(0, off, 1), Along(off, 4, 1)}, 2, kUnitX, kFaces);
-    EXPECT_EQ(s.tree[0].split, 2.0);
+    EXPECT_EQ(s.tree.nodes[0].split, 2.0);
 }
 
 TEST(WorkSplit, AShorterAxisWinsOnlyWhenItBalancesBetter) {
@@ -111,11 +111,11 @@ TEST(WorkSplit, AShorterAxisWinsOnlyWhenItBalancesBetter) {
     for (int j = 0; j <= 10; ++j) faces[1].push_back(0.1 * j);
     std::sort(faces[1].begin(), faces[1].end());
     const WorkSplit s = SplitWork(items, 2, kUnitX, faces);
-    ASSERT_EQ(s.tree[0].axis, 1);
+    ASSERT_EQ(s.tree.nodes[0].axis, 1);
     EXPECT_DOUBLE_EQ(s.cost[0], 5);
     EXPECT_DOUBLE_EQ(s.cost[1], 5);
-    EXPECT_EQ(s.boxes[0][1][1], s.tree[0].split);
-    EXPECT_EQ(s.boxes[1][0][1], s.tree[0].split);
+    EXPECT_EQ(s.boxes[0].hi[1], s.tree.nodes[0].split);
+    EXPECT_EQ(s.boxes[1].lo[1], s.tree.nodes[0].split);
 }
 
 TEST(WorkSplit, AnyCountBalancesManySmallPieces) {
@@ -136,14 +136,14 @@ TEST(WorkSplit, AnyCountBalancesManySmallPieces) {
         total += e.weight;
         items.push_back(e);
     }
-    const AxisBox cube{{{0, 0, 0}, {1, 1, 1}}};
+    const Box cube{{0, 0, 0}, {1, 1, 1}};
     for (int count : {2, 3, 5, 7, 8, 12}) {
         const WorkSplit s = SplitWork(items, count, cube, {{{}, {}, {}}});
         ASSERT_EQ(static_cast<int>(s.boxes.size()), count);
         double volume = 0, worst = 0;
         for (int b = 0; b < count; ++b) {
             double v = 1;
-            for (int d = 0; d < 3; ++d) v *= s.boxes[b][1][d] - s.boxes[b][0][d];
+            for (int d = 0; d < 3; ++d) v *= s.boxes[b].hi[d] - s.boxes[b].lo[d];
             volume += v;
             worst = std::max(worst, s.cost[b]);
         }

@@ -417,7 +417,7 @@ TEST(VolumeLinear, ClipPlanesAndBoxCutExactly) {
     EXPECT_GT(CompareLinearImage(scene, image, "u", "v", 1e-10).pixels, 80);
     scene.clip.near = 0;
     scene.clip.far = INFINITY;
-    scene.clip.box = {{{0.2, 0.1, 0.3}, {0.9, 0.8, 0.7}}};
+    scene.clip.box = Box{{0.2, 0.1, 0.3}, {0.9, 0.8, 0.7}};
     image = RenderMeshJob(mesh, scene, stats);
     EXPECT_GT(CompareLinearImage(scene, image, "u", "v", 1e-10, {0.2L, 0.1L, 0.3L},
                                  {0.9L, 0.8L, 0.7L})

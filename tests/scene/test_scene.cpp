@@ -224,8 +224,8 @@ edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
     EXPECT_EQ(s.clip.near, 0.5);
     EXPECT_EQ(s.clip.far, 10.0);
     ASSERT_TRUE(s.clip.box.has_value());
-    EXPECT_EQ((*s.clip.box)[0], (Vec3{0, 0, 0}));
-    EXPECT_EQ((*s.clip.box)[1], (Vec3{1, 2, 3}));
+    EXPECT_EQ(s.clip.box->lo, (Vec3{0, 0, 0}));
+    EXPECT_EQ(s.clip.box->hi, (Vec3{1, 2, 3}));
     EXPECT_EQ(s.threads, 3);
     EXPECT_EQ(s.distribute, Distribution::Space);
     ASSERT_TRUE(s.edges.has_value());

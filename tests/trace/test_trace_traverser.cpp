@@ -26,7 +26,7 @@ using testing::MakeRay;
 using testing::MakeRayDir;
 using testing::Vec3;
 
-const AxisBox kUnitBox = {{{0, 0, 0}, {1, 1, 1}}};
+const Box kUnitBox = {{0, 0, 0}, {1, 1, 1}};
 
 // Segments must be sorted, of positive length, and never overlap; returns the maximal
 // runs of exactly touching segments as intervals.
@@ -105,7 +105,7 @@ void CheckCubeRay(const Mesh& mesh, const BrickTraverser& tr, const Ray& ray,
     const bool hit = BoxChord(ray, kUnitBox, t0, t1);
     const double chord = hit ? t1 - t0 : 0;
     // Rays in the boundary planes: the closed box and the open box disagree.
-    const AxisBox inner = {{{1e-9, 1e-9, 1e-9}, {1 - 1e-9, 1 - 1e-9, 1 - 1e-9}}};
+    const Box inner = {{1e-9, 1e-9, 1e-9}, {1 - 1e-9, 1 - 1e-9, 1 - 1e-9}};
     double s0, s1;
     const double innerChord = BoxChord(ray, inner, s0, s1) ? s1 - s0 : 0;
     const bool grazing = std::fabs(innerChord - chord) > 1e-6;
@@ -339,9 +339,8 @@ std::vector<std::array<double, 2>> CubeUnionIntervals(
         for (int b = 0; b < n; ++b)
             for (int a = 0; a < n; ++a) {
                 if (!keep(a, b, c)) continue;
-                const AxisBox box = {
-                    {{double(a) / n, double(b) / n, double(c) / n},
-                     {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}}};
+                const Box box = {{double(a) / n, double(b) / n, double(c) / n},
+                                 {double(a + 1) / n, double(b + 1) / n, double(c + 1) / n}};
                 double t0, t1;
                 if (BoxChord(ray, box, t0, t1) && t1 > t0) iv.push_back({t0, t1});
             }
@@ -401,7 +400,7 @@ TEST(BrickTraverser, NonConvexDisconnectedMeshWithCavity) {
 
 TEST(BrickTraverser, ClipsToSubBoxAndRange) {
     const Mesh mesh = GridMesh(6, 0.2, [](int, int, int) { return CubeCut::Wedges; });
-    const AxisBox sub = {{{0.2, 0.1, 0.3}, {0.7, 0.9, 0.6}}};
+    const Box sub = {{0.2, 0.1, 0.3}, {0.7, 0.9, 0.6}};
     const BrickTraverser tr(Brick{&mesh, sub});
     const BrickTraverser whole(Brick::WholeMesh(mesh));
     std::mt19937_64 rng(13);
@@ -545,9 +544,9 @@ TEST(BrickTraverser, StraightHighOrderCellsHaveStraightFaces) {
         for (int i = 0; i < 3000; ++i) {
             Vec3 from, to;
             for (int d = 0; d < 3; ++d) {
-                const double w = box[1][d] - box[0][d];
-                from[d] = box[0][d] + w * (3 * uni(rng) - 1);
-                to[d] = box[0][d] + w * uni(rng);
+                const double w = box.hi[d] - box.lo[d];
+                from[d] = box.lo[d] + w * (3 * uni(rng) - 1);
+                to[d] = box.lo[d] + w * uni(rng);
             }
             const Ray ray = MakeRay(from, to);
             tr.Trace(ray, -INFINITY, INFINITY, segs);
@@ -589,9 +588,10 @@ struct QuadricSlab {
 // middle.
 std::vector<std::array<double, 2>> SlabIntervals(const Ray& ray, const QuadricSlab& s) {
     std::vector<double> br;
-    double t0 = -INFINITY, t1 = INFINITY;
-    const AxisBox square = {{{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}}};
-    if (!ClipRayToBox(ray, square, t0, t1)) return {};
+    const Box square = {{s.xy[0], s.xy[0], -1e300}, {s.xy[1], s.xy[1], 1e300}};
+    RaySpan span;
+    if (!ClipRayToBox(ray, square, span)) return {};
+    const double t0 = span.t0, t1 = span.t1;
     br.push_back(t0);
     br.push_back(t1);
     for (double level : {s.g[0], s.g[1]}) {

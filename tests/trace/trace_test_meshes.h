@@ -126,10 +126,12 @@ inline Mesh GridMesh(int n, double jitter, std::function<CubeCut(int, int, int)>
 }
 
 /// Chord of a ray through a closed box: [t0, t1] or false.
-inline bool BoxChord(const Ray& ray, const AxisBox& box, double& t0, double& t1) {
-    t0 = -INFINITY;
-    t1 = INFINITY;
-    return ClipRayToBox(ray, box, t0, t1);
+inline bool BoxChord(const Ray& ray, const Box& box, double& t0, double& t1) {
+    RaySpan span;
+    const bool hit = ClipRayToBox(ray, box, span);
+    t0 = span.t0;
+    t1 = span.t1;
+    return hit;
 }
 
 inline Ray MakeRay(const Vec3& from, const Vec3& to) {
