@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <limits>
 
-#include "over.h"
+#include "image/image.h"
 #include "util/check.h"
 
 namespace hpray::compositor {
@@ -50,14 +50,14 @@ namespace {
 
 inline Pixel ReadWire(const double* src) {
     Pixel p;
-    p.r = src[0];
-    p.g = src[1];
-    p.b = src[2];
-    p.a = src[3];
+    p.rgba[0] = src[0];
+    p.rgba[1] = src[1];
+    p.rgba[2] = src[2];
+    p.rgba[3] = src[3];
     p.z = src[4];
-    p.nx = src[5];
-    p.ny = src[6];
-    p.nz = src[7];
+    p.normal[0] = src[5];
+    p.normal[1] = src[6];
+    p.normal[2] = src[7];
     p.isoResidual = src[8];
     p.isoId = src[9];
     p.volError = src[10];

@@ -5,7 +5,7 @@
 #include <memory>
 #include <vector>
 
-#include "io/image.h"
+#include "image/image.h"
 
 namespace hpray::compositor {
 

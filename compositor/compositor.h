@@ -6,8 +6,7 @@
 #include <cstdint>
 
 #include "composite_tree.h"
-#include "io/image.h"
-#include "over.h"
+#include "image/image.h"
 
 namespace hpray::compositor {
 

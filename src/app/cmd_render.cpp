@@ -493,7 +493,7 @@ int RunRender(const RenderArgs& args) {
                                  nullptr, &accumulated);
             }
             ++loaded;
-            compositor::CompositeOver(accumulated, image);
+            CompositeOver(accumulated, image);
         }
         if (P > 1) rankTree = compositor::BuildRankTree(plan.tree, plan.rank, P);
     }

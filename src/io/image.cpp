@@ -14,55 +14,6 @@
 
 namespace hpray {
 
-void Image::Resize(int w, int h) {
-    HPRAY_CHECK_GE(w, 0);
-    HPRAY_CHECK_GE(h, 0);
-    width = w;
-    height = h;
-    const std::size_t n = PixelCount();
-    const double inf = std::numeric_limits<double>::infinity();
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    r.assign(n, 0.0);
-    g.assign(n, 0.0);
-    b.assign(n, 0.0);
-    a.assign(n, 0.0);
-    z.assign(n, inf);
-    nx.assign(n, 0.0);
-    ny.assign(n, 0.0);
-    nz.assign(n, 0.0);
-    isoResidual.assign(n, nan);
-    isoId.assign(n, -1.0);
-    volError.assign(n, 0.0);
-}
-
-std::vector<std::pair<std::string, std::vector<double>*>> Image::Channels() {
-    return {{"R", &r},
-            {"G", &g},
-            {"B", &b},
-            {"A", &a},
-            {"Z", &z},
-            {"N.X", &nx},
-            {"N.Y", &ny},
-            {"N.Z", &nz},
-            {"iso.residual", &isoResidual},
-            {"iso.id", &isoId},
-            {"vol.error", &volError}};
-}
-
-std::vector<std::pair<std::string, const std::vector<double>*>> Image::Channels() const {
-    return {{"R", &r},
-            {"G", &g},
-            {"B", &b},
-            {"A", &a},
-            {"Z", &z},
-            {"N.X", &nx},
-            {"N.Y", &ny},
-            {"N.Z", &nz},
-            {"iso.residual", &isoResidual},
-            {"iso.id", &isoId},
-            {"vol.error", &volError}};
-}
-
 double LinearToSrgb(double linear) {
     // NaN compares false everywhere; map it to black rather than propagate into 8 bits.
     if (!(linear > 0.0)) return 0.0;

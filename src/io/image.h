@@ -1,4 +1,5 @@
-// The rendered image: double-precision channels of design.md, structure of arrays.
+// Writing and reading images (OpenEXR, PNG, NumPy .npy); the image itself is in
+// image/image.h.
 #pragma once
 
 #include <array>
@@ -6,28 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "image/image.h"
+
 namespace hpray {
-
-/// Per-pixel channels, each W*H doubles, row-major with the top row first (pixel (i, j) at
-/// index j * width + i). Colour is linear and premultiplied by alpha.
-struct Image {
-    int width = 0;
-    int height = 0;
-    std::vector<double> r, g, b, a;       ///< premultiplied RGBA
-    std::vector<double> z;                ///< t of nearest isosurface hit, +inf where none
-    std::vector<double> nx, ny, nz;       ///< unit normal at that hit, 0 where none
-    std::vector<double> isoResidual;      ///< |f(x_hit) - C|, NaN where none
-    std::vector<double> isoId;            ///< isosurface index, -1 where none
-    std::vector<double> volError;         ///< estimated abs. error of RGB, 0 without volume
-
-    /// Allocates all channels at their "empty" values (transparent black, no hit).
-    void Resize(int w, int h);
-    std::size_t PixelCount() const { return static_cast<std::size_t>(width) * height; }
-
-    /// Names and pointers of every channel, in the EXR channel naming of design.md.
-    std::vector<std::pair<std::string, std::vector<double>*>> Channels();
-    std::vector<std::pair<std::string, const std::vector<double>*>> Channels() const;
-};
 
 /// Writes `image` as a one-part OpenEXR file with float32 channels R G B A Z N.X N.Y N.Z
 /// iso.residual iso.id vol.error. Throws InputError(path) if the file cannot be written.

@@ -105,7 +105,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
 class RayIntegrator {
   public:
     /// `costSamples`: when not null, one sample per traversed segment is appended.
-    void Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
+    void Integrate(const BrickSetup& setup, const Ray& ray, Pixel& out,
                    RenderCounters& counters,
                    std::vector<SegmentCostSample>* costSamples = nullptr);
 
@@ -117,7 +117,7 @@ class RayIntegrator {
         int slice = -1;  ///< slice index, or -1 for an isosurface
     };
     void Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
-               SegmentField& field, PixelSample& out, double& transmittance,
+               SegmentField& field, Pixel& out, double& transmittance,
                RenderCounters& counters);
     void ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
                     const Event& e, RayComposite& composite, RenderCounters& counters);
@@ -157,7 +157,7 @@ void RayIntegrator::ShadeSlice(const BrickSetup& setup, const Ray& ray,
 }
 
 void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
-                          SegmentField& field, PixelSample& out, double& transmittance,
+                          SegmentField& field, Pixel& out, double& transmittance,
                           RenderCounters& counters) {
     const BrickSetup::Iso& iso = setup.isos[e.iso];
     double value, g[3];
@@ -190,7 +190,7 @@ void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& 
         out.isoId = e.iso;
         out.z = e.t;
         for (int i = 0; i < 3; ++i) out.normal[i] = n[i];
-        out.residual = e.residual;
+        out.isoResidual = e.residual;
     }
     counters.isoHits += 1;
     counters.isoResidualSqSum += e.residual * e.residual;
@@ -262,10 +262,10 @@ class SegmentCostRecorder {
 };
 }  // namespace
 
-void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSample& out,
+void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& out,
                               RenderCounters& counters,
                               std::vector<SegmentCostSample>* costSamples) {
-    out = PixelSample{};
+    out = Pixel{};
     counters.rays += 1;
     RaySpan span{setup.tNear, setup.tFar};
     if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, span)) return;
@@ -491,7 +491,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, PixelSamp
     }
 }
 
-void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
+void IntegrateRay(const BrickSetup& setup, const Ray& ray, Pixel& sample,
                   RenderCounters& counters) {
     thread_local RayIntegrator integrator;
     integrator.Integrate(setup, ray, sample, counters);
@@ -519,7 +519,7 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
     tbb::parallel_for(begin, end, [&](int tile) {
         ThreadState& st = states.local();
         const int x0 = (tile % tilesX) * kRenderTile, y0 = (tile / tilesX) * kRenderTile;
-        PixelSample s;
+        Pixel s;
         for (int j = y0; j < std::min(H, y0 + kRenderTile); ++j)
             for (int i = x0; i < std::min(W, x0 + kRenderTile); ++i) {
                 // Behind an opaque pixel nothing shows: leave it empty, untraced.
@@ -532,18 +532,7 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
                 }
                 st.integrator.Integrate(setup, ray, s, st.counters,
                                         costSamples ? &st.costSamples : nullptr);
-                const std::size_t p = static_cast<std::size_t>(j) * W + i;
-                image.r[p] = s.rgba[0];
-                image.g[p] = s.rgba[1];
-                image.b[p] = s.rgba[2];
-                image.a[p] = s.rgba[3];
-                image.z[p] = s.z;
-                image.nx[p] = s.normal[0];
-                image.ny[p] = s.normal[1];
-                image.nz[p] = s.normal[2];
-                image.isoResidual[p] = s.residual;
-                image.isoId[p] = s.isoId;
-                image.volError[p] = s.volError;
+                StorePixel(image, static_cast<std::size_t>(j) * W + i, s);
             }
     });
     for (const ThreadState& st : states) {

@@ -10,7 +10,7 @@
 
 #include "elements/bounds.h"
 #include "elements/mesh_geometry.h"
-#include "io/image.h"
+#include "image/image.h"
 #include "render/ray_field.h"
 #include "render/ray_roots.h"
 #include "render/stats.h"
@@ -82,16 +82,6 @@ struct BrickSetup {
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                           const BrickTraverser& traverser, const Scene& scene);
 
-/// The result of one ray in one brick (design.md channels, double precision).
-struct PixelSample {
-    double rgba[4] = {0, 0, 0, 0};  ///< premultiplied
-    double z = std::numeric_limits<double>::infinity();
-    double normal[3] = {0, 0, 0};
-    double residual = std::numeric_limits<double>::quiet_NaN();
-    int isoId = -1;
-    double volError = 0;
-};
-
 /// The measured cost of one ray segment: where its work was done and how long it took.
 /// Sampled on request (a steady-clock read per segment) to calibrate the partitioner's
 /// cost model and to balance in-memory splits by measured cost.
@@ -136,7 +126,7 @@ void RenderBrickTiles(const BrickSetup& setup, const Camera& camera, int threads
 
 /// One ray (exposed for tests): fills `sample` and adds to `counters`.
 class RayIntegrator;
-void IntegrateRay(const BrickSetup& setup, const Ray& ray, PixelSample& sample,
+void IntegrateRay(const BrickSetup& setup, const Ray& ray, Pixel& sample,
                   RenderCounters& counters);
 
 }  // namespace hpray

@@ -1,6 +1,8 @@
 // A render job on one process (see render_job.h).
 #include "render/render_job.h"
 
+#include "io/image.h"
+
 #include <tbb/info.h>
 
 #include <algorithm>

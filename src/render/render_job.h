@@ -2,7 +2,7 @@
 // structures, ray-cast, composite, write the outputs and the stats.
 #pragma once
 
-#include "io/image.h"
+#include "image/image.h"
 #include "mesh/mesh.h"
 #include "trace/ray.h"
 

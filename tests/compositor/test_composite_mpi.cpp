@@ -62,14 +62,14 @@ struct SyntheticScene {
         entry = t0;
         Pixel p;
         const double sigma = 0.6 + 0.45 * (rank % 5);
-        p.a = 1.0 - std::exp(-sigma * length);
-        p.r = (0.15 + 0.1 * (rank % 8)) * p.a;
-        p.g = (0.95 - 0.12 * (rank % 6)) * p.a;
-        p.b = (0.3 + 0.2 * (rank % 3)) * p.a;
+        p.rgba[3] = 1.0 - std::exp(-sigma * length);
+        p.rgba[0] = (0.15 + 0.1 * (rank % 8)) * p.rgba[3];
+        p.rgba[1] = (0.95 - 0.12 * (rank % 6)) * p.rgba[3];
+        p.rgba[2] = (0.3 + 0.2 * (rank % 3)) * p.rgba[3];
         if ((i + 2 * j + rank) % 3 == 0) {
             p.z = t0 + 0.25 * length;
             const Vec3 n = testutil::Normalize({1.0 + rank, 0.5 + i % 3, -0.25 - j % 2});
-            p.nx = n[0], p.ny = n[1], p.nz = n[2];
+            p.normal[0] = n[0], p.normal[1] = n[1], p.normal[2] = n[2];
             p.isoResidual = 1e-3 * (rank + 1);
             p.isoId = rank % 4;
         }
@@ -108,14 +108,14 @@ struct SyntheticScene {
                           [](const auto& x, const auto& y) { return x.first < y.first; });
                 Pixel acc;
                 for (const auto& [entry, p] : layers) {
-                    const double transmittance = 1.0 - acc.a;
-                    acc.r += transmittance * p.r;
-                    acc.g += transmittance * p.g;
-                    acc.b += transmittance * p.b;
-                    acc.a += transmittance * p.a;
+                    const double transmittance = 1.0 - acc.rgba[3];
+                    acc.rgba[0] += transmittance * p.rgba[0];
+                    acc.rgba[1] += transmittance * p.rgba[1];
+                    acc.rgba[2] += transmittance * p.rgba[2];
+                    acc.rgba[3] += transmittance * p.rgba[3];
                     acc.volError += p.volError;
                     if (p.z < acc.z) {
-                        acc.z = p.z, acc.nx = p.nx, acc.ny = p.ny, acc.nz = p.nz;
+                        acc.z = p.z, acc.normal[0] = p.normal[0], acc.normal[1] = p.normal[1], acc.normal[2] = p.normal[2];
                         acc.isoResidual = p.isoResidual, acc.isoId = p.isoId;
                     }
                 }
@@ -252,8 +252,8 @@ TEST(CompositeMpi, BytesStayWithinTheBoundAndFallWithEmptyPixels) {
             for (std::size_t p = 0; p < image.PixelCount(); ++p) {
                 if (Hash01(p, Rank(), 77) >= fill) continue;
                 Pixel px;
-                px.a = 0.5 * Hash01(p, Rank(), 1);
-                px.r = px.g = px.b = 0.5 * px.a;
+                px.rgba[3] = 0.5 * Hash01(p, Rank(), 1);
+                px.rgba[0] = px.rgba[1] = px.rgba[2] = 0.5 * px.rgba[3];
                 px.volError = 1e-6;
                 StorePixel(image, p, px);
             }

@@ -9,7 +9,6 @@
 
 #include "composite_test_util.h"
 #include "composite_tree.h"
-#include "scene/camera.h"
 #include "util/error.h"
 
 namespace hpray::compositor {
@@ -38,20 +37,6 @@ TEST(LowInFront, OrthographicDirectionSignDecides) {
     EXPECT_TRUE(LowInFront(2, -100.0, ViewOrigin::Orthographic({0.0, 0.0, 2.0})));
     // Parallel to the plane: every ray lies on one side only; the tie puts high first.
     EXPECT_FALSE(LowInFront(1, 0.5, ViewOrigin::Orthographic({1.0, 0.0, 1.0})));
-}
-
-TEST(LowInFront, ViewFromSceneCamera) {
-    SceneCamera camera;
-    camera.position = {0.2, 3.0, 0.7};
-    camera.lookAt = {0.5, 0.5, 0.5};
-    EXPECT_TRUE(LowInFront(0, 0.5, ViewOriginOf(camera)));
-    EXPECT_FALSE(LowInFront(1, 0.5, ViewOriginOf(camera)));
-    camera.orthographic = true;
-    camera.orthoHeight = 2.0;
-    // Direction (0.3, -2.5, -0.2): low in front along x, high along y and z.
-    EXPECT_TRUE(LowInFront(0, 0.9, ViewOriginOf(camera)));
-    EXPECT_FALSE(LowInFront(1, -4.0, ViewOriginOf(camera)));
-    EXPECT_FALSE(LowInFront(2, 0.0, ViewOriginOf(camera)));
 }
 
 /// Checks, for `rays` random rays of `view`, that the ranks whose leaf box each ray

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "active_pixels.h"
-#include "over.h"
+#include "image/image.h"
 #include "util/error.h"
 
 namespace hpray::compositor {
@@ -20,15 +20,15 @@ const double kInf = std::numeric_limits<double>::infinity();
 Pixel RandomPixel(std::mt19937& rng) {
     std::uniform_real_distribution<double> u(0.0, 1.0);
     Pixel p;
-    p.a = u(rng);
-    p.r = p.a * u(rng);
-    p.g = p.a * u(rng);
-    p.b = p.a * u(rng);
+    p.rgba[3] = u(rng);
+    p.rgba[0] = p.rgba[3] * u(rng);
+    p.rgba[1] = p.rgba[3] * u(rng);
+    p.rgba[2] = p.rgba[3] * u(rng);
     if (u(rng) < 0.5) {
         p.z = 10.0 * u(rng);
-        p.nx = u(rng);
-        p.ny = u(rng);
-        p.nz = u(rng);
+        p.normal[0] = u(rng);
+        p.normal[1] = u(rng);
+        p.normal[2] = u(rng);
         p.isoResidual = 1e-12 * u(rng);
         p.isoId = std::floor(4.0 * u(rng));
     }
@@ -39,10 +39,10 @@ Pixel RandomPixel(std::mt19937& rng) {
 /// Channel-wise comparison; NaN equals NaN.
 void ExpectPixelNear(const Pixel& x, const Pixel& y, double tol,
                      const std::string& what) {
-    const double xs[kChannels] = {x.r,  x.g,  x.b,           x.a,     x.z,       x.nx,
-                                  x.ny, x.nz, x.isoResidual, x.isoId, x.volError};
-    const double ys[kChannels] = {y.r,  y.g,  y.b,           y.a,     y.z,       y.nx,
-                                  y.ny, y.nz, y.isoResidual, y.isoId, y.volError};
+    const double xs[kChannels] = {x.rgba[0],  x.rgba[1],  x.rgba[2],           x.rgba[3],     x.z,       x.normal[0],
+                                  x.normal[1], x.normal[2], x.isoResidual, x.isoId, x.volError};
+    const double ys[kChannels] = {y.rgba[0],  y.rgba[1],  y.rgba[2],           y.rgba[3],     y.z,       y.normal[0],
+                                  y.normal[1], y.normal[2], y.isoResidual, y.isoId, y.volError};
     for (int c = 0; c < kChannels; ++c) {
         if (std::isnan(xs[c]) || std::isnan(ys[c])) {
             EXPECT_TRUE(std::isnan(xs[c]) && std::isnan(ys[c]))
@@ -57,18 +57,18 @@ void ExpectPixelNear(const Pixel& x, const Pixel& y, double tol,
 
 TEST(Over, ClosedFormOfTwoLayers) {
     Pixel front, back;
-    front.r = 0.1, front.g = 0.2, front.b = 0.3, front.a = 0.4, front.volError = 1e-6;
-    back.r = 0.5, back.g = 0.25, back.b = 0.125, back.a = 0.75, back.volError = 2e-6;
-    back.z = 3.0, back.nx = 1.0, back.isoResidual = 1e-13, back.isoId = 2.0;
+    front.rgba[0] = 0.1, front.rgba[1] = 0.2, front.rgba[2] = 0.3, front.rgba[3] = 0.4, front.volError = 1e-6;
+    back.rgba[0] = 0.5, back.rgba[1] = 0.25, back.rgba[2] = 0.125, back.rgba[3] = 0.75, back.volError = 2e-6;
+    back.z = 3.0, back.normal[0] = 1.0, back.isoResidual = 1e-13, back.isoId = 2.0;
     const Pixel out = Over(front, back);
-    EXPECT_DOUBLE_EQ(out.r, 0.1 + 0.6 * 0.5);
-    EXPECT_DOUBLE_EQ(out.g, 0.2 + 0.6 * 0.25);
-    EXPECT_DOUBLE_EQ(out.b, 0.3 + 0.6 * 0.125);
-    EXPECT_DOUBLE_EQ(out.a, 0.4 + 0.6 * 0.75);
+    EXPECT_DOUBLE_EQ(out.rgba[0], 0.1 + 0.6 * 0.5);
+    EXPECT_DOUBLE_EQ(out.rgba[1], 0.2 + 0.6 * 0.25);
+    EXPECT_DOUBLE_EQ(out.rgba[2], 0.3 + 0.6 * 0.125);
+    EXPECT_DOUBLE_EQ(out.rgba[3], 0.4 + 0.6 * 0.75);
     EXPECT_DOUBLE_EQ(out.volError, 3e-6);
     // The only hit is behind a translucent front: it is the nearest hit.
     EXPECT_EQ(out.z, 3.0);
-    EXPECT_EQ(out.nx, 1.0);
+    EXPECT_EQ(out.normal[0], 1.0);
     EXPECT_EQ(out.isoResidual, 1e-13);
     EXPECT_EQ(out.isoId, 2.0);
 }
@@ -79,22 +79,22 @@ TEST(Over, NLayersOfEqualFogMatchBeerLambert) {
     const double d = 0.3, c = 0.7;
     for (int layers = 1; layers <= 12; ++layers) {
         Pixel slab;
-        slab.a = 1.0 - std::exp(-d);
-        slab.r = slab.g = slab.b = c * slab.a;
+        slab.rgba[3] = 1.0 - std::exp(-d);
+        slab.rgba[0] = slab.rgba[1] = slab.rgba[2] = c * slab.rgba[3];
         Pixel acc;
         for (int k = 0; k < layers; ++k) acc = Over(acc, slab);
         const double alpha = 1.0 - std::exp(-layers * d);
-        EXPECT_NEAR(acc.a, alpha, 1e-15) << layers;
-        EXPECT_NEAR(acc.r, c * alpha, 1e-15) << layers;
+        EXPECT_NEAR(acc.rgba[3], alpha, 1e-15) << layers;
+        EXPECT_NEAR(acc.rgba[0], c * alpha, 1e-15) << layers;
     }
 }
 
 TEST(Over, NearestHitWinsAndTiesKeepFront) {
     Pixel front, back;
-    front.z = 2.0, front.nx = 1.0, front.isoId = 0.0, front.isoResidual = 1e-3;
-    back.z = 1.0, back.ny = 1.0, back.isoId = 1.0, back.isoResidual = 2e-3;
+    front.z = 2.0, front.normal[0] = 1.0, front.isoId = 0.0, front.isoResidual = 1e-3;
+    back.z = 1.0, back.normal[1] = 1.0, back.isoId = 1.0, back.isoResidual = 2e-3;
     EXPECT_EQ(Over(front, back).isoId, 1.0);
-    EXPECT_EQ(Over(front, back).ny, 1.0);
+    EXPECT_EQ(Over(front, back).normal[1], 1.0);
     EXPECT_EQ(Over(back, front).isoId, 1.0);
     back.z = 2.0;
     EXPECT_EQ(Over(front, back).isoId, 0.0);
@@ -114,7 +114,7 @@ TEST(Over, EmptyPixelIsTwoSidedIdentity) {
 
 TEST(Over, GlowWithoutOpacityIsNotEmpty) {
     Pixel glow;
-    glow.r = 0.2;  // emission with no absorption: alpha 0, colour adds
+    glow.rgba[0] = 0.2;  // emission with no absorption: alpha 0, colour adds
     EXPECT_FALSE(IsEmpty(glow));
     Pixel errorOnly;
     errorOnly.volError = 1e-9;

@@ -16,7 +16,7 @@
 
 #include "geom/kd_tree.h"
 #include "io/mesh_io.h"
-#include "over.h"
+#include "image/image.h"
 #include "partition.h"
 #include "partition_test_util.h"
 #include "render/render_job.h"
@@ -202,12 +202,12 @@ TEST_P(BrickSeams, EveryCameraOnPlanesEdgesAndCornersGivesTheUnpartitionedImage)
                 Image image;
                 prepared[b]->Render(scene, camera, std::nullopt, image, stats, nullptr,
                                     &bricked);
-                compositor::CompositeOver(bricked, image);
+                CompositeOver(bricked, image);
                 // The in-memory split of the whole mesh into the same boxes.
                 Image piece;
                 reference.Render(scene, camera, part.bricks[b].box, piece, stats, nullptr,
                                  &inMemory);
-                compositor::CompositeOver(inMemory, piece);
+                CompositeOver(inMemory, piece);
             }
             ExpectSameImage(ref, bricked, what + " (partition)", worst);
             ExpectSameImage(ref, inMemory, what + " (in-memory split)", worst);

@@ -239,7 +239,7 @@ TEST(IsoRender, TangentAndNearTangentRays) {
     s.isosurfaces[0].value = 0.25;  // R = 0.5
     const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, s);
     RenderCounters counters;
-    PixelSample sample;
+    Pixel sample;
     // Tangent to the sphere at (0, 0.5, 0), a mesh vertex: a double root at t = 2.
     Ray ray;
     ray.origin[0] = -2;
@@ -248,7 +248,7 @@ TEST(IsoRender, TangentAndNearTangentRays) {
     ray.dir[2] = 0;
     IntegrateRay(setup, ray, sample, counters);
     EXPECT_NEAR(sample.z, 2.0, 1e-6);  // a double root is determined to ~sqrt(eps)
-    EXPECT_LE(sample.residual, 1e-14);
+    EXPECT_LE(sample.isoResidual, 1e-14);
     // Tangent inside a face of the grid (z = 0.25 is not a grid plane): at (0.1, 0.4, 0.25)?
     // Use y offset: passing 1e-6 outside misses, 1e-6 inside hits at the analytic chord.
     ray.origin[1] = 0.5 + 1e-6;
@@ -452,7 +452,7 @@ isosurfaces:
         {0.1, 0.0, 0.3},                                                    // boundary face
     };
     RenderCounters counters;
-    PixelSample sample;
+    Pixel sample;
     int checked = 0;
     for (std::size_t k = 0; k < targets.size(); ++k)
         for (int trial = 0; trial < 200; ++trial) {

@@ -450,7 +450,7 @@ volume:
         const BrickTraverser traverser(Brick::WholeMesh(mesh));
         const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
         RenderCounters counters;
-        PixelSample sample;
+        Pixel sample;
         int checked = 0;
         for (int trial = 0; trial < 300; ++trial) {
             std::mt19937 rng(trial);
@@ -494,7 +494,7 @@ accuracy: {volume_tolerance: 1e-12}
     const BrickTraverser traverser(Brick::WholeMesh(mesh));
     const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
     RenderCounters counters;
-    PixelSample sample;
+    Pixel sample;
     for (int trial = 0; trial < 100; ++trial) {
         std::mt19937 rng(trial);
         std::uniform_real_distribution<double> uni(0.05, 0.95);

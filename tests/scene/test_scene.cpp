@@ -792,5 +792,19 @@ TEST(CameraTest, FromAParsedScene) {
     EXPECT_NEAR(ray.direction[2], -1 / std::sqrt(1 + sy * sy), 1e-15);
 }
 
+TEST(SceneCamera, ViewOriginOrdersKdLeaves) {
+    SceneCamera camera;
+    camera.position = {0.2, 3.0, 0.7};
+    camera.lookAt = {0.5, 0.5, 0.5};
+    EXPECT_TRUE(LowInFront(0, 0.5, ViewOriginOf(camera)));
+    EXPECT_FALSE(LowInFront(1, 0.5, ViewOriginOf(camera)));
+    camera.orthographic = true;
+    camera.orthoHeight = 2.0;
+    // Direction (0.3, -2.5, -0.2): low in front along x, high along y and z.
+    EXPECT_TRUE(LowInFront(0, 0.9, ViewOriginOf(camera)));
+    EXPECT_FALSE(LowInFront(1, -4.0, ViewOriginOf(camera)));
+    EXPECT_FALSE(LowInFront(2, 0.0, ViewOriginOf(camera)));
+}
+
 }  // namespace
 }  // namespace hpray
