@@ -40,41 +40,36 @@ double QuadArea(const double* a, const double* b, const double* c, const double*
 
 double HullSurfaceArea(CellShape shape, const double* v) {
     auto P = [v](int i) { return v + 3 * i; };
-    switch (shape) {
-        case CellShape::Tet:
-            return TriangleArea(P(0), P(1), P(2)) + TriangleArea(P(0), P(1), P(3)) +
-                   TriangleArea(P(1), P(2), P(3)) + TriangleArea(P(0), P(2), P(3));
-        case CellShape::Hex:
-            return QuadArea(P(0), P(1), P(2), P(3)) + QuadArea(P(4), P(5), P(6), P(7)) +
-                   QuadArea(P(0), P(1), P(5), P(4)) + QuadArea(P(1), P(2), P(6), P(5)) +
-                   QuadArea(P(2), P(3), P(7), P(6)) + QuadArea(P(3), P(0), P(4), P(7));
-        case CellShape::Wedge:
-            return TriangleArea(P(0), P(1), P(2)) + TriangleArea(P(3), P(4), P(5)) +
-                   QuadArea(P(0), P(1), P(4), P(3)) + QuadArea(P(1), P(2), P(5), P(4)) +
-                   QuadArea(P(2), P(0), P(3), P(5));
-        case CellShape::Pyramid:
-            return QuadArea(P(0), P(1), P(2), P(3)) + TriangleArea(P(0), P(1), P(4)) +
-                   TriangleArea(P(1), P(2), P(4)) + TriangleArea(P(2), P(3), P(4)) +
-                   TriangleArea(P(3), P(0), P(4));
+    const CellTopology& t = Topology(shape);
+    double area = 0;
+    for (int f = 0; f < t.faces; ++f) {
+        const int* c = t.face[f];
+        area += t.faceSize[f] == 3 ? TriangleArea(P(c[0]), P(c[1]), P(c[2]))
+                                   : QuadArea(P(c[0]), P(c[1]), P(c[2]), P(c[3]));
     }
-    return 0;
+    return area;
 }
 
 double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
                            const double* nodeXyz) {
-    // Internal indices of the corner vertices, cached per (shape, order, family).
+    // Internal indices of the corners (mesh/cell.h Topology), cached per (shape, order,
+    // family).
     static std::mutex mutex;
     static std::map<std::tuple<int, int, int>, std::vector<int>> cache;
     const std::vector<int>* corners = nullptr;
     {
         std::lock_guard<std::mutex> lock(mutex);
         auto& entry = cache[{static_cast<int>(shape), order, static_cast<int>(family)}];
-        if (entry.empty())
-            for (const LatticeIndex& ijk : VertexLattice(shape, order)) {
+        if (entry.empty()) {
+            const CellTopology& t = Topology(shape);
+            for (int k = 0; k < t.corners; ++k) {
+                const LatticeIndex ijk{order * t.lattice[k][0], order * t.lattice[k][1],
+                                       order * t.lattice[k][2]};
                 const int index = InternalNodeIndex(shape, order, family, ijk);
                 HPRAY_CHECK_GE(index, 0);
                 entry.push_back(index);
             }
+        }
         corners = &entry;
     }
     double v[8 * 3];

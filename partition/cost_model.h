@@ -114,9 +114,10 @@ inline CellCostParts CellCostModel(CellShape shape, int order, CellFamily family
             k.segmentBase + k.segmentPerWork * nodes * samples};
 }
 
-/// Surface area of the straight-sided hull of a cell from its corner vertices, given in
-/// the VTK linear vertex order (mesh/cell.h VertexLattice): xyz interleaved, 4/8/6/5
-/// vertices. Quadrilaterals count |diagonal x diagonal| / 2 (exact when planar).
+/// Surface area of the straight-sided hull of a cell from its corners, given in the order
+/// of mesh/cell.h Topology (the internal corner order): xyz interleaved, 4/8/6/5 corners,
+/// faces from the same table. Quadrilaterals count |diagonal x diagonal| / 2 (exact when
+/// planar).
 double HullSurfaceArea(CellShape shape, const double* vertexXyz);
 
 /// The same from all of a cell's nodes in internal order (xyz interleaved).

@@ -79,6 +79,10 @@ const std::map<int, GmshCellType>& SupportedTypes() {
 // ---- gmsh's integer node positions ("monomials"), generated as gmsh generates them ----
 // Tet, hex, prism: the position is the internal lattice index. Pyramid: (i, j, p - k),
 // the third coordinate counting down from the base (gmsh's convention).
+// The edge and face tables below are gmsh's numbering convention (which corner each edge
+// and face starts from, in which order they are walked), in gmsh's corner numbering; the
+// faces are those of the reference cells of mesh/cell.h (GmshFaceCorners, checked by a
+// test).
 
 using M2 = std::array<int, 2>;
 using M3 = std::array<int, 3>;
@@ -292,6 +296,33 @@ const std::vector<LatticeIndex>& GmshNodeLattice(int type) {
         it = cache.emplace(type, std::move(nodes)).first;
     }
     return it->second;
+}
+
+std::vector<std::vector<LatticeIndex>> GmshFaceCorners(CellShape shape) {
+    const int firstOrder[kNumCellShapes] = {4, 5, 6, 7};  // gmsh types of order 1
+    const std::vector<LatticeIndex>& corner =
+        GmshNodeLattice(firstOrder[static_cast<int>(shape)]);
+    std::vector<std::vector<LatticeIndex>> faces;
+    auto add = [&](const int* f, int n) {
+        std::vector<LatticeIndex> cycle;
+        for (int k = 0; k < n && f[k] >= 0; ++k) cycle.push_back(corner[f[k]]);
+        faces.push_back(cycle);
+    };
+    switch (shape) {
+        case CellShape::Tet:
+            for (const auto& f : kTetFaces) add(f, 3);
+            break;
+        case CellShape::Hex:
+            for (const auto& f : kHexFaces) add(f, 4);
+            break;
+        case CellShape::Wedge:
+            for (const auto& f : kPrismFaces) add(f, 4);
+            break;
+        case CellShape::Pyramid:
+            for (const auto& f : kPyramidFaces) add(f, 4);
+            break;
+    }
+    return faces;
 }
 
 std::vector<std::array<double, 3>> GmshReferenceCoords(int type) {

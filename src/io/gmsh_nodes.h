@@ -69,6 +69,12 @@ std::optional<GmshCellType> ClassifyGmshType(int type);
 /// InternalError for other types.
 const std::vector<LatticeIndex>& GmshNodeLattice(int type);
 
+/// The faces as gmsh's node numbering walks them (its order of faces and the corner each
+/// starts from), as cycles of corner lattice positions of order 1 in the internal frame.
+/// They are the faces of mesh/cell.h Topology(shape), with the same orientation; a test
+/// checks that.
+std::vector<std::vector<LatticeIndex>> GmshFaceCorners(CellShape shape);
+
 /// Gmsh's reference coordinates of the nodes, in gmsh's node order and gmsh's reference
 /// cell (see the file comment), computed as gmsh computes them.
 std::vector<std::array<double, 3>> GmshReferenceCoords(int type);

@@ -118,6 +118,44 @@ std::array<double, 3> LatticeRefCoords(CellShape shape, int order, const Lattice
     return {ijk[0] / p, ijk[1] / p, ijk[2] / p};
 }
 
+const CellTopology& Topology(CellShape shape) {
+    static const CellTopology kShapes[kNumCellShapes] = {
+    {4,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}},
+     4,
+     {3, 3, 3, 3},
+     {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}},
+    {8,
+     {{0, 0, 0},
+      {1, 0, 0},
+      {0, 1, 0},
+      {1, 1, 0},
+      {0, 0, 1},
+      {1, 0, 1},
+      {0, 1, 1},
+      {1, 1, 1}},
+     6,
+     {4, 4, 4, 4, 4, 4},
+     {{0, 2, 3, 1},
+      {4, 5, 7, 6},
+      {0, 1, 5, 4},
+      {2, 6, 7, 3},
+      {0, 4, 6, 2},
+      {1, 3, 7, 5}}},
+    {6,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}},
+     5,
+     {3, 3, 4, 4, 4},
+     {{0, 2, 1}, {3, 4, 5}, {0, 1, 4, 3}, {0, 3, 5, 2}, {1, 2, 5, 4}}},
+    {5,
+     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}},
+     5,
+     {4, 3, 3, 3, 3},
+     {{0, 2, 3, 1}, {0, 1, 4}, {1, 3, 4}, {3, 2, 4}, {2, 0, 4}}},
+};
+    return kShapes[static_cast<int>(shape)];
+}
+
 std::vector<LatticeIndex> VertexLattice(CellShape shape, int p) {
     switch (shape) {
         case CellShape::Tet: return {{0, 0, 0}, {p, 0, 0}, {0, p, 0}, {0, 0, p}};

@@ -58,6 +58,20 @@ int InternalNodeIndex(CellShape shape, int order, CellFamily family, const Latti
 /// Reference coordinates of a lattice node (see the file comment).
 std::array<double, 3> LatticeRefCoords(CellShape shape, int order, const LatticeIndex& ijk);
 
+/// The corners and faces of a reference cell, the one table every part uses (traversal,
+/// cost model; the gmsh node numbering is checked against it). Corners are lattice
+/// positions in units of the order (the internal node frame above), in the order of the
+/// internal corner nodes; each face is a cycle of corners, counter-clockwise seen from
+/// outside a positively oriented cell.
+struct CellTopology {
+    int corners;
+    int lattice[8][3];
+    int faces;
+    int faceSize[6];
+    int face[6][4];
+};
+const CellTopology& Topology(CellShape shape);
+
 /// Lattice indices of the linear vertices in the VTK linear vertex order
 /// (VTK_TETRA, VTK_HEXAHEDRON, VTK_LAGRANGE_WEDGE winding, VTK_PYRAMID), scaled to order p.
 /// Wedge: (0,0,0) (p,0,0) (0,p,0) then the same at k = p.

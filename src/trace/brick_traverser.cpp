@@ -37,51 +37,6 @@ using trace::TriangleCrossing;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kMaxEdgeNodes = 11;  // order 10
 
-// Corners (lattice position in units of the order p, internal node frame of mesh/cell.h)
-// and faces (corner cycles, counter-clockwise seen from outside a positively oriented
-// cell) of each shape.
-struct ShapeTable {
-    int corners;
-    int lattice[8][3];
-    int faces;
-    int faceSize[6];
-    int face[6][4];
-};
-const ShapeTable kShapes[kNumCellShapes] = {
-    {4,
-     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}},
-     4,
-     {3, 3, 3, 3},
-     {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}},
-    {8,
-     {{0, 0, 0},
-      {1, 0, 0},
-      {0, 1, 0},
-      {1, 1, 0},
-      {0, 0, 1},
-      {1, 0, 1},
-      {0, 1, 1},
-      {1, 1, 1}},
-     6,
-     {4, 4, 4, 4, 4, 4},
-     {{0, 2, 3, 1},
-      {4, 5, 7, 6},
-      {0, 1, 5, 4},
-      {2, 6, 7, 3},
-      {0, 4, 6, 2},
-      {1, 3, 7, 5}}},
-    {6,
-     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}},
-     5,
-     {3, 3, 4, 4, 4},
-     {{0, 2, 1}, {3, 4, 5}, {0, 1, 4, 3}, {0, 3, 5, 2}, {1, 2, 5, 4}}},
-    {5,
-     {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}},
-     5,
-     {4, 3, 3, 3, 3},
-     {{0, 2, 3, 1}, {0, 1, 4}, {1, 3, 4}, {3, 2, 4}, {2, 0, 4}}},
-};
-
 enum class FaceKind : std::uint8_t {
     Triangle,      // planar triangle: the crossing of its plane
     PlanarQuad,    // planar quadrilateral: two triangles of one plane
@@ -107,7 +62,7 @@ struct CurvedRec {
     FaceBasis basis = FaceBasis::Triangle;
     std::uint8_t straightEdges = 0;             // bit e: boundary edge e is straight
     double size = 0;                            // diagonal of the control net's box
-    double box[2][3] = {{0, 0, 0}, {0, 0, 0}};  // control net box, padded: holds the face
+    Box box;  // control net box, padded: holds the face
 };
 
 // A crossing of the ray with a face. side +1: along the face's canonical normal, i.e.
@@ -389,7 +344,7 @@ void BrickTraverser::Impl::BuildTopology() {
         [&](const tbb::blocked_range<std::int64_t>& range) {
             std::vector<double> values, dRef;
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+                const CellTopology& s = Topology(mesh.cellShape[c]);
                 const int p = mesh.cellOrder[c];
                 const std::int64_t* nodes = mesh.CellNodes(c);
                 for (int k = 0; k < s.corners; ++k) {
@@ -450,7 +405,7 @@ void BrickTraverser::Impl::BuildTopology() {
     // 3. Cells around each merged corner.
     std::vector<std::int64_t> vcOffset(nMerged + 1, 0);
     for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nc = kShapes[int(mesh.cellShape[c])].corners;
+        const int nc = Topology(mesh.cellShape[c]).corners;
         for (int k = 0; k < nc; ++k) ++vcOffset[corners[8 * c + k] + 1];
     }
     std::partial_sum(vcOffset.begin(), vcOffset.end(), vcOffset.begin());
@@ -458,7 +413,7 @@ void BrickTraverser::Impl::BuildTopology() {
     {
         std::vector<std::int64_t> fill(vcOffset.begin(), vcOffset.end() - 1);
         for (std::int64_t c = 0; c < nCells; ++c) {
-            const int nc = kShapes[int(mesh.cellShape[c])].corners;
+            const int nc = Topology(mesh.cellShape[c]).corners;
             for (int k = 0; k < nc; ++k)
                 vcCells[fill[corners[8 * c + k]]++] = std::int32_t(c);
         }
@@ -466,7 +421,7 @@ void BrickTraverser::Impl::BuildTopology() {
 
     // 4. The neighbour across each cell face: the other cell with the same corner set.
     auto sortedKey = [&](std::int64_t c, int f, std::int32_t* key) {
-        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const CellTopology& s = Topology(mesh.cellShape[c]);
         const int n = s.faceSize[f];
         for (int k = 0; k < n; ++k) key[k] = corners[8 * c + s.face[f][k]];
         for (int k = 1; k < n; ++k)  // insertion sort of at most 4 ids
@@ -483,7 +438,7 @@ void BrickTraverser::Impl::BuildTopology() {
         [&](const tbb::blocked_range<std::int64_t>& range) {
             std::int32_t key[4], key2[4];
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+                const CellTopology& s = Topology(mesh.cellShape[c]);
                 for (int f = 0; f < s.faces; ++f) {
                     const int n = sortedKey(c, f, key);
                     if (std::adjacent_find(key, key + n) != key + n) {
@@ -495,7 +450,7 @@ void BrickTraverser::Impl::BuildTopology() {
                          ++i) {
                         const std::int64_t c2 = vcCells[i];
                         if (c2 == c) continue;
-                        const ShapeTable& s2 = kShapes[int(mesh.cellShape[c2])];
+                        const CellTopology& s2 = Topology(mesh.cellShape[c2]);
                         for (int f2 = 0; f2 < s2.faces; ++f2) {
                             if (s2.faceSize[f2] != n) continue;
                             sortedKey(c2, f2, key2);
@@ -522,11 +477,11 @@ void BrickTraverser::Impl::BuildTopology() {
     // 5. Face ids: a face belongs to the lower-numbered of its cells.
     cellFaceOffset.assign(nCells + 1, 0);
     for (std::int64_t c = 0; c < nCells; ++c)
-        cellFaceOffset[c + 1] = cellFaceOffset[c] + kShapes[int(mesh.cellShape[c])].faces;
+        cellFaceOffset[c + 1] = cellFaceOffset[c] + Topology(mesh.cellShape[c]).faces;
     cellFaces.assign(cellFaceOffset.back(), -1);
     std::int64_t nFaces = 0;
     for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = kShapes[int(mesh.cellShape[c])].faces;
+        const int nf = Topology(mesh.cellShape[c]).faces;
         for (int f = 0; f < nf; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
             if (nb < 0 || c < nb)
@@ -536,7 +491,7 @@ void BrickTraverser::Impl::BuildTopology() {
         }
     }
     for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = kShapes[int(mesh.cellShape[c])].faces;
+        const int nf = Topology(mesh.cellShape[c]).faces;
         for (int f = 0; f < nf; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
             if (nb >= 0 && nb < c)
@@ -611,7 +566,7 @@ void BrickTraverser::Impl::BuildTopology() {
     // the face corner at local corner canonLocal[0] (-1: a serendipity face centre).
     auto faceLattice = [&](std::int64_t c, const int* canonLocal, int n, int p,
                            std::vector<std::int32_t>& out) {
-        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const CellTopology& s = Topology(mesh.cellShape[c]);
         const CellFamily family = mesh.cellFamily[c];
         const int* L[4];
         for (int k = 0; k < n; ++k) L[k] = s.lattice[canonLocal[k]];
@@ -630,7 +585,7 @@ void BrickTraverser::Impl::BuildTopology() {
     };
     std::vector<std::int32_t> neighbourLattice;
     auto outwardCycle = [&](std::int64_t c, int f, std::int32_t* ids, int* local) {
-        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const CellTopology& s = Topology(mesh.cellShape[c]);
         const int n = s.faceSize[f];
         for (int k = 0; k < n; ++k) {
             const int kk = orient[c] > 0 ? k : (k == 0 ? 0 : n - k);
@@ -640,7 +595,7 @@ void BrickTraverser::Impl::BuildTopology() {
         return n;
     };
     for (std::int64_t c = 0; c < nCells; ++c) {
-        const ShapeTable& s = kShapes[int(mesh.cellShape[c])];
+        const CellTopology& s = Topology(mesh.cellShape[c]);
         for (int f = 0; f < s.faces; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
             if (!(nb < 0 || c < nb)) continue;
@@ -847,8 +802,8 @@ void BrickTraverser::Impl::BuildTopology() {
             cr.size = size;
             for (int d = 0; d < 3; ++d) {
                 const double pad = 1e-9 * size + 1e-300;
-                cr.box[0][d] = lo[d] - pad;
-                cr.box[1][d] = hi[d] + pad;
+                cr.box.lo[d] = lo[d] - pad;
+                cr.box.hi[d] = hi[d] + pad;
             }
             rec.curved = static_cast<std::int32_t>(curved.size());
             curved.push_back(cr);
@@ -888,8 +843,8 @@ void BrickTraverser::Impl::BuildTopology() {
         if (rec.kind == FaceKind::Curved) {
             const CurvedRec& cr = curved[rec.curved];
             for (int d = 0; d < 3; ++d) {
-                lo[d] = cr.box[0][d];
-                hi[d] = cr.box[1][d];
+                lo[d] = cr.box.lo[d];
+                hi[d] = cr.box.hi[d];
             }
         }
         Tessellation(boundaryFaces[b], tris);
@@ -1124,10 +1079,10 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
         for (int d = 0; d < 3; ++d) {
             const double o = frame.org[d], dd = frame.dir[d];
             if (dd == 0) {
-                if (o < cr.box[0][d] || o > cr.box[1][d]) return;
+                if (o < cr.box.lo[d] || o > cr.box.hi[d]) return;
                 continue;
             }
-            double t0 = (cr.box[0][d] - o) / dd, t1 = (cr.box[1][d] - o) / dd;
+            double t0 = (cr.box.lo[d] - o) / dd, t1 = (cr.box.hi[d] - o) / dd;
             if (t0 > t1) std::swap(t0, t1);
             lo = std::max(lo, t0);
             hi = std::min(hi, t1);
@@ -1211,7 +1166,7 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
             if (rec.kind != FaceKind::Curved) continue;
             const CurvedRec& cr = curved[rec.curved];
             __builtin_prefetch(&cr);
-            __builtin_prefetch(&cr.box[1][2]);
+            __builtin_prefetch(&cr.box.hi[2]);
         }
         for (int k = 0; k < nf; ++k) AppendCrossings(cf[k], frame, xs);
         std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {

@@ -99,6 +99,36 @@ TEST(GmshNodes, SupportedTypesAreTheDocumentedOnes) {
     EXPECT_EQ(GmshTypeNodeCount(34), -1);  // polygon: no fixed size
 }
 
+// gmsh walks the faces of the reference cells in its own order and from its own first
+// corners; as sets of oriented cycles they are the faces of the one table (Topology).
+TEST(GmshNodes, FacesAreTheReferenceCellsFacesWithTheirOrientation) {
+    for (CellShape shape :
+         {CellShape::Tet, CellShape::Hex, CellShape::Wedge, CellShape::Pyramid}) {
+        const CellTopology& t = Topology(shape);
+        const auto gmsh = GmshFaceCorners(shape);
+        ASSERT_EQ(static_cast<int>(gmsh.size()), t.faces);
+        std::vector<int> matched(t.faces, 0);
+        for (const auto& cycle : gmsh) {
+            int found = -1;
+            for (int f = 0; f < t.faces && found < 0; ++f) {
+                if (t.faceSize[f] != static_cast<int>(cycle.size())) continue;
+                const int n = t.faceSize[f];
+                for (int r = 0; r < n && found < 0; ++r) {
+                    bool same = true;
+                    for (int k = 0; k < n; ++k) {
+                        const int* c = t.lattice[t.face[f][(r + k) % n]];
+                        same &= cycle[k] == LatticeIndex{c[0], c[1], c[2]};
+                    }
+                    if (same) found = f;
+                }
+            }
+            ASSERT_GE(found, 0) << "shape " << static_cast<int>(shape);
+            ++matched[found];
+        }
+        for (int f = 0; f < t.faces; ++f) EXPECT_EQ(matched[f], 1) << f;
+    }
+}
+
 TEST(GmshNodes, NodeCountsMatchShapeOrderAndFamily) {
     for (int t : AllSupportedTypes()) {
         const GmshCellType k = *ClassifyGmshType(t);

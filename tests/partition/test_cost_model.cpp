@@ -19,13 +19,14 @@ namespace {
 TEST(CostModel, HullSurfaceAreasOfUnitCells) {
     const double tet[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1};
     EXPECT_NEAR(HullSurfaceArea(CellShape::Tet, tet), 1.5 + std::sqrt(3.0) / 2, 1e-15);
-    const double hex[] = {0, 0, 0, 2, 0, 0, 2, 1, 0, 0, 1, 0,
-                          0, 0, 3, 2, 0, 3, 2, 1, 3, 0, 1, 3};
+    // Corners in the internal order: (0,0,0) (1,0,0) (0,1,0) (1,1,0), then at z = 1.
+    const double hex[] = {0, 0, 0, 2, 0, 0, 0, 1, 0, 2, 1, 0,
+                          0, 0, 3, 2, 0, 3, 0, 1, 3, 2, 1, 3};
     EXPECT_NEAR(HullSurfaceArea(CellShape::Hex, hex), 2 * (2 + 6 + 3), 1e-14);
     const double wedge[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 2, 1, 0, 2, 0, 1, 2};
     EXPECT_NEAR(HullSurfaceArea(CellShape::Wedge, wedge), 1 + 2 + 2 + 2 * std::sqrt(2.0),
                 1e-14);
-    const double pyramid[] = {0, 0, 0, 2, 0, 0, 2, 2, 0, 0, 2, 0, 1, 1, 1};
+    const double pyramid[] = {0, 0, 0, 2, 0, 0, 0, 2, 0, 2, 2, 0, 1, 1, 1};
     // Four triangles of base 2 and slant height sqrt(2).
     EXPECT_NEAR(HullSurfaceArea(CellShape::Pyramid, pyramid), 4 + 4 * std::sqrt(2.0),
                 1e-14);
