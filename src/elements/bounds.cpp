@@ -388,13 +388,15 @@ Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
         nodalHi = std::max(nodalHi, coeffsIn[m * stride]);
     }
     const double shift = 0.5 * nodalLo + 0.5 * nodalHi;
-    std::vector<double> shifted(basis.nodeCount);
+    // Scratch of this thread: called for every cell at load, three times for its box
+    // and once per field, so no allocation per call.
+    thread_local std::vector<double> shifted, f, af, b, ab;
+    shifted.resize(basis.nodeCount);
     for (int m = 0; m < basis.nodeCount; ++m) shifted[m] = coeffsIn[m * stride] - shift;
     // The subtraction rounds: |error| <= u |f - shift| per entry, carried below.
     const double* coeffs = shifted.data();
     stride = 1;
     const BasisTable* full = &basis;
-    std::vector<double> f, af;
     double gammaInput = 0.0;
     if (basis.family == CellFamily::Serendipity) {
         // Exact expansion to the order-2 Lagrange space that contains the serendipity
@@ -427,7 +429,6 @@ Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
         }
     }
     const BernsteinTable& t = GetTable(full->shape, full->order);
-    std::vector<double> b, ab;
     Bernstein(t, *full, f, af, b, ab);
     const double gamma = t.gamma + gammaInput + 2.0 * kUnit;
     const double inf = std::numeric_limits<double>::infinity();

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <sstream>
 #include <unordered_map>
@@ -402,24 +403,10 @@ void BrickTraverser::Impl::BuildTopology() {
             }
         });
 
-    // 3. Cells around each merged corner.
-    std::vector<std::int64_t> vcOffset(nMerged + 1, 0);
-    for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nc = Topology(mesh.cellShape[c]).corners;
-        for (int k = 0; k < nc; ++k) ++vcOffset[corners[8 * c + k] + 1];
-    }
-    std::partial_sum(vcOffset.begin(), vcOffset.end(), vcOffset.begin());
-    std::vector<std::int32_t> vcCells(vcOffset.back());
-    {
-        std::vector<std::int64_t> fill(vcOffset.begin(), vcOffset.end() - 1);
-        for (std::int64_t c = 0; c < nCells; ++c) {
-            const int nc = Topology(mesh.cellShape[c]).corners;
-            for (int k = 0; k < nc; ++k)
-                vcCells[fill[corners[8 * c + k]]++] = std::int32_t(c);
-        }
-    }
-
-    // 4. The neighbour across each cell face: the other cell with the same corner set.
+    // 3-4. The neighbour across each cell face: the other cell with the same corner set.
+    // Faces are bucketed by their smallest merged corner (a counting sort), each bucket
+    // is sorted by the remaining corners, and equal neighbours in a bucket are the two
+    // sides of one face: linear in the faces, parallel over buckets, no per-face heap.
     auto sortedKey = [&](std::int64_t c, int f, std::int32_t* key) {
         const CellTopology& s = Topology(mesh.cellShape[c]);
         const int n = s.faceSize[f];
@@ -433,41 +420,81 @@ void BrickTraverser::Impl::BuildTopology() {
     std::vector<std::int32_t> nbCell(6 * nCells, kNone);
     std::vector<std::int8_t> nbFace(6 * nCells, -1);
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
-    tbb::parallel_for(
-        tbb::blocked_range<std::int64_t>(0, nCells, 1024),
-        [&](const tbb::blocked_range<std::int64_t>& range) {
-            std::int32_t key[4], key2[4];
-            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+    {
+        // A face after its smallest corner: the other corners (a triangle's fourth is -1,
+        // so triangles and quadrilaterals never match) and its cell and face.
+        struct FaceKey {
+            std::int32_t k[3];
+            std::int32_t cell;
+            std::int8_t face;
+            bool operator<(const FaceKey& o) const {
+                if (k[0] != o.k[0]) return k[0] < o.k[0];
+                if (k[1] != o.k[1]) return k[1] < o.k[1];
+                if (k[2] != o.k[2]) return k[2] < o.k[2];
+                return cell != o.cell ? cell < o.cell : face < o.face;
+            }
+            bool SameFace(const FaceKey& o) const {
+                return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
+            }
+        };
+        std::vector<std::int64_t> bucket(nMerged + 1, 0);
+        std::int32_t key[4];
+        for (std::int64_t c = 0; c < nCells; ++c) {
+            const CellTopology& s = Topology(mesh.cellShape[c]);
+            for (int f = 0; f < s.faces; ++f) {
+                const int n = sortedKey(c, f, key);
+                if (std::adjacent_find(key, key + n) != key + n) {
+                    nbCell[6 * c + f] = kDegenerate;
+                    continue;
+                }
+                ++bucket[key[0] + 1];
+            }
+        }
+        std::partial_sum(bucket.begin(), bucket.end(), bucket.begin());
+        std::vector<FaceKey> keys(bucket.back());
+        {
+            std::vector<std::int64_t> fill(bucket.begin(), bucket.end() - 1);
+            for (std::int64_t c = 0; c < nCells; ++c) {
                 const CellTopology& s = Topology(mesh.cellShape[c]);
                 for (int f = 0; f < s.faces; ++f) {
+                    if (nbCell[6 * c + f] == kDegenerate) continue;
                     const int n = sortedKey(c, f, key);
-                    if (std::adjacent_find(key, key + n) != key + n) {
-                        nbCell[6 * c + f] = kDegenerate;
-                        continue;
-                    }
-                    int matches = 0;
-                    for (std::int64_t i = vcOffset[key[0]]; i < vcOffset[key[0] + 1];
-                         ++i) {
-                        const std::int64_t c2 = vcCells[i];
-                        if (c2 == c) continue;
-                        const CellTopology& s2 = Topology(mesh.cellShape[c2]);
-                        for (int f2 = 0; f2 < s2.faces; ++f2) {
-                            if (s2.faceSize[f2] != n) continue;
-                            sortedKey(c2, f2, key2);
-                            if (!std::equal(key, key + n, key2)) continue;
-                            if (nbCell[6 * c + f] != std::int32_t(c2)) ++matches;
-                            nbCell[6 * c + f] = std::int32_t(c2);
-                            nbFace[6 * c + f] = std::int8_t(f2);
-                        }
-                    }
-                    if (matches > 1) {
-                        std::int64_t cur = badCell.load();
-                        while (c < cur && !badCell.compare_exchange_weak(cur, c)) {
-                        }
-                    }
+                    FaceKey& fk = keys[fill[key[0]]++];
+                    fk.k[0] = key[1];
+                    fk.k[1] = key[2];
+                    fk.k[2] = n == 4 ? key[3] : -1;
+                    fk.cell = std::int32_t(c);
+                    fk.face = std::int8_t(f);
                 }
             }
-        });
+        }
+        tbb::parallel_for(
+            tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
+            [&](const tbb::blocked_range<std::int64_t>& range) {
+                for (std::int64_t v = range.begin(); v < range.end(); ++v) {
+                    FaceKey* first = keys.data() + bucket[v];
+                    FaceKey* last = keys.data() + bucket[v + 1];
+                    std::sort(first, last);
+                    for (FaceKey* run = first; run < last;) {
+                        FaceKey* end = run + 1;
+                        while (end < last && end->SameFace(*run)) ++end;
+                        if (end - run == 2 && run[0].cell != run[1].cell) {
+                            nbCell[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].cell;
+                            nbFace[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].face;
+                            nbCell[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].cell;
+                            nbFace[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].face;
+                        } else if (end - run > 2) {
+                            // Sorted by cell within the run: the first names the lowest.
+                            std::int64_t cur = badCell.load();
+                            while (run->cell < cur &&
+                                   !badCell.compare_exchange_weak(cur, run->cell)) {
+                            }
+                        }
+                        run = end;
+                    }
+                }
+            });
+    }
     if (badCell.load() != std::numeric_limits<std::int64_t>::max()) {
         std::ostringstream where;
         where << "cell " << badCell.load();
@@ -594,7 +621,13 @@ void BrickTraverser::Impl::BuildTopology() {
         }
         return n;
     };
-    for (std::int64_t c = 0; c < nCells; ++c) {
+    // A face is built by the lower-numbered of its cells. Faces of order-1 cells touch
+    // nothing but their own record, so they are built in parallel; faces of high-order
+    // cells share the edge table and the curved arrays, and are built in cell order.
+    std::atomic<std::int64_t> bilinearFaces{0};
+    std::atomic<std::int64_t> overlap{std::numeric_limits<std::int64_t>::max()};
+    std::vector<std::int32_t> overlapNeighbour(1, -1);
+    auto buildFaces = [&](std::int64_t c) {
         const CellTopology& s = Topology(mesh.cellShape[c]);
         for (int f = 0; f < s.faces; ++f) {
             const std::int32_t nb = nbCell[6 * c + f];
@@ -618,11 +651,14 @@ void BrickTraverser::Impl::BuildTopology() {
                 outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
                 const bool same2 = Canonicalize(ids2, n, canon2, byPosition);
                 if (same2 == same) {
-                    std::ostringstream where;
-                    where << "cells " << c << " and " << nb;
-                    throw InputError(
-                        kSource, where.str(),
-                        "cells overlap (they lie on the same side of their shared face)");
+                    // Reported after the loop, for the lowest cell whatever the order.
+                    static std::mutex overlapMutex;
+                    std::lock_guard<std::mutex> lock(overlapMutex);
+                    if (c < overlap.load()) {
+                        overlap.store(c);
+                        overlapNeighbour[0] = nb;
+                    }
+                    continue;
                 }
                 rec.cell[same2 ? 0 : 1] = nb;
             }
@@ -725,7 +761,8 @@ void BrickTraverser::Impl::BuildTopology() {
                         std::fabs(nrm[0] * e3[0] + nrm[1] * e3[1] + nrm[2] * e3[2]);
                     rec.kind =
                         off <= tol * len ? FaceKind::PlanarQuad : FaceKind::BilinearQuad;
-                    if (rec.kind == FaceKind::BilinearQuad) ++stats.bilinearFaces;
+                    if (rec.kind == FaceKind::BilinearQuad)
+                        bilinearFaces.fetch_add(1, std::memory_order_relaxed);
                 }
                 continue;
             }
@@ -808,6 +845,20 @@ void BrickTraverser::Impl::BuildTopology() {
             rec.curved = static_cast<std::int32_t>(curved.size());
             curved.push_back(cr);
         }
+    };
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nCells, 2048),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                              if (mesh.cellOrder[c] == 1) buildFaces(c);
+                      });
+    for (std::int64_t c = 0; c < nCells; ++c)
+        if (mesh.cellOrder[c] != 1) buildFaces(c);
+    stats.bilinearFaces += bilinearFaces.load();
+    if (overlap.load() != std::numeric_limits<std::int64_t>::max()) {
+        std::ostringstream where;
+        where << "cells " << overlap.load() << " and " << overlapNeighbour[0];
+        throw InputError(kSource, where.str(),
+                         "cells overlap (they lie on the same side of their shared face)");
     }
     // Grown face by face: give back the doubling slack.
     xyz.shrink_to_fit();
