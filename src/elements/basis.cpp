@@ -435,6 +435,14 @@ std::unique_ptr<BasisTable> BuildBasis(CellShape shape, int order, CellFamily fa
 }  // namespace
 
 const BasisTable& GetBasis(CellShape shape, int order, CellFamily family) {
+    // Tables live as long as the process: each thread remembers the ones it has seen, so
+    // the per-cell calls of set-up and rendering take no lock.
+    const int slot = order >= 0 && order <= kMaxOrder
+                         ? (static_cast<int>(shape) * (kMaxOrder + 1) + order) * 2 +
+                               static_cast<int>(family)
+                         : -1;
+    thread_local std::array<const BasisTable*, kNumCellShapes * (kMaxOrder + 1) * 2> seen{};
+    if (slot >= 0 && slot < static_cast<int>(seen.size()) && seen[slot]) return *seen[slot];
     // Validates the combination (throws InternalError) before taking the lock.
     LatticeNodes(shape, order, family);
     static std::recursive_mutex mutex;  // serendipity tables build their Lagrange table
@@ -443,6 +451,7 @@ const BasisTable& GetBasis(CellShape shape, int order, CellFamily family) {
     auto key = std::make_tuple(static_cast<int>(shape), order, static_cast<int>(family));
     auto it = cache.find(key);
     if (it == cache.end()) it = cache.emplace(key, BuildBasis(shape, order, family)).first;
+    if (slot >= 0 && slot < static_cast<int>(seen.size())) seen[slot] = it->second.get();
     return *it->second;
 }
 

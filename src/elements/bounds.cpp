@@ -227,12 +227,18 @@ std::unique_ptr<BernsteinTable> BuildTable(CellShape shape, int p) {
 }
 
 const BernsteinTable& GetTable(CellShape shape, int order) {
+    // Tables live as long as the process; each thread remembers those it has seen.
+    const int slot = static_cast<int>(shape) * (kMaxOrder + 1) + order;
+    thread_local std::array<const BernsteinTable*, kNumCellShapes * (kMaxOrder + 1)> seen{};
+    const bool cacheable = order >= 0 && order <= kMaxOrder;
+    if (cacheable && seen[slot]) return *seen[slot];
     static std::mutex mutex;
     static std::map<std::pair<int, int>, std::unique_ptr<BernsteinTable>> cache;
     std::lock_guard<std::mutex> lock(mutex);
     auto key = std::make_pair(static_cast<int>(shape), order);
     auto it = cache.find(key);
     if (it == cache.end()) it = cache.emplace(key, BuildTable(shape, order)).first;
+    if (cacheable) seen[slot] = it->second.get();
     return *it->second;
 }
 
