@@ -378,6 +378,8 @@ int RunRender(const RenderArgs& args) {
         log::Info(line);
         return 0;
     }
+    // From here on the job uses collectives (a partition on one process included).
+    mpi::EnsureInitialized();
     if (scene.threads == 0 && P > 1) scene.threads = DefaultThreads();
     Distribution mode = scene.distribute;
     if (mode == Distribution::Auto) mode = isPartition ? Distribution::Space : Distribution::Image;

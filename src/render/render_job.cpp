@@ -1,9 +1,8 @@
 // A render job on one process (see render_job.h).
 #include "render/render_job.h"
 
-#include "io/image.h"
-
 #include <tbb/info.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <chrono>
@@ -12,6 +11,7 @@
 #include <set>
 
 #include "elements/mesh_geometry.h"
+#include "io/image.h"
 #include "io/mesh_io.h"
 #include "render/brick_renderer.h"
 #include "trace/brick_traverser.h"
@@ -184,10 +184,16 @@ void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats)
     const auto t0 = std::chrono::steady_clock::now();
     const SceneOutput& out = scene.output;
     const std::size_t H = image.height, W = image.width;
-    if (!out.exr.empty()) WriteExr(out.exr, image);
-    if (!out.png.empty()) WritePng(out.png, image, scene.background);
-    if (!out.hits.empty()) WriteNpy(out.hits, HitsArray(image), {H, W, 5});
-    if (!out.rgba.empty()) WriteNpy(out.rgba, RgbaArray(image), {H, W, 4});
+    // The files are independent: written side by side (the first error is rethrown
+    // once all have finished; each writer leaves no partial file).
+    tbb::task_group writers;
+    if (!out.exr.empty()) writers.run([&] { WriteExr(out.exr, image); });
+    if (!out.png.empty()) writers.run([&] { WritePng(out.png, image, scene.background); });
+    if (!out.hits.empty())
+        writers.run([&] { WriteNpy(out.hits, HitsArray(image), {H, W, 5}); });
+    if (!out.rgba.empty())
+        writers.run([&] { WriteNpy(out.rgba, RgbaArray(image), {H, W, 4}); });
+    writers.wait();
     stats.timing.write = Seconds(t0);
     stats.timing.total += stats.timing.write;
     if (!out.stats.empty()) WriteStats(out.stats, stats);

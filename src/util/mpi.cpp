@@ -26,6 +26,17 @@ void Init(int* argc, char*** argv) {
     log::SetRank(WorldRank());
 }
 
+bool LaunchedByMpi() {
+    for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_RANK", "PMI_SIZE", "PMIX_RANK",
+                             "MPI_LOCALNRANKS", "MV2_COMM_WORLD_SIZE"})
+        if (std::getenv(name) != nullptr) return true;
+    return false;
+}
+
+void EnsureInitialized() {
+    if (!Initialized()) Init(nullptr, nullptr);
+}
+
 void Finalize() {
     int finalized = 0;
     MPI_Finalized(&finalized);
