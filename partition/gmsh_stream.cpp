@@ -23,6 +23,7 @@
 
 #include "io/gmsh_detail.h"
 #include "io/gmsh_nodes.h"
+#include "io/vtk_cells.h"
 #include "spill.h"
 #include "util/check.h"
 #include "util/error.h"
@@ -1031,6 +1032,10 @@ class GmshStreamer {
             }
             const GmshCellType& kind = *block.kind;
             const std::vector<int>& perm = GmshToInternal(kind.type);
+            // The VTK type ReadGmsh records (the one a gmsh user expects in a .vtu:
+            // tet10 -> 24, hex27 -> 29, prism18 -> 32, ...; see FixedVtkTypeFor).
+            const auto vtkType = static_cast<std::uint8_t>(
+                FixedVtkTypeFor(CellKind{kind.shape, kind.order, kind.family}));
             fileNodes.resize(block.nodes);
             cellNodes.resize(block.nodes);
             for (std::uint64_t e = 0; e < block.count; ++e) {
@@ -1048,7 +1053,7 @@ class GmshStreamer {
                 for (int k = 0; k < block.nodes; ++k) cellNodes[k] = fileNodes[perm[k]];
                 ReadValues(readers, cellFiles_, values.data());
                 sink_.Cell(kind.shape, kind.order, kind.family, cellNodes.data(),
-                           block.nodes, values.data());
+                           block.nodes, values.data(), vtkType);
                 ++stats_.cells;
             }
         }

@@ -31,6 +31,7 @@
 #include "elements/bounds.h"
 #include "gmsh_stream.h"
 #include "io/output_file.h"
+#include "io/vtk_cells.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
 #include "spill.h"
@@ -52,10 +53,12 @@ constexpr const char* kTestExitEnv = "HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS";
 constexpr int kBricksPerPass = 256;
 
 /// Fixed part of a spilled cell; followed by nodeCount int64 global point indices and the
-/// cell field values (doubles).
+/// cell field values (doubles). `vtkType` is the VTK type the input cell was read as
+/// (0 = unknown), for the brick writer to keep. The node count fits 16 bits (at most
+/// (kMaxOrder + 1)^3 nodes), which leaves room for the type without growing the record.
 struct CellRecord {
-    std::uint8_t shape = 0, order = 1, family = 0, ghost = 0;
-    std::int32_t nodeCount = 0;
+    std::uint8_t shape = 0, order = 1, family = 0, ghost = 0, vtkType = 0;
+    std::uint16_t nodeCount = 0;
     double lo[3], hi[3];
     double centroid[3];
     /// The cost model's parts (cost_model.h): setup seconds, and seconds per segment
@@ -67,6 +70,8 @@ struct CellRecord {
     }
 };
 static_assert(sizeof(CellRecord) == 96, "spill record layout");
+static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
+              "CellRecord::nodeCount holds the node count of any cell");
 
 /// A centroid and its cost parts, as spilled before the root box is known.
 struct CentroidRecord {
@@ -193,7 +198,7 @@ class ScanSink : public MeshSink {
     }
 
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
-              int nodeCount, const double* values) override {
+              int nodeCount, const double* values, std::uint8_t vtkType) override {
         xyz_.resize(3 * static_cast<std::size_t>(nodeCount));
         for (int k = 0; k < nodeCount; ++k) {
             HPRAY_CHECK_LT(nodes[k], points);
@@ -204,7 +209,13 @@ class ScanSink : public MeshSink {
         r.shape = static_cast<std::uint8_t>(shape);
         r.order = static_cast<std::uint8_t>(order);
         r.family = static_cast<std::uint8_t>(family);
-        r.nodeCount = nodeCount;
+        r.vtkType = vtkType;
+        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
+        r.nodeCount = static_cast<std::uint16_t>(nodeCount);
+        // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
+        // type, so the pieces agree with the arrays bricks.pvtu declares.
+        higherOrderDegrees |=
+            VtkTypeNeedsDegrees(VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
         double sum[3] = {0, 0, 0};
         for (int d = 0; d < 3; ++d) {
             r.lo[d] = std::numeric_limits<double>::infinity();
@@ -259,6 +270,7 @@ class ScanSink : public MeshSink {
     int cellValues = 0;
     std::int64_t points = 0, cells = 0;
     Box root;
+    bool higherOrderDegrees = false;  ///< some cell is written as VTK 71-74
 
   private:
     std::string spill_;
@@ -386,7 +398,8 @@ void WriteTextAtomically(const std::string& path, const std::string& text) {
 }
 
 std::string PvtuText(const std::vector<StreamField>& pf,
-                     const std::vector<StreamField>& cf, int bricks) {
+                     const std::vector<StreamField>& cf, bool higherOrderDegrees,
+                     int bricks) {
     std::ostringstream x;
     auto array = [&](const char* type, const std::string& name, int comps) {
         x << "      <PDataArray type=\"" << type << "\" Name=\"" << XmlEscape(name)
@@ -402,7 +415,7 @@ std::string PvtuText(const std::vector<StreamField>& pf,
     for (const StreamField& f : pf) array("Float64", f.name, f.components);
     x << "    </PPointData>\n    <PCellData>\n";
     for (const StreamField& f : cf) array("Float64", f.name, f.components);
-    array("Float64", "HigherOrderDegrees", 3);
+    if (higherOrderDegrees) array("Float64", "HigherOrderDegrees", 3);
     array("UInt8", "vtkGhostType", 1);
     x << "    </PCellData>\n    <PPoints>\n";
     array("Float64", "Points", 3);
@@ -607,11 +620,11 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const std::size_t pointBytes = sizeof(double) * scan.pointStride;
     auto brickBytes = [&](const BrickTally& t, std::int64_t points) {
         // Peak of the assembly: two copies of the connectivity (sorted ids, then the VTK
-        // copy of the writer), per-cell arrays (offsets twice, kinds, ghost, degrees,
-        // field values twice) and the point records.
+        // copy of the writer), per-cell arrays (offsets twice, kinds, ghost, source and
+        // written VTK types, degrees, field values twice) and the point records.
         return static_cast<std::uint64_t>(t.nodes) * 16 +
                static_cast<std::uint64_t>(points) * pointBytes +
-               static_cast<std::uint64_t>(t.cells) * (16 + 5 + 24 + 2 * recordTail);
+               static_cast<std::uint64_t>(t.cells) * (16 + 6 + 24 + 2 * recordTail);
     };
     auto tooLarge = [&](int b, std::uint64_t bytes) {
         return InputError("command line", "--memory-limit",
@@ -643,6 +656,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             mesh.cellOrder.reserve(t.cells);
             mesh.cellFamily.reserve(t.cells);
             mesh.ghost.reserve(t.cells);
+            mesh.vtkType.reserve(t.cells);
             std::vector<double> cellValues;
             cellValues.reserve(static_cast<std::size_t>(t.cells) * scan.cellValues);
             {
@@ -661,6 +675,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                                  static_cast<CellFamily>(r.family), nodes.data(),
                                  r.nodeCount);
                     mesh.ghost.push_back(r.ghost);
+                    mesh.vtkType.push_back(r.vtkType);
                     cellValues.insert(cellValues.end(), values.begin(), values.end());
                 }
                 std::error_code ec;
@@ -717,7 +732,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             const nlohmann::json ranges = BrickRanges(mesh);
             const std::string file = BrickName(b);
             const std::string path = (fs::path(dir) / file).string();
-            WriteVtu(path, mesh);
+            WriteVtu(path, mesh, scan.higherOrderDegrees);
             const std::uint64_t bytes = fs::file_size(path);
             bytesWritten += bytes;
             storedCells += mesh.CellCount();
@@ -740,7 +755,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
 
     // 6. Index, then the manifest last.
     const std::string index = (fs::path(dir) / kIndex).string();
-    const std::string indexText = PvtuText(scan.pointFields, scan.cellFields, nBricks);
+    const std::string indexText =
+        PvtuText(scan.pointFields, scan.cellFields, scan.higherOrderDegrees, nBricks);
     WriteTextAtomically(index, indexText);
     bytesWritten += indexText.size();
 

@@ -604,7 +604,7 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                     cached.kind = *kind;
                     cached.perm =
                         &VtkToInternal(static_cast<int>(type), *kind, legacyHex);
-                } else if (type == 11 &&
+                } else if (type == kVtkVoxel &&
                            count == 8) {  // voxel: internal linear hex order
                     static const std::vector<int> kVoxel{0, 1, 2, 3, 4, 5, 6, 7};
                     cached.kind = CellKind{CellShape::Hex, 1, CellFamily::Lagrange};
@@ -646,7 +646,8 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 nodes[k] = pt + st.pointBase;
             }
             st.sink.Cell(cached.kind.shape, cached.kind.order, cached.kind.family,
-                         nodes.data(), static_cast<int>(count), values.data());
+                         nodes.data(), static_cast<int>(count), values.data(),
+                         static_cast<std::uint8_t>(cached.type));  // classified: < 256
             ++st.stats.cells;
         }
         if (conn.Remaining() != 0)
@@ -726,7 +727,8 @@ void ReplayMesh(const Mesh& mesh, StreamState& st, const std::string& source) {
         nodes.assign(mesh.CellNodes(c), mesh.CellNodes(c) + count);
         for (auto& n : nodes) n += st.pointBase;
         st.sink.Cell(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c],
-                     nodes.data(), count, cellValues.data());
+                     nodes.data(), count, cellValues.data(),
+                     mesh.vtkType.empty() ? 0 : mesh.vtkType[c]);
         ++st.stats.cells;
     }
     st.pointBase += mesh.PointCount();

@@ -32,9 +32,11 @@ class MeshSink {
     /// the order of Fields().
     virtual void Points(std::int64_t count, const double* xyz, const double* values) = 0;
     /// One 3-D cell, nodes in internal order as global point indices; `values` the sum
-    /// of cell field components, in the order of Fields().
+    /// of cell field components, in the order of Fields(); `vtkType` the VTK cell type it
+    /// was read as (Mesh::vtkType; 0 = unknown), so the bricks can keep it.
     virtual void Cell(CellShape shape, int order, CellFamily family,
-                      const std::int64_t* nodes, int nodeCount, const double* values) = 0;
+                      const std::int64_t* nodes, int nodeCount, const double* values,
+                      std::uint8_t vtkType) = 0;
 };
 
 /// Statistics of one streaming pass.

@@ -29,6 +29,7 @@
 #include "io/gmsh_nodes.h"
 #include "io/file_bytes.h"
 #include "io/mesh_io.h"
+#include "io/vtk_cells.h"
 #include "util/check.h"
 #include "util/error.h"
 #include "util/log.h"
@@ -305,6 +306,11 @@ void MshParser::ParseElements() {
         }
         const std::optional<GmshCellType>& kind = block.kind;
         const std::vector<int>& perm = GmshToInternal(kind->type);
+        // Gmsh has no VTK types; record the one a gmsh user expects to see in a .vtu
+        // (tet10 -> 24, hex20 -> 25, hex27 -> 29, prism15 -> 26, prism18 -> 32,
+        // pyramid13 -> 27, linear cells 10-14, others 71-74: FixedVtkTypeFor).
+        const auto vtkType = static_cast<std::uint8_t>(
+            FixedVtkTypeFor(CellKind{kind->shape, kind->order, kind->family}));
         fileNodes.resize(nodes);
         cellNodes.resize(nodes);
         mesh_.connectivity.reserve(mesh_.connectivity.size() + count * nodes);
@@ -323,6 +329,7 @@ void MshParser::ParseElements() {
             for (int k = 0; k < nodes; ++k) cellNodes[k] = fileNodes[perm[k]];
             mesh_.AddCell(kind->shape, kind->order, kind->family, cellNodes.data(),
                           nodes);
+            mesh_.vtkType.push_back(vtkType);
             cellTags_.push_back(tag);
         }
     }

@@ -591,9 +591,43 @@ int VtkTypeFor(const CellKind& kind) {
 }
 
 const std::vector<int>& InternalToVtk(const CellKind& kind) {
+    return InternalToVtk(VtkTypeFor(kind), kind);
+}
+
+bool VtkTypeHolds(int vtkType, const CellKind& kind) {
+    if (vtkType == kVtkVoxel)
+        return SameKind(kind, CellKind{CellShape::Hex, 1, CellFamily::Lagrange});
+    if (auto fixed = FixedKind(vtkType)) return SameKind(*fixed, kind);
+    auto shape = LagrangeShape(vtkType);
+    return shape && *shape == kind.shape && kind.family == CellFamily::Lagrange &&
+           kind.order >= 1 && kind.order <= kMaxOrder;
+}
+
+int FixedVtkTypeFor(const CellKind& kind) {
+    // The fixed-node types, tried in order; 25 is a serendipity hex, 29 a Lagrange one,
+    // so at most one matches.
+    for (int type :
+         {kVtkTetra, kVtkHexahedron, kVtkWedge, kVtkPyramid, kVtkQuadraticTetra,
+          kVtkQuadraticHexahedron, kVtkQuadraticWedge, kVtkQuadraticPyramid,
+          kVtkTriquadraticHexahedron, kVtkBiquadraticQuadraticWedge})
+        if (SameKind(*FixedKind(type), kind)) return type;
+    return VtkTypeFor(kind);
+}
+
+int VtkTypeToWrite(const CellKind& kind, int sourceType) {
+    if (sourceType != 0 && VtkTypeHolds(sourceType, kind)) return sourceType;
+    if (kind.order == 1 && kind.family == CellFamily::Lagrange)
+        return FixedVtkTypeFor(kind);
+    return VtkTypeFor(kind);
+}
+
+const std::vector<int>& InternalToVtk(int vtkType, const CellKind& kind) {
     static std::map<PermKey, std::vector<int>> cache;
-    const int vtkType = VtkTypeFor(kind);
+    HPRAY_CHECK_MSG(VtkTypeHolds(vtkType, kind),
+                    "VTK type " << vtkType << " cannot hold a " << ShapeName(kind.shape)
+                                << " of order " << kind.order);
     return Cached(cache, MakeKey(vtkType, kind, false), [&] {
+        if (vtkType == kVtkVoxel) return std::vector<int>{0, 1, 2, 3, 4, 5, 6, 7};
         const std::vector<int>& toInternal = VtkToInternal(vtkType, kind);
         std::vector<int> inverse(toInternal.size());
         for (size_t k = 0; k < toInternal.size(); ++k)

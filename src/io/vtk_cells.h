@@ -55,6 +55,8 @@ struct CellKind {
 /// VTK cell type ids hpray reads (vtkCellType.h).
 enum VtkCellType : int {
     kVtkTetra = 10,
+    /// Read as a linear hexahedron: its node order (i fastest) is the internal one.
+    kVtkVoxel = 11,
     kVtkHexahedron = 12,
     kVtkWedge = 13,
     kVtkPyramid = 14,
@@ -89,10 +91,40 @@ std::optional<CellKind> ClassifyVtkCell(int vtkType, long long nodeCount,
 const std::vector<int>& VtkToInternal(int vtkType, const CellKind& kind,
                                       bool legacyLagrangeHex = false);
 
-/// The VTK type hpray writes for a cell kind: 71-74 for Lagrange, 25/26/27 for
-/// serendipity; and the inverse permutation file[k] = internal[perm[k]].
+/// The VTK type hpray writes for a cell kind of no known source type: 71-74 for
+/// Lagrange, 25/26/27 for serendipity; and the inverse permutation file[k] =
+/// internal[perm[k]].
 int VtkTypeFor(const CellKind& kind);
 const std::vector<int>& InternalToVtk(const CellKind& kind);
+
+/// Whether a cell of `kind` can be stored as VTK type `vtkType`: a pair ClassifyVtkCell
+/// returns, or VTK_VOXEL (11) for a linear hexahedron.
+bool VtkTypeHolds(int vtkType, const CellKind& kind);
+
+/// The VTK type a converter would choose for `kind` when the source format has no VTK
+/// type (gmsh): the fixed-node type VTK has for it (10, 12, 13, 14; 24, 29, 32 for
+/// quadratic Lagrange tet, hex, wedge; 25, 26, 27 for serendipity), else the Lagrange
+/// type 71-74 (VTK has no fixed type for the 14-node pyramid or for order 3 and up).
+int FixedVtkTypeFor(const CellKind& kind);
+
+/// The VTK type WriteVtu stores a cell of `kind` as, given the type it was read with
+/// (`sourceType`, 0 = unknown): `sourceType` itself when VtkTypeHolds, so a file read and
+/// written again keeps its cell types; otherwise linear Lagrange cells as 10, 12, 13, 14
+/// (the types every VTK reader knows) and other kinds as VtkTypeFor(kind).
+int VtkTypeToWrite(const CellKind& kind, int sourceType);
+
+/// Whether cells of VTK type `vtkType` need VTK's HigherOrderDegrees (the Lagrange types
+/// 71-74; VTK derives the order of the others from the type).
+inline bool VtkTypeNeedsDegrees(int vtkType) {
+    return vtkType >= kVtkLagrangeTetrahedron && vtkType <= kVtkLagrangePyramid;
+}
+
+/// `perm` with file[k] = internal[perm[k]] for a cell of `kind` written as VTK type
+/// `vtkType` (VtkTypeHolds must be true, else InternalError): the inverse of
+/// VtkToInternal(vtkType, kind) in VTK 9 order, so reading the file back gives the same
+/// internal cell, whatever winding the type has (13, 26 and 32 exchange r and s); the
+/// identity for VTK_VOXEL. Cached; thread-safe.
+const std::vector<int>& InternalToVtk(int vtkType, const CellKind& kind);
 
 /// VTK's parametric coordinates of node n of a cell of this type and kind, in VTK's own
 /// reference cell (for tests that compare with VTK's GetParametricCoords).

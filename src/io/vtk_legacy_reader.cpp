@@ -106,8 +106,6 @@ bool IsLowerDimensional(int type) {
     return false;
 }
 
-constexpr int kVtkVoxel = 11;
-
 // A legacy data type: its size in a BINARY file and how to decode it.
 enum class Kind { Int, Unsigned, Float };
 struct DataType {
@@ -504,6 +502,7 @@ void LegacyParser::ParseCellTypes(const std::vector<std::string_view>& w) {
     const bool legacyHex = major_ < 5 || (major_ == 5 && minor_ < 1);
     const std::int64_t points = mesh_.PointCount();
     keptCell_.assign(n, -1);
+    mesh_.vtkType.reserve(n);
     std::vector<std::int64_t> nodes, internal;
     for (std::uint64_t c = 0; c < n; ++c) {
         int type = static_cast<int>(IntValue(it, "CELL_TYPES"));
@@ -514,6 +513,7 @@ void LegacyParser::ParseCellTypes(const std::vector<std::string_view>& w) {
             continue;
         }
         nodes.assign(ids, ids + count);
+        const int fileType = type;  // kept so a writer can use the same type
         if (type == kVtkVoxel &&
             count == 8) {  // a voxel is a hexahedron numbered i fastest
             nodes = {ids[0], ids[1], ids[3], ids[2], ids[4], ids[5], ids[7], ids[6]};
@@ -533,6 +533,8 @@ void LegacyParser::ParseCellTypes(const std::vector<std::string_view>& w) {
         keptCell_[c] = mesh_.CellCount();
         mesh_.AddCell(kind->shape, kind->order, kind->family, internal.data(),
                       static_cast<int>(internal.size()));
+        // A type ClassifyVtkCell accepted (or the voxel) is below 256.
+        mesh_.vtkType.push_back(static_cast<std::uint8_t>(fileType));
     }
     haveTypes_ = true;
     fileConn_.clear();

@@ -27,8 +27,6 @@ using vtkxml::RequireCount;
 using vtkxml::Fail;
 using vtkxml::XmlFile;
 
-constexpr int kVtkVoxel = 11;
-
 /// VTK cell types of dimension 0, 1 or 2 (vertices, lines, faces): skipped, not errors.
 bool IsLowerDimensional(std::int64_t type) {
     // empty, vertex, poly-vertex, line, poly-line, triangle, strip, polygon, pixel, quad;
@@ -198,6 +196,7 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
     mesh.cellShape.reserve(nCells);
     mesh.cellOrder.reserve(nCells);
     mesh.cellFamily.reserve(nCells);
+    mesh.vtkType.reserve(nCells);
     mesh.connectivity.resize(conn.size());
     std::int64_t out = 0;
     for (std::int64_t c = 0; c < nCells; ++c) {
@@ -266,6 +265,7 @@ PieceResult ReadUnstructuredPiece(const XmlFile& file, pugi::xml_node piece, int
         mesh.cellShape.push_back(cached.kind.shape);
         mesh.cellOrder.push_back(static_cast<std::uint8_t>(cached.kind.order));
         mesh.cellFamily.push_back(cached.kind.family);
+        mesh.vtkType.push_back(static_cast<std::uint8_t>(type));  // < 256: classified
     }
     mesh.connectivity.resize(out);
     ReadCellFields(file, arrays, nCells, result.skipped > 0 ? &kept : nullptr, mesh);
@@ -377,12 +377,16 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
                           piece.cellOrder.end());
     into.cellFamily.insert(into.cellFamily.end(), piece.cellFamily.begin(),
                            piece.cellFamily.end());
-    if (!into.ghost.empty() || !piece.ghost.empty()) {
-        into.ghost.resize(cellsBefore, 0);
-        if (piece.ghost.empty())
-            into.ghost.resize(into.CellCount(), 0);
+    // Per-cell byte arrays that a piece may lack: 0 (no ghost, unknown type) there.
+    for (auto array : {&Mesh::ghost, &Mesh::vtkType}) {
+        std::vector<std::uint8_t>& a = into.*array;
+        const std::vector<std::uint8_t>& b = piece.*array;
+        if (a.empty() && b.empty()) continue;
+        a.resize(cellsBefore, 0);
+        if (b.empty())
+            a.resize(into.CellCount(), 0);
         else
-            into.ghost.insert(into.ghost.end(), piece.ghost.begin(), piece.ghost.end());
+            a.insert(a.end(), b.begin(), b.end());
     }
 }
 

@@ -73,38 +73,31 @@ std::string XmlEscape(const std::string& s) {
     return out;
 }
 
-void WriteVtu(const std::string& path, const Mesh& mesh) {
+void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees) {
     const std::int64_t nCells = mesh.CellCount();
+    HPRAY_CHECK(mesh.vtkType.empty() ||
+                static_cast<std::int64_t>(mesh.vtkType.size()) == nCells);
 
-    // Cells in VTK order; HigherOrderDegrees for Lagrange cells (serendipity: 2 2 2).
+    // Cells in the VTK order of the type each is written as; HigherOrderDegrees for the
+    // Lagrange types.
     std::vector<std::int64_t> connectivity(mesh.connectivity.size());
     std::vector<std::int64_t> offsets(nCells);
     std::vector<std::uint8_t> types(nCells);
     std::vector<double> degrees(3 * nCells);
-    bool anyLagrange = false;
+    bool anyLagrange = alwaysWriteDegrees;
     for (std::int64_t c = 0; c < nCells; ++c) {
         const CellKind kind{mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]};
         const std::int64_t* nodes = mesh.CellNodes(c);
         std::int64_t* out = connectivity.data() + mesh.cellOffsets[c];
         const int count = mesh.CellNodeCount(c);
-        // VTK 9.1 has no Lagrange pyramid class, so a linear pyramid is written as a
-        // VTK_PYRAMID (file[perm[k]] = internal[k] with perm = VtkToInternal(14)).
-        const bool linearPyramid = kind.shape == CellShape::Pyramid && kind.order == 1 &&
-                                   kind.family == CellFamily::Lagrange;
-        if (linearPyramid) {
-            const std::vector<int>& perm = VtkToInternal(kVtkPyramid, kind);
-            HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
-            for (int k = 0; k < count; ++k) out[perm[k]] = nodes[k];
-            types[c] = kVtkPyramid;
-        } else {
-            const std::vector<int>& perm = InternalToVtk(kind);
-            HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
-            for (int k = 0; k < count; ++k) out[k] = nodes[perm[k]];
-            types[c] = static_cast<std::uint8_t>(VtkTypeFor(kind));
-        }
+        const int type = VtkTypeToWrite(kind, mesh.vtkType.empty() ? 0 : mesh.vtkType[c]);
+        const std::vector<int>& perm = InternalToVtk(type, kind);
+        HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
+        for (int k = 0; k < count; ++k) out[k] = nodes[perm[k]];
+        types[c] = static_cast<std::uint8_t>(type);
         offsets[c] = mesh.cellOffsets[c + 1];
         for (int k = 0; k < 3; ++k) degrees[3 * c + k] = kind.order;
-        anyLagrange |= kind.family == CellFamily::Lagrange;
+        anyLagrange |= VtkTypeNeedsDegrees(type);
     }
 
     std::vector<Block> pointData, cellData;

@@ -65,8 +65,8 @@ Box Mesh::Bounds() const {
 std::size_t Mesh::MemoryBytes() const {
     std::size_t bytes = points.size() * sizeof(double) +
                         cellOffsets.size() * sizeof(std::int64_t) +
-                        connectivity.size() * sizeof(std::int64_t) + cellShape.size() * 3 +
-                        ghost.size();
+                        connectivity.size() * sizeof(std::int64_t) +
+                        cellShape.size() * 3 + ghost.size() + vtkType.size();
     for (const Field& f : pointFields) bytes += f.values.size() * sizeof(double);
     for (const Field& f : cellFields) bytes += f.values.size() * sizeof(double);
     return bytes;
@@ -117,6 +117,9 @@ void Mesh::Validate(const std::string& source) const {
     for (const Field& f : cellFields) checkField(f, nc, "cell");
     if (!ghost.empty() && static_cast<std::int64_t>(ghost.size()) != nc)
         throw InputError(source, "vtkGhostType", "has the wrong number of values");
+    if (!vtkType.empty() && static_cast<std::int64_t>(vtkType.size()) != nc)
+        throw InputError(source, "",
+                         "the cell type array has the wrong number of values");
 }
 
 std::optional<ScalarSelector> SelectScalar(const Mesh& mesh, const std::string& name) {

@@ -42,6 +42,11 @@ struct Mesh {
     std::vector<Field> cellFields;
     /// Optional per-cell ghost flags (VTK vtkGhostType; 1 = duplicate cell); empty = none.
     std::vector<std::uint8_t> ghost;
+    /// Optional per-cell VTK cell type the cell was read as (io/vtk_cells.h; for gmsh
+    /// input the type a converter would choose), so a writer can keep the input's types;
+    /// 0 or an empty array = unknown (meshes built in memory). One byte per cell: every
+    /// 3-D VTK type id is below 256. Like `ghost`, AddCell leaves it alone.
+    std::vector<std::uint8_t> vtkType;
 
     std::int64_t PointCount() const { return static_cast<std::int64_t>(points.size() / 3); }
     std::int64_t CellCount() const { return static_cast<std::int64_t>(cellShape.size()); }

@@ -20,6 +20,8 @@
 #include <vector>
 
 #include "io/mesh_io.h"
+#include "io/raw_vtu.h"
+#include "io/vtk_cells.h"
 #include "io/vtu_writer.h"
 #include "mesh/cell.h"
 #include "util/error.h"
@@ -1427,6 +1429,162 @@ TEST(VtuWriter, RoundTripMixedMesh) {
         EXPECT_NE(bytes.find(s), std::string::npos) << s;
     EXPECT_EQ(head.find("format=\"ascii\""), std::string::npos);
     EXPECT_EQ(head.find("Float32"), std::string::npos);
+}
+
+/// One cell of `kind` per entry, private nodes placed by a curved map (as MixedMesh),
+/// each with the source VTK type given (types empty: no source types).
+Mesh CellsOfKinds(const std::vector<CellKind>& kinds, const std::vector<int>& types) {
+    Mesh m;
+    int cell = 0;
+    for (const CellKind& kind : kinds) {
+        std::vector<std::int64_t> nodes;
+        for (const auto& ijk : LatticeNodes(kind.shape, kind.order, kind.family)) {
+            const auto r = LatticeRefCoords(kind.shape, kind.order, ijk);
+            nodes.push_back(m.PointCount());
+            m.points.push_back(r[0] + 0.1 * r[1] * r[1] + 3 * cell);
+            m.points.push_back(r[1] + 0.05 * r[2]);
+            m.points.push_back(r[2] + 0.1 * r[0] * r[1]);
+        }
+        m.AddCell(kind.shape, kind.order, kind.family, nodes.data(),
+                  static_cast<int>(nodes.size()));
+        ++cell;
+    }
+    for (int t : types) m.vtkType.push_back(static_cast<std::uint8_t>(t));
+    return m;
+}
+
+TEST(VtuWriter, KeepsTheSourceCellTypesAndReadsBackTheSameCells) {
+    constexpr auto L = CellFamily::Lagrange;
+    constexpr auto S = CellFamily::Serendipity;
+    using Shape = CellShape;
+    // Every type hpray reads, each with a kind it can hold; 71-74 also of order 1 (a
+    // linear cell read as a Lagrange type stays one).
+    const std::vector<std::pair<int, CellKind>> cases = {
+        {10, {Shape::Tet, 1, L}},     {11, {Shape::Hex, 1, L}},
+        {12, {Shape::Hex, 1, L}},     {13, {Shape::Wedge, 1, L}},
+        {14, {Shape::Pyramid, 1, L}}, {24, {Shape::Tet, 2, L}},
+        {25, {Shape::Hex, 2, S}},     {26, {Shape::Wedge, 2, S}},
+        {27, {Shape::Pyramid, 2, S}}, {29, {Shape::Hex, 2, L}},
+        {32, {Shape::Wedge, 2, L}},   {71, {Shape::Tet, 1, L}},
+        {71, {Shape::Tet, 2, L}},     {71, {Shape::Tet, 4, L}},
+        {72, {Shape::Hex, 1, L}},     {72, {Shape::Hex, 3, L}},
+        {73, {Shape::Wedge, 1, L}},   {73, {Shape::Wedge, 2, L}},
+        {73, {Shape::Wedge, 3, L}},   {74, {Shape::Pyramid, 1, L}},
+        {74, {Shape::Pyramid, 3, L}},
+    };
+    std::vector<CellKind> kinds;
+    std::vector<int> types;
+    for (const auto& [type, kind] : cases) {
+        kinds.push_back(kind);
+        types.push_back(type);
+    }
+    const Mesh m = CellsOfKinds(kinds, types);
+    m.Validate("kinds");
+    const std::string path = (TempDir() / "xml_source_types.vtu").string();
+    WriteVtu(path, m);
+    const test::RawVtu raw(path);
+    EXPECT_EQ(raw.Values<std::uint8_t>("Cells", "types"), m.vtkType);
+    EXPECT_TRUE(raw.Has("CellData", "HigherOrderDegrees"));  // 71-74 need it
+    // The file's node order is VTK's for the type written: the inverse of the reading
+    // permutation (e.g. a VTK_WEDGE lists its first triangle the other way round than a
+    // VTK_LAGRANGE_WEDGE).
+    const auto conn = raw.Values<std::int64_t>("Cells", "connectivity");
+    for (std::int64_t c = 0; c < m.CellCount(); ++c) {
+        const CellKind kind = kinds[c];
+        if (types[c] == kVtkVoxel) continue;  // no reading table: checked below
+        const std::vector<int>& perm = VtkToInternal(types[c], kind);
+        for (int k = 0; k < m.CellNodeCount(c); ++k)
+            EXPECT_EQ(conn[m.cellOffsets[c] + perm[k]], m.CellNodes(c)[k])
+                << "type " << types[c] << " node " << k;
+    }
+    auto fileNodes = [&](std::int64_t c) {
+        return std::vector<std::int64_t>(conn.begin() + m.cellOffsets[c],
+                                         conn.begin() + m.cellOffsets[c + 1]);
+    };
+    const std::int64_t* voxel = m.CellNodes(1);  // i fastest: the internal order
+    EXPECT_EQ(fileNodes(1), std::vector<std::int64_t>(voxel, voxel + 8));
+    const std::int64_t* hex = m.CellNodes(2);  // VTK_HEXAHEDRON: counterclockwise
+    EXPECT_EQ(fileNodes(2), (std::vector<std::int64_t>{hex[0], hex[1], hex[3], hex[2],
+                                                       hex[4], hex[5], hex[7], hex[6]}));
+    const std::int64_t* wedge = m.CellNodes(3);  // VTK_WEDGE: (0,0) (0,1) (1,0) below
+    EXPECT_EQ(fileNodes(3), (std::vector<std::int64_t>{wedge[0], wedge[2], wedge[1],
+                                                       wedge[3], wedge[5], wedge[4]}));
+    const std::int64_t* lagrangeWedge = m.CellNodes(16);  // VTK_LAGRANGE_WEDGE, order 1
+    EXPECT_EQ(fileNodes(16), std::vector<std::int64_t>(lagrangeWedge, lagrangeWedge + 6));
+    // Read back: the same cells in internal order, and the same source types.
+    const Mesh back = ReadVtkXml(path, {});
+    ExpectSameMesh(m, back);
+    EXPECT_EQ(back.vtkType, m.vtkType);
+}
+
+TEST(VtuWriter, CellsOfUnknownTypeAreWrittenAsTheLinearTypesOrAsBefore) {
+    constexpr auto L = CellFamily::Lagrange;
+    constexpr auto S = CellFamily::Serendipity;
+    using Shape = CellShape;
+    // Linear cells only: VTK_TETRA, VTK_HEXAHEDRON, VTK_WEDGE, VTK_PYRAMID and no
+    // HigherOrderDegrees.
+    const Mesh linear = CellsOfKinds({{Shape::Tet, 1, L},
+                                      {Shape::Hex, 1, L},
+                                      {Shape::Wedge, 1, L},
+                                      {Shape::Pyramid, 1, L}},
+                                     {});
+    const std::string a = (TempDir() / "xml_unknown_linear.vtu").string();
+    WriteVtu(a, linear);
+    const test::RawVtu rawA(a);
+    EXPECT_EQ(rawA.Values<std::uint8_t>("Cells", "types"),
+              (std::vector<std::uint8_t>{10, 12, 13, 14}));
+    EXPECT_FALSE(rawA.Has("CellData", "HigherOrderDegrees"));
+    const Mesh backA = ReadVtkXml(a, {});
+    EXPECT_EQ(backA.connectivity, linear.connectivity);
+    EXPECT_EQ(backA.points, linear.points);
+    // ...unless asked for (the pieces of a .pvtu that declares the array).
+    WriteVtu(a, linear, /*alwaysWriteDegrees=*/true);
+    EXPECT_TRUE(test::RawVtu(a).Has("CellData", "HigherOrderDegrees"));
+    // Curved cells as before: Lagrange 71-74 (with their degrees), serendipity 25-27; a
+    // source type that cannot hold the cell (stale) is ignored.
+    const Mesh curved = CellsOfKinds({{Shape::Tet, 2, L},
+                                      {Shape::Hex, 2, L},
+                                      {Shape::Wedge, 3, L},
+                                      {Shape::Pyramid, 2, L},
+                                      {Shape::Hex, 2, S},
+                                      {Shape::Wedge, 2, S},
+                                      {Shape::Pyramid, 2, S}},
+                                     {0, 12, 0, 0, 0, 0, 0});
+    const std::string b = (TempDir() / "xml_unknown_curved.vtu").string();
+    WriteVtu(b, curved);
+    const test::RawVtu rawB(b);
+    EXPECT_EQ(rawB.Values<std::uint8_t>("Cells", "types"),
+              (std::vector<std::uint8_t>{71, 72, 73, 74, 25, 26, 27}));
+    EXPECT_EQ(rawB.Values<double>("CellData", "HigherOrderDegrees"),
+              (std::vector<double>{2, 2, 2, 2, 2, 2, 3, 3, 3, 2, 2,
+                                   2, 2, 2, 2, 2, 2, 2, 2, 2, 2}));
+    const Mesh backB = ReadVtkXml(b, {});
+    EXPECT_EQ(backB.connectivity, curved.connectivity);
+    EXPECT_EQ(backB.cellFamily, curved.cellFamily);
+}
+
+TEST(VtuWriter, ReadersRecordTheFileCellTypes) {
+    // XML, legacy and structured input: the type each cell was read as (voxels too);
+    // structured grids have none.
+    const Mesh lagrange = ReadVtkXml(TestData("xml_vtk_lagrange.vtu"), {});
+    const test::RawVtu raw(TestData("xml_vtk_lagrange.vtu"));
+    EXPECT_EQ(lagrange.vtkType, raw.Values<std::uint8_t>("Cells", "types"));
+    const Mesh legacy = ReadMesh(TestData("legacy_ascii_42.vtk"));
+    std::vector<std::uint8_t> legacyTypes;
+    {
+        std::ifstream in(TestData("legacy_ascii_42.vtk"));
+        std::string word;
+        while (in >> word && word != "CELL_TYPES") {
+        }
+        int n = 0, t = 0;
+        in >> n;
+        for (int i = 0; i < n && in >> t; ++i)
+            if (t >= 10) legacyTypes.push_back(static_cast<std::uint8_t>(t));  // 3-D
+    }
+    ASSERT_FALSE(legacyTypes.empty());
+    EXPECT_EQ(legacy.vtkType, legacyTypes);
+    const Mesh grid = ReadVtkXml(TestData("xml_vtk_grid.vts"), {});
+    EXPECT_TRUE(grid.vtkType.empty());
 }
 
 TEST(VtuWriter, RoundTripThroughParallelIndex) {

@@ -321,9 +321,10 @@ class CollectSink : public partition::MeshSink {
         pointValues.insert(pointValues.end(), values, values + count * pointComps);
     }
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
-              int count, const double* values) override {
+              int count, const double* values, std::uint8_t vtkType) override {
         ASSERT_LT(*std::max_element(nodes, nodes + count), mesh.PointCount());
         mesh.AddCell(shape, order, family, nodes, count);
+        mesh.vtkType.push_back(vtkType);
         cellValues.insert(cellValues.end(), values, values + cellComps);
     }
     Mesh mesh;
@@ -341,6 +342,7 @@ void ExpectSinkEquals(const CollectSink& sink, const Mesh& ref) {
     EXPECT_EQ(sink.mesh.cellShape, ref.cellShape);
     EXPECT_EQ(sink.mesh.cellOrder, ref.cellOrder);
     EXPECT_EQ(sink.mesh.cellFamily, ref.cellFamily);
+    EXPECT_EQ(sink.mesh.vtkType, ref.vtkType);
     auto compare = [](const std::vector<partition::StreamField>& fields, int stride,
                       const std::vector<double>& values, const std::vector<Field>& refs,
                       std::int64_t n) {

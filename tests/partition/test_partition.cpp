@@ -12,6 +12,7 @@
 
 #include "cost_model.h"
 #include "io/mesh_io.h"
+#include "io/raw_vtu.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
 #include "mesh/builtin.h"
@@ -43,8 +44,9 @@ class CollectSink : public partition::MeshSink {
         pointValues.insert(pointValues.end(), values, values + count * pointComps);
     }
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
-              int count, const double* values) override {
+              int count, const double* values, std::uint8_t vtkType) override {
         mesh.AddCell(shape, order, family, nodes, count);
+        mesh.vtkType.push_back(vtkType);
         cellValues.insert(cellValues.end(), values, values + cellComps);
     }
     Mesh mesh;
@@ -66,6 +68,7 @@ void ExpectStreamEqualsRead(const std::string& path, bool expectStreamed) {
     EXPECT_EQ(sink.mesh.cellOffsets, ref.cellOffsets);
     EXPECT_EQ(sink.mesh.cellShape, ref.cellShape);
     EXPECT_EQ(sink.mesh.cellOrder, ref.cellOrder);
+    EXPECT_EQ(sink.mesh.vtkType, ref.vtkType);
     ASSERT_EQ(sink.pointFields.size(), ref.pointFields.size());
     int offset = 0;
     for (const auto& f : sink.pointFields) {
@@ -365,6 +368,100 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
     for (int d = 0; d < 3; ++d) {
         EXPECT_LE(q.tree.box.lo[d], curved.Bounds().lo[d]);
         EXPECT_GE(q.tree.box.hi[d], curved.Bounds().hi[d]);
+    }
+}
+
+/// The VTK cell types of a partition's bricks as their files store them (the raw
+/// `types` and `vtkGhostType` arrays, decoded without hpray's reader).
+struct BrickTypes {
+    std::map<int, std::int64_t> owned;  ///< cells with vtkGhostType 0, per VTK type
+    std::set<int> all;                  ///< every type in a brick, ghosts included
+    int bricksWithDegrees = 0;          ///< bricks with a HigherOrderDegrees array
+};
+
+BrickTypes RawBrickTypes(const Partition& p) {
+    BrickTypes t;
+    for (int b = 0; b < static_cast<int>(p.bricks.size()); ++b) {
+        const test::RawVtu raw(p.BrickPath(b));
+        const auto types = raw.Values<std::uint8_t>("Cells", "types");
+        const auto ghost = raw.Values<std::uint8_t>("CellData", "vtkGhostType");
+        EXPECT_EQ(static_cast<std::int64_t>(types.size()), raw.Cells());
+        EXPECT_EQ(ghost.size(), types.size());
+        for (std::size_t c = 0; c < types.size() && c < ghost.size(); ++c) {
+            t.all.insert(types[c]);
+            if (ghost[c] == 0) ++t.owned[types[c]];
+        }
+        t.bricksWithDegrees += raw.Has("CellData", "HigherOrderDegrees");
+    }
+    return t;
+}
+
+/// Whether the partition's bricks.pvtu declares a HigherOrderDegrees cell array.
+bool PvtuDeclaresDegrees(const std::string& dir) {
+    std::ifstream in(dir + "/bricks.pvtu");
+    const std::string text((std::istreambuf_iterator<char>(in)),
+                           std::istreambuf_iterator<char>());
+    EXPECT_FALSE(text.empty());
+    return text.find("Name=\"HigherOrderDegrees\"") != std::string::npos;
+}
+
+TEST(Partition, BricksKeepTheInputCellTypes) {
+    ScratchDir dir("partition_types");
+    struct Case {
+        std::string path;
+        int bricks;
+        std::map<int, std::int64_t> types;  ///< the input's 3-D cells per VTK type
+        bool degrees;                       ///< some type needs HigherOrderDegrees
+    };
+    const std::string kTestData = HPRAY_TEST_DATA;
+    const std::vector<Case> cases = {
+        // The four linear types interleaved (appended raw + zlib, streamed): VTK_TETRA,
+        // VTK_HEXAHEDRON, VTK_WEDGE, VTK_PYRAMID, not their Lagrange equivalents.
+        {kData + "/mfem_fichera_mixed16_linear.vtu",
+         5,
+         {{10, 50400}, {12, 4096}, {13, 24576}, {14, 11664}},
+         false},
+        // VTK_QUADRATIC_TETRA (ASCII, read whole and replayed).
+        {kData + "/mfem_escher_quadtet_p2.vtu", 3, {{24, 42}}, false},
+        // Gmsh has no VTK types: tet10 -> 24, prism18 -> 32, pyramid14 -> 74.
+        {kData + "/gmsh_pripyrtet_p2.msh", 4, {{24, 12}, {32, 135}, {74, 15}}, true},
+        // Every 3-D type of a legacy file (lines and triangles dropped), voxel included.
+        {kTestData + "/legacy_binary_51.vtk",
+         2,
+         {{10, 1},
+          {11, 1},
+          {12, 1},
+          {13, 1},
+          {14, 1},
+          {24, 1},
+          {25, 1},
+          {26, 1},
+          {27, 1},
+          {29, 1},
+          {32, 1},
+          {71, 1},
+          {72, 1},
+          {73, 1}},
+         true},
+        // Meshes built in memory: linear tets as VTK_TETRA.
+        {"builtin:cube-tets-4", 3, {{10, 5 * 4 * 4 * 4}}, false},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.path);
+        partition::PartitionOptions o;
+        o.bricks = c.bricks;
+        o.outDir = dir / std::to_string(&c - cases.data());
+        partition::PartitionMesh(c.path, o);
+        const Partition p = partition::ReadPartition(o.outDir);
+        const BrickTypes t = RawBrickTypes(p);
+        EXPECT_EQ(t.owned, c.types);
+        for (int type : t.all) EXPECT_EQ(c.types.count(type), 1u) << "type " << type;
+        // HigherOrderDegrees in every brick or in none, as bricks.pvtu declares it.
+        EXPECT_EQ(t.bricksWithDegrees, c.degrees ? c.bricks : 0);
+        EXPECT_EQ(PvtuDeclaresDegrees(o.outDir), c.degrees);
+        // hpray reads the bricks back into the input's cells (ownership, ghosts, nodes
+        // in internal order with their coordinates).
+        if (c.path.rfind("builtin:", 0) != 0) ExpectValidPartition(c.path, o.outDir);
     }
 }
 

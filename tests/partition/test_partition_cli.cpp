@@ -99,11 +99,12 @@ void ExpectCompletePartition(const std::string& dir, int bricks, std::int64_t ce
 
 TEST(PartitionCli, PeakMemoryStaysWithinTheLimit) {
     ScratchDir dir("partition_rss");
-    // cube-tets-60: 1.08M tets in an appended raw .vtu of about 80 MiB (Float64, Int64).
+    // cube-tets-66: 1.44M tets in an appended raw .vtu of about 65 MiB (Float64, Int64;
+    // linear tets are written as VTK_TETRA, without HigherOrderDegrees).
     const std::string input = dir / "cube.vtu";
     std::int64_t cells = 0;
     {
-        const Mesh mesh = MakeBuiltin("builtin:cube-tets-60");
+        const Mesh mesh = MakeBuiltin("builtin:cube-tets-66");
         cells = mesh.CellCount();
         WriteVtu(input, mesh);
     }
