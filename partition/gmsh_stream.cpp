@@ -1033,7 +1033,7 @@ class GmshStreamer {
             const GmshCellType& kind = *block.kind;
             const std::vector<int>& perm = GmshToInternal(kind.type);
             // The VTK type ReadGmsh records (the one a gmsh user expects in a .vtu:
-            // tet10 -> 24, hex27 -> 29, prism18 -> 32, ...; see FixedVtkTypeFor).
+            // tet10 -> 24, hex27 -> 29, prism18 -> 73, ...; see FixedVtkTypeFor).
             const auto vtkType = static_cast<std::uint8_t>(
                 FixedVtkTypeFor(CellKind{kind.shape, kind.order, kind.family}));
             fileNodes.resize(block.nodes);

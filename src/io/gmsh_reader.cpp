@@ -307,7 +307,7 @@ void MshParser::ParseElements() {
         const std::optional<GmshCellType>& kind = block.kind;
         const std::vector<int>& perm = GmshToInternal(kind->type);
         // Gmsh has no VTK types; record the one a gmsh user expects to see in a .vtu
-        // (tet10 -> 24, hex20 -> 25, hex27 -> 29, prism15 -> 26, prism18 -> 32,
+        // (tet10 -> 24, hex20 -> 25, hex27 -> 29, prism15 -> 26, prism18 -> 73,
         // pyramid13 -> 27, linear cells 10-14, others 71-74: FixedVtkTypeFor).
         const auto vtkType = static_cast<std::uint8_t>(
             FixedVtkTypeFor(CellKind{kind->shape, kind->order, kind->family}));

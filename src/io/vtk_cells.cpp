@@ -609,7 +609,7 @@ int FixedVtkTypeFor(const CellKind& kind) {
     for (int type :
          {kVtkTetra, kVtkHexahedron, kVtkWedge, kVtkPyramid, kVtkQuadraticTetra,
           kVtkQuadraticHexahedron, kVtkQuadraticWedge, kVtkQuadraticPyramid,
-          kVtkTriquadraticHexahedron, kVtkBiquadraticQuadraticWedge})
+          kVtkTriquadraticHexahedron})
         if (SameKind(*FixedKind(type), kind)) return type;
     return VtkTypeFor(kind);
 }

@@ -102,9 +102,11 @@ const std::vector<int>& InternalToVtk(const CellKind& kind);
 bool VtkTypeHolds(int vtkType, const CellKind& kind);
 
 /// The VTK type a converter would choose for `kind` when the source format has no VTK
-/// type (gmsh): the fixed-node type VTK has for it (10, 12, 13, 14; 24, 29, 32 for
-/// quadratic Lagrange tet, hex, wedge; 25, 26, 27 for serendipity), else the Lagrange
-/// type 71-74 (VTK has no fixed type for the 14-node pyramid or for order 3 and up).
+/// type (gmsh): the fixed-node type VTK has for it (10, 12, 13, 14; 24, 29 for quadratic
+/// Lagrange tet and hex; 25, 26, 27 for serendipity), else the Lagrange type 71-74 (VTK
+/// has no fixed type for the 14-node pyramid or for order 3 and up). The 18-node wedge
+/// goes to 73, not 32: VTK 9.1's cell-size and validity filters give type 32 negative
+/// volumes for cells its own face lists call positive, and 73 reads the same nodes.
 int FixedVtkTypeFor(const CellKind& kind);
 
 /// The VTK type WriteVtu stores a cell of `kind` as, given the type it was read with

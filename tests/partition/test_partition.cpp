@@ -423,8 +423,8 @@ TEST(Partition, BricksKeepTheInputCellTypes) {
          false},
         // VTK_QUADRATIC_TETRA (ASCII, read whole and replayed).
         {kData + "/mfem_escher_quadtet_p2.vtu", 3, {{24, 42}}, false},
-        // Gmsh has no VTK types: tet10 -> 24, prism18 -> 32, pyramid14 -> 74.
-        {kData + "/gmsh_pripyrtet_p2.msh", 4, {{24, 12}, {32, 135}, {74, 15}}, true},
+        // Gmsh has no VTK types: tet10 -> 24, prism18 -> 73, pyramid14 -> 74.
+        {kData + "/gmsh_pripyrtet_p2.msh", 4, {{24, 12}, {73, 135}, {74, 15}}, true},
         // Every 3-D type of a legacy file (lines and triangles dropped), voxel included.
         {kTestData + "/legacy_binary_51.vtk",
          2,
