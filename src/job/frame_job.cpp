@@ -1,0 +1,360 @@
+// FrameJob: loading and preparation once, frames rendered on every rank and composited
+// (moved out of the hpray render command so that a service can keep it).
+#include "job/frame_job.h"
+
+#include <mpi.h>
+#include <tbb/info.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+#include <unistd.h>
+
+#include "compositor.h"
+#include "io/mesh_io.h"
+#include "job/tile_dealer.h"
+#include "scene/camera.h"
+#include "util/error.h"
+#include "util/log.h"
+#include "util/mpi.h"
+
+namespace hpray::job {
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+/// True when the box lies entirely outside the camera's view: all its corners are on the
+/// outer side of one bounding plane of the view volume (perspective: the four side planes
+/// through the eye and the near/far distances along the view direction; orthographic: the
+/// four side slabs). Conservative: a box that may be seen is never reported outside.
+bool OutsideView(const Scene& scene, const Box& box) {
+    const Camera camera(scene.camera);
+    const auto& f = camera.Forward();
+    const auto& r = camera.Right();
+    const auto& u = camera.TrueUp();
+    const auto& e = camera.Position();
+    const double aspect = double(scene.camera.width) / scene.camera.height;
+    std::array<std::array<double, 3>, 8> rel;
+    for (int q = 0; q < 8; ++q)
+        for (int d = 0; d < 3; ++d) rel[q][d] = ((q >> d) & 1 ? box.hi : box.lo)[d] - e[d];
+    auto dot = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+        return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    };
+    auto allOutside = [&](auto&& signedDistance) {
+        for (const auto& x : rel)
+            if (signedDistance(x) <= 0) return false;
+        return true;
+    };
+    // Behind the near limit or beyond the far one (along the forward axis; a ray's t is at
+    // least its forward component, so this is conservative for perspective too).
+    if (allOutside([&](const auto& x) { return dot(x, f) - scene.clip.far; })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, f); }) && !scene.camera.orthographic)
+        return true;
+    if (scene.camera.orthographic) {
+        const double hy = 0.5 * scene.camera.orthoHeight, hx = hy * aspect;
+        if (allOutside([&](const auto& x) { return dot(x, r) - hx; })) return true;
+        if (allOutside([&](const auto& x) { return -dot(x, r) - hx; })) return true;
+        if (allOutside([&](const auto& x) { return dot(x, u) - hy; })) return true;
+        if (allOutside([&](const auto& x) { return -dot(x, u) - hy; })) return true;
+        return false;
+    }
+    const double ty = std::tan(0.5 * scene.camera.fovYDegrees * M_PI / 180), tx = ty * aspect;
+    // Side planes through the eye: outside when |x.r| > tx (x.f), etc.
+    if (allOutside([&](const auto& x) { return dot(x, r) - tx * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, r) - tx * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return dot(x, u) - ty * dot(x, f); })) return true;
+    if (allOutside([&](const auto& x) { return -dot(x, u) - ty * dot(x, f); })) return true;
+    return false;
+}
+
+/// A brick of a partition can contribute unless it lies outside the view or the clip box
+/// or, in a scene of isosurfaces only, no isovalue lies in its guaranteed field ranges.
+bool BrickMayContribute(const Scene& scene, const partition::BrickInfo& brick,
+                        const Box& box) {
+    if (scene.clip.box && !box.Touches(*scene.clip.box)) return false;
+    if (OutsideView(scene, box)) return false;
+    if (scene.volume || !scene.slices.empty()) return true;
+    for (const SceneIsosurface& iso : scene.isosurfaces) {
+        std::string name = iso.field;
+        auto it = brick.ranges.find(name);
+        if (it == brick.ranges.end()) return true;  // no range recorded: be conservative
+        if (iso.value >= it->second[0] && iso.value <= it->second[1]) return true;
+    }
+    return false;
+}
+
+/// Reduces the stats of all ranks into rank 0's. `wholeMeshEverywhere`: every rank
+/// prepared the same whole mesh, so its non-conforming faces are counted once, not summed.
+void ReduceStats(RenderStats& stats, int bricksLoaded, bool wholeMeshEverywhere) {
+    auto counters = stats.counters.ToArray();
+    std::array<double, RenderCounters::kSize> sum{}, max{};
+    MPI_Reduce(counters.data(), sum.data(), RenderCounters::kSize, MPI_DOUBLE, MPI_SUM, 0,
+               MPI_COMM_WORLD);
+    MPI_Reduce(counters.data(), max.data(), RenderCounters::kSize, MPI_DOUBLE, MPI_MAX, 0,
+               MPI_COMM_WORLD);
+    for (int i = 0; i < RenderCounters::kSize; ++i)
+        counters[i] = RenderCounters::IsMax(i) ? max[i] : sum[i];
+    double times[8] = {stats.timing.load,      stats.timing.accel,   stats.timing.render,
+                       stats.timing.composite, stats.timing.total,   stats.timing.prepass,
+                       stats.timing.wait,      -stats.timing.render};
+    double timesMax[8];
+    MPI_Reduce(times, timesMax, 8, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    double range[2] = {stats.isoFieldRange[0], -stats.isoFieldRange[1]}, rangeMin[2];
+    MPI_Reduce(range, rangeMin, 2, MPI_DOUBLE, MPI_MIN, 0, MPI_COMM_WORLD);
+    int loaded = 0;
+    MPI_Reduce(&bricksLoaded, &loaded, 1, MPI_INT, MPI_SUM, 0, MPI_COMM_WORLD);
+    TraversalStats& tr = stats.traversal;
+    double meshCounts[3] = {tr.nonConformingFaces, tr.nonConformingEdges, tr.nonConformity};
+    double meshSum[3], meshMax[3];
+    MPI_Reduce(meshCounts, meshSum, 3, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+    MPI_Reduce(meshCounts, meshMax, 3, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    double walk[3] = {tr.walkRepairs, tr.walkFailures, tr.faceNewtonFailures}, walkSum[3];
+    MPI_Reduce(walk, walkSum, 3, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+    double bytes = stats.accelBytes, bytesSum = 0;
+    MPI_Reduce(&bytes, &bytesSum, 1, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+    if (mpi::Root()) {
+        stats.counters = RenderCounters::FromArray(counters);
+        stats.timing.load = timesMax[0];
+        stats.timing.accel = timesMax[1];
+        stats.timing.render = timesMax[2];
+        stats.timing.composite = timesMax[3];
+        stats.timing.total = timesMax[4];
+        stats.timing.prepass = timesMax[5];
+        stats.timing.wait = timesMax[6];
+        stats.timing.renderMin = -timesMax[7];
+        stats.isoFieldRange = {rangeMin[0], -rangeMin[1]};
+        stats.bricksLoaded = loaded;
+        stats.accelBytes = bytesSum;
+        tr.nonConformingFaces = wholeMeshEverywhere ? meshMax[0] : meshSum[0];
+        tr.nonConformingEdges = wholeMeshEverywhere ? meshMax[1] : meshSum[1];
+        tr.nonConformity = meshMax[2];
+        tr.walkRepairs = walkSum[0];
+        tr.walkFailures = walkSum[1];
+        tr.faceNewtonFailures = walkSum[2];
+    }
+}
+
+/// Threads per rank when the scene does not say: the cores of this node shared by the
+/// ranks on it.
+int DefaultThreads() {
+    MPI_Comm node;
+    MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node);
+    int onNode = 1;
+    MPI_Comm_size(node, &onNode);
+    MPI_Comm_free(&node);
+    // The cores this rank may run on (its affinity mask) against the node's: a launcher
+    // that bound the rank to fewer cores has already given it its share.
+    const int allowed = tbb::info::default_concurrency();
+    const long online = sysconf(_SC_NPROCESSORS_ONLN);
+    if (online > 0 && allowed < online) return std::max(1, allowed);
+    return std::max(1, allowed / onNode);
+}
+
+/// The preparation's share of a frame's stats: accel time and bytes, non-conformity,
+/// the isosurface fields' range.
+void AddSetupStats(const RenderStats& setup, bool withTimes, RenderStats& stats) {
+    if (withTimes) {
+        stats.timing.load += setup.timing.load;
+        stats.timing.accel += setup.timing.accel;
+    }
+    stats.accelBytes += setup.accelBytes;
+    stats.accelBytesPerCell = setup.accelBytesPerCell;
+    stats.traversal.nonConformingFaces += setup.traversal.nonConformingFaces;
+    stats.traversal.nonConformingEdges += setup.traversal.nonConformingEdges;
+    stats.traversal.nonConformity =
+        std::max(stats.traversal.nonConformity, setup.traversal.nonConformity);
+    stats.isoFieldRange = {std::min(stats.isoFieldRange[0], setup.isoFieldRange[0]),
+                           std::max(stats.isoFieldRange[1], setup.isoFieldRange[1])};
+}
+
+}  // namespace
+
+void WarnIfThreadsExceedBinding(int threads) {
+    const int allowed = tbb::info::default_concurrency();
+    if (threads <= allowed || !mpi::Root()) return;
+    log::Warn("threads is " + std::to_string(threads) + " but this process may run on " +
+              (allowed == 1 ? std::string("1 core, so its threads share it")
+                            : std::to_string(allowed) + " cores, so its threads share them") +
+              "; mpirun binds each rank to one core when it starts 2 ranks or fewer: add "
+              "--bind-to none, or a binding that gives each rank as many cores as threads");
+}
+
+FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
+    const int P = mpi::WorldSize();
+    const bool isPartition = partition::IsPartitionDirectory(scene_.data.mesh);
+    WarnIfThreadsExceedBinding(scene_.threads);
+    if (P > 1 || isPartition) {
+        // From here on the job uses collectives (a partition on one process included).
+        mpi::EnsureInitialized();
+        if (scene_.threads == 0 && P > 1) scene_.threads = DefaultThreads();
+        hpray::Distribution mode = scene_.distribute;
+        if (mode == hpray::Distribution::Auto)
+            mode = isPartition ? hpray::Distribution::Space : hpray::Distribution::Image;
+        if (mode == hpray::Distribution::Image && isPartition)
+            throw InputError(scene_.data.mesh, "",
+                             "is a partition directory, but distribute: image needs the "
+                             "whole mesh on every rank; use distribute: space (or auto) "
+                             "for a partition, or give the mesh file");
+        split_ = mode == hpray::Distribution::Image ? Split::Image : Split::Space;
+    }
+    setupStats_ = StartStats(scene_);
+    std::set<std::string> fields;
+    for (const std::string& name : scene_.FieldNames()) fields.insert(name);
+    readOptions_.fields = fields;
+
+    // The data: the partition's manifest, or the whole mesh on every rank (rendered
+    // whole, split in image tiles, or split in space into one box per rank, each rank
+    // clipping its rays to its own box).
+    const auto t0 = std::chrono::steady_clock::now();
+    if (isPartition) {
+        part_ = partition::ReadPartition(scene_.data.mesh);
+        partitionPlan_ = PlanFromPartition(*part_);
+        const int bricks = static_cast<int>(partitionPlan_.boxes.size());
+        if (bricks < P)
+            throw InputError(scene_.data.mesh, "",
+                             "has " + std::to_string(bricks) + " bricks, fewer than the " +
+                                 std::to_string(P) + " MPI ranks; partition it into at least " +
+                                 std::to_string(P) + " bricks");
+        AssignRanks(partitionPlan_, P);
+    } else {
+        whole_ = ReadMesh(scene_.data.mesh, readOptions_);
+        if (mpi::Root())
+            log::Info("loaded " + scene_.data.mesh + ": " +
+                      std::to_string(whole_->CellCount()) + " cells, " +
+                      std::to_string(whole_->PointCount()) + " points");
+    }
+    setupStats_.timing.load = Seconds(t0);
+    if (whole_)
+        prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
+}
+
+FrameJob::~FrameJob() = default;
+
+Image FrameJob::Render(const std::optional<SceneCamera>& camera, RenderStats& stats) {
+    Scene scene = scene_;
+    if (camera) scene.camera = *camera;
+    Image image = split_ == Split::None ? RenderSingle(scene, stats)
+                                        : RenderDistributed(scene, stats);
+    firstFrame_ = false;
+    return image;
+}
+
+Image FrameJob::RenderSingle(const Scene& scene, RenderStats& stats) {
+    const auto start = std::chrono::steady_clock::now();
+    stats = StartStats(scene);
+    AddSetupStats(setupStats_, firstFrame_, stats);
+    stats.bricksLoaded = stats.bricksTotal = 1;
+    Image image;
+    prepared_->Render(scene, Camera(scene.camera), std::nullopt, image, stats);
+    stats.timing.total = Seconds(start) + (firstFrame_ ? stats.timing.load + stats.timing.accel : 0);
+    return image;
+}
+
+Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
+    const auto start = std::chrono::steady_clock::now();
+    const int P = mpi::WorldSize(), rank = mpi::WorldRank();
+    stats = StartStats(scene);
+    AddSetupStats(setupStats_, firstFrame_, stats);
+    stats.ranks = P;
+    stats.distribute = split_ == Split::Image ? "image" : "space";
+    BrickPlan plan = partitionPlan_;
+    auto t0 = std::chrono::steady_clock::now();
+    if (whole_ && split_ == Split::Space) {
+        // Rank 0 renders a pre-pass at 1/8 of the resolution, measuring each segment's
+        // cost where it lies, and splits space so that each rank's box holds an equal
+        // share of the measured cost (the split follows the camera: every frame).
+        if (mpi::Root()) {
+            SceneCamera low = scene.camera;
+            low.width = std::min(scene.camera.width, std::max(32, scene.camera.width / 8));
+            low.height =
+                std::min(scene.camera.height, std::max(32, scene.camera.height / 8));
+            std::vector<SegmentCostSample> samples;
+            Image preview;
+            RenderStats ignored = StartStats(scene);
+            prepared_->Render(scene, Camera(low), std::nullopt, preview, ignored, &samples);
+            plan = SplitMesh(*whole_, prepared_->Geometry(), P, samples);
+            std::string planes;
+            for (const KdNode& n : plan.tree.nodes)
+                if (n.axis >= 0) {
+                    char text[64];
+                    std::snprintf(text, sizeof text, " %c=%.17g", "xyz"[n.axis], n.split);
+                    planes += text;
+                }
+            log::Info("split by measured cost (" + std::to_string(samples.size()) +
+                      " pre-pass segments):" + planes);
+        }
+        BroadcastPlan(plan);
+        AssignRanks(plan, P);
+        stats.timing.prepass = Seconds(t0);
+    }
+
+    const ViewOrigin view = ViewOriginOf(scene.camera);
+    Image accumulated;
+    accumulated.Resize(scene.camera.width, scene.camera.height);
+    int loaded = 0;
+    std::unique_ptr<TileDealer> dealer;
+    KdTree rankTree;
+    if (split_ == Split::Image) {
+        // Every pixel is rendered by exactly one rank, exactly as on one rank; the others
+        // leave it empty, which Over leaves unchanged, so any visibility order composites
+        // the single-rank image bit for bit.
+        const Camera cam(scene.camera);
+        const int tiles = RenderTileCount(cam);
+        const int chunk = std::max(1, std::min(8 * scene.threads, tiles / (16 * P)));
+        dealer = std::make_unique<TileDealer>(tiles, chunk);
+        int begin = 0, end = 0;
+        while (dealer->Next(begin, end))
+            prepared_->RenderTiles(scene, cam, begin, end, accumulated, stats);
+        loaded = mpi::Root() ? 1 : 0;
+        stats.bricksTotal = 1;
+        rankTree = RegularKdTree(P, prepared_->Geometry().bounds);
+    } else {
+        stats.bricksTotal = static_cast<int>(plan.boxes.size());
+        for (int b : plan.tree.FrontToBack(view)) {
+            if (plan.rank[b] != rank) continue;
+            if (part_ && !BrickMayContribute(scene, part_->bricks[b], plan.boxes[b])) continue;
+            Image image;
+            if (part_) {
+                t0 = std::chrono::steady_clock::now();
+                const Mesh mesh = partition::LoadBrick(*part_, b, readOptions_);
+                stats.timing.load += Seconds(t0);
+                RenderOneBrick(mesh, plan.boxes[b], scene, image, stats, nullptr,
+                               &accumulated);
+            } else {
+                prepared_->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats,
+                                  nullptr, &accumulated);
+            }
+            ++loaded;
+            CompositeOver(accumulated, image);
+        }
+        if (P > 1) rankTree = compositor::BuildRankTree(plan.tree, plan.rank, P);
+    }
+
+    // Waiting for the slowest rank is imbalance, not compositing: timed apart.
+    t0 = std::chrono::steady_clock::now();
+    MPI_Barrier(MPI_COMM_WORLD);
+    stats.timing.wait = Seconds(t0);
+    dealer.reset();
+    t0 = std::chrono::steady_clock::now();
+    compositor::CompositeStats cs;
+    if (P > 1) cs = compositor::Composite(accumulated, rankTree, view, MPI_COMM_WORLD);
+    stats.timing.composite = Seconds(t0);
+    stats.timing.total =
+        Seconds(start) + (firstFrame_ ? setupStats_.timing.load + setupStats_.timing.accel : 0);
+    ReduceStats(stats, loaded, !part_.has_value());
+    if (P > 1) {
+        stats.composite.rounds = cs.rounds;
+        stats.composite.bytesPerPixel = cs.bytesPerPixel;
+        stats.composite.bytesSentMax = static_cast<double>(cs.bytesSentMax);
+        stats.composite.bytesSentTotal = static_cast<double>(cs.bytesSentTotal);
+        stats.composite.bytesGather = static_cast<double>(cs.bytesGather);
+    }
+    return accumulated;
+}
+
+}  // namespace hpray::job

@@ -1,0 +1,65 @@
+// A render job that lives across frames: the data loaded once, the whole mesh prepared
+// once, the ranks' plan; each frame renders a camera on every rank and composites it.
+#pragma once
+
+#include <memory>
+#include <optional>
+
+#include "image/image.h"
+#include "job/brick_plan.h"
+#include "render/render_job.h"
+#include "render/stats.h"
+#include "scene/scene.h"
+
+namespace hpray::job {
+
+/// How a job's ranks share a frame (scene.h Distribution, resolved).
+enum class Split { None, Image, Space };
+
+/// A render job over MPI_COMM_WORLD (one process or many). Construction and every Render
+/// are collective: every rank constructs it with the same scene and calls Render with the
+/// same camera, in the same order.
+///
+/// Construction reads the data the scene names: a mesh (every rank holds it whole and
+/// prepares it: geometry, traversal, per-field set-up) or a partition directory (the
+/// manifest; each frame reads the bricks a rank renders and can contribute). Frames of
+/// another camera reuse all of it; a frame of a scene that differs in other keys needs a
+/// new job.
+class FrameJob {
+  public:
+    /// Throws InputError for bad input (the same on every rank: the scene and data are
+    /// checked before any collective that could leave ranks waiting).
+    explicit FrameJob(const Scene& scene);
+    ~FrameJob();
+    FrameJob(const FrameJob&) = delete;
+    FrameJob& operator=(const FrameJob&) = delete;
+
+    /// Renders the job's scene seen through `camera` (nullopt: the scene's camera). On
+    /// rank 0 returns the composited image and fills `stats` (reduced over ranks; the
+    /// first frame also carries the load and preparation times); other ranks return
+    /// scratch. Writes no file.
+    Image Render(const std::optional<SceneCamera>& camera, RenderStats& stats);
+
+    Split Distribution() const { return split_; }
+    const Scene& GetScene() const { return scene_; }
+
+  private:
+    Image RenderSingle(const Scene& scene, RenderStats& stats);
+    Image RenderDistributed(const Scene& scene, RenderStats& stats);
+
+    Scene scene_;
+    Split split_ = Split::None;
+    std::optional<partition::Partition> part_;
+    std::optional<Mesh> whole_;
+    std::unique_ptr<PreparedBrick> prepared_;
+    BrickPlan partitionPlan_;
+    ReadOptions readOptions_;
+    RenderStats setupStats_;  ///< load and preparation, reported with the first frame
+    bool firstFrame_ = true;
+};
+
+/// Threads beyond the cores a rank may run on only share those cores: says so once, on
+/// rank 0.
+void WarnIfThreadsExceedBinding(int threads);
+
+}  // namespace hpray::job
