@@ -12,7 +12,7 @@ HPRAY_PACKAGES=(
   libeigen3-dev libembree-dev libopenexr-dev libtbb-dev
   libyaml-cpp-dev libpugixml-dev zlib1g-dev libpng-dev
   libcli11-dev nlohmann-json3-dev libboost-dev libcerf-dev
-  libgtest-dev libbenchmark-dev libssl-dev
+  libgtest-dev libbenchmark-dev libssl-dev libcpp-httplib-dev
   python3-numpy
 )
 

@@ -1,8 +1,11 @@
 // Subcommand entry points of the hpray executable; each returns the process exit code.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "mesh/mesh.h"
 
 namespace hpray::app {
 
@@ -11,6 +14,8 @@ struct InfoArgs {
     bool json = false;
 };
 int RunInfo(const InfoArgs& args);
+/// The JSON of `hpray info --json` for a mesh in memory.
+nlohmann::json MeshSummaryJson(const Mesh& mesh);
 
 struct ProbeArgs {
     std::string mesh;
@@ -26,6 +31,15 @@ struct RenderArgs {
     std::vector<std::string> overrides;  ///< "key.path=value"
 };
 int RunRender(const RenderArgs& args);
+
+struct ServeArgs {
+    std::string scene;
+    std::vector<std::string> overrides;  ///< "key.path=value"
+    int port = 8080;                     ///< 0: any free port
+    std::string bind = "127.0.0.1";
+    std::string token;                   ///< empty: $HPRAY_TOKEN, else random
+};
+int RunServe(const ServeArgs& args);
 
 struct PartitionArgs {
     std::string mesh;

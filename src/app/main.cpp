@@ -41,6 +41,17 @@ int main(int argc, char** argv) {
     renderCmd->add_option("scene", render.scene, "scene YAML file")->required();
     renderCmd->add_option("--set", render.overrides, "override a scene key: key.path=value");
 
+    app::ServeArgs serve;
+    auto* serveCmd = cli.add_subcommand(
+        "serve", "load a scene's data once and render frames on request over HTTP");
+    serveCmd->add_option("scene", serve.scene, "scene YAML file")->required();
+    serveCmd->add_option("--set", serve.overrides, "override a scene key: key.path=value");
+    serveCmd->add_option("--port", serve.port, "TCP port (0: any free port)")
+        ->check(CLI::Range(0, 65535));
+    serveCmd->add_option("--bind", serve.bind, "address to listen on (default 127.0.0.1)");
+    serveCmd->add_option("--token", serve.token,
+                         "access token (default: $HPRAY_TOKEN, else a random one)");
+
     app::PartitionArgs part;
     auto* partCmd = cli.add_subcommand("partition", "split a mesh into k-d bricks");
     partCmd->add_option("mesh", part.mesh, "mesh file")->required();
@@ -61,6 +72,7 @@ int main(int argc, char** argv) {
         if (*infoCmd) return app::RunInfo(info);
         if (*probeCmd) return app::RunProbe(probe);
         if (*renderCmd) return app::RunRender(render);
+        if (*serveCmd) return app::RunServe(serve);
         if (*partCmd) return app::RunPartition(part);
         return 2;
     } catch (const InputError& e) {

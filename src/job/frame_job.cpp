@@ -203,9 +203,8 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
         split_ = mode == hpray::Distribution::Image ? Split::Image : Split::Space;
     }
     setupStats_ = StartStats(scene_);
-    std::set<std::string> fields;
-    for (const std::string& name : scene_.FieldNames()) fields.insert(name);
-    readOptions_.fields = fields;
+    for (const std::string& name : scene_.FieldNames()) loadedFields_.insert(name);
+    readOptions_.fields = loadedFields_;
 
     // The data: the partition's manifest, or the whole mesh on every rank (rendered
     // whole, split in image tiles, or split in space into one box per rank, each rank
@@ -238,6 +237,51 @@ FrameJob::~FrameJob() = default;
 Image FrameJob::Render(const std::optional<SceneCamera>& camera, RenderStats& stats) {
     Scene scene = scene_;
     if (camera) scene.camera = *camera;
+    Image image = split_ == Split::None ? RenderSingle(scene, stats)
+                                        : RenderDistributed(scene, stats);
+    firstFrame_ = false;
+    return image;
+}
+
+Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stats) {
+    if (frameScene.data.mesh != scene_.data.mesh)
+        throw InputError(frameScene.data.mesh, "",
+                         "a job renders the data it loaded (" + scene_.data.mesh + ")");
+    Scene scene = frameScene;
+    scene.threads = scene_.threads;
+    scene.distribute = scene_.distribute;
+    if (change == Change::Scene) {
+        // The preparation of this frame is reported with it; what it keeps (the
+        // traversal's bytes and findings) stays in the stats.
+        const RenderStats kept = setupStats_;
+        setupStats_ = StartStats(scene);
+        setupStats_.accelBytes = kept.accelBytes;
+        setupStats_.accelBytesPerCell = kept.accelBytesPerCell;
+        setupStats_.traversal = kept.traversal;
+        firstFrame_ = true;
+        bool missing = false;
+        for (const std::string& name : scene.FieldNames())
+            missing |= loadedFields_.insert(name).second;
+        readOptions_.fields = loadedFields_;
+        if (whole_) {
+            if (missing) {
+                const auto t0 = std::chrono::steady_clock::now();
+                prepared_.reset();
+                whole_ = ReadMesh(scene.data.mesh, readOptions_);
+                setupStats_.timing.load = Seconds(t0);
+            }
+            if (missing || scene.accuracy.mappingTolerance != prepared_->MappingTolerance()) {
+                prepared_.reset();
+                setupStats_.accelBytes = 0;
+                setupStats_.traversal = TraversalStats{};
+                prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene,
+                                                            setupStats_);
+            }
+            else
+                prepared_->Reconfigure(scene, setupStats_);
+        }
+    }
+    scene_ = scene;
     Image image = split_ == Split::None ? RenderSingle(scene, stats)
                                         : RenderDistributed(scene, stats);
     firstFrame_ = false;

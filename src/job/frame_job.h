@@ -4,6 +4,8 @@
 
 #include <memory>
 #include <optional>
+#include <set>
+#include <string>
 
 #include "image/image.h"
 #include "job/brick_plan.h"
@@ -40,8 +42,21 @@ class FrameJob {
     /// scratch. Writes no file.
     Image Render(const std::optional<SceneCamera>& camera, RenderStats& stats);
 
+    /// What a frame changes against the job's current scene.
+    enum class Change { CameraOnly, Scene };
+    /// Renders `scene` (same data as the job's; `threads` and `distribute` stay the
+    /// job's) and makes it the job's current scene. CameraOnly reuses all preparation;
+    /// Scene keeps the data and the traversal and rebuilds the per-scene set-up (field
+    /// ranges, transfer functions), loading fields not yet loaded (then the mesh is read
+    /// and prepared again). Throws InputError if `scene` names other data.
+    Image Render(const Scene& scene, Change change, RenderStats& stats);
+
     Split Distribution() const { return split_; }
     const Scene& GetScene() const { return scene_; }
+    /// The whole mesh every rank holds (nullptr for a partition directory).
+    const Mesh* WholeMesh() const { return whole_ ? &*whole_ : nullptr; }
+    /// The partition's manifest (nullptr for a mesh).
+    const partition::Partition* GetPartition() const { return part_ ? &*part_ : nullptr; }
 
   private:
     Image RenderSingle(const Scene& scene, RenderStats& stats);
@@ -54,7 +69,8 @@ class FrameJob {
     std::unique_ptr<PreparedBrick> prepared_;
     BrickPlan partitionPlan_;
     ReadOptions readOptions_;
-    RenderStats setupStats_;  ///< load and preparation, reported with the first frame
+    RenderStats setupStats_;  ///< load and preparation, reported with the next frame
+    std::set<std::string> loadedFields_;
     bool firstFrame_ = true;
 };
 

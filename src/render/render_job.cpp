@@ -82,6 +82,8 @@ RenderStats StartStats(const Scene& scene) {
 }
 
 struct PreparedBrick::Impl {
+    const Mesh* mesh = nullptr;
+    double mappingTolerance = 0;
     MeshGeometry geometry;
     std::unique_ptr<BrickTraverser> traverser;
     BrickSetup setup;
@@ -91,6 +93,8 @@ PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
                              const Scene& scene, RenderStats& stats)
     : impl_(std::make_unique<Impl>()) {
     const auto t0 = std::chrono::steady_clock::now();
+    impl_->mesh = &mesh;
+    impl_->mappingTolerance = scene.accuracy.mappingTolerance;
     impl_->geometry = MeshGeometry::Build(mesh);
     const MeshGeometry& geometry = impl_->geometry;
     Brick brick{&mesh, {}};
@@ -133,6 +137,19 @@ PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
 }
 
 PreparedBrick::~PreparedBrick() = default;
+
+void PreparedBrick::Reconfigure(const Scene& scene, RenderStats& stats) {
+    const auto t0 = std::chrono::steady_clock::now();
+    impl_->setup = MakeBrickSetup(*impl_->mesh, impl_->geometry, *impl_->traverser, scene);
+    for (const ScalarSelector& f : impl_->setup.fields) {
+        const auto r = f.field->Range(f.component);
+        stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),
+                               std::max(stats.isoFieldRange[1], r[1])};
+    }
+    stats.timing.accel += Seconds(t0);
+}
+
+double PreparedBrick::MappingTolerance() const { return impl_->mappingTolerance; }
 
 const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
 

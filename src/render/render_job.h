@@ -64,6 +64,13 @@ class PreparedBrick {
     void RenderTiles(const Scene& scene, const Camera& camera, int begin, int end,
                      Image& image, RenderStats& stats);
 
+    /// Rebuilds the per-scene set-up (fields, isosurfaces, slices, volume, clip,
+    /// accuracy) for `scene`, keeping the geometry and the traversal; adds the time to
+    /// stats.timing.accel and the fields' range to the stats. The scene must name only
+    /// fields the mesh holds and the same accuracy.mapping_tolerance (the traversal's).
+    void Reconfigure(const Scene& scene, RenderStats& stats);
+    double MappingTolerance() const;
+
     const MeshGeometry& Geometry() const;
 
   private:
