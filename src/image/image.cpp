@@ -43,17 +43,11 @@ std::vector<std::pair<std::string, std::vector<double>*>> Image::Channels() {
 }
 
 std::vector<std::pair<std::string, const std::vector<double>*>> Image::Channels() const {
-    return {{"R", &r},
-            {"G", &g},
-            {"B", &b},
-            {"A", &a},
-            {"Z", &z},
-            {"N.X", &nx},
-            {"N.Y", &ny},
-            {"N.Z", &nz},
-            {"iso.residual", &isoResidual},
-            {"iso.id", &isoId},
-            {"vol.error", &volError}};
+    // The same list, read-only: the mutable one does not modify the image.
+    std::vector<std::pair<std::string, const std::vector<double>*>> out;
+    for (const auto& [name, channel] : const_cast<Image*>(this)->Channels())
+        out.emplace_back(name, channel);
+    return out;
 }
 
 void CompositeOver(Image& accumulated, const Image& behind) {

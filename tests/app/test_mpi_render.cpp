@@ -16,6 +16,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "app/process_util.h"
 #include "io/image.h"
 
 namespace hpray {
@@ -25,22 +26,8 @@ namespace {
 const std::filesystem::path kDir = std::filesystem::temp_directory_path() /
                                    ("hpray_test_mpi_render_" + std::to_string(getpid()));
 
-int RunCommand(const std::string& cmd, std::string* out = nullptr) {
-    FILE* pipe = popen((cmd + " 2>&1").c_str(), "r");
-    if (!pipe) return -1;
-    std::array<char, 4096> buf;
-    std::string text;
-    std::size_t n;
-    while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) text.append(buf.data(), n);
-    const int status = pclose(pipe);
-    if (out) *out = text;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string Mpirun(int ranks) {
-    return std::string(HPRAY_MPIEXEC) + " -n " + std::to_string(ranks) +
-           " --allow-run-as-root --oversubscribe --bind-to none ";
-}
+using test::Mpirun;
+using test::RunCommand;
 
 struct Camera {
     const char* name;

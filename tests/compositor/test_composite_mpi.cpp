@@ -15,6 +15,7 @@
 #include "compositor.h"
 #include "util/error.h"
 #include "util/mpi.h"
+#include "mpi/mpi_test_main.h"
 
 namespace hpray::compositor {
 namespace {
@@ -324,18 +325,3 @@ TEST(CompositeMpi, DisagreementMakesEveryRankThrowTogether) {
 
 }  // namespace
 }  // namespace hpray::compositor
-
-int main(int argc, char** argv) {
-    hpray::mpi::Session session(&argc, &argv);
-    ::testing::InitGoogleTest(&argc, argv);
-    // Only rank 0 prints gtest's report; every rank runs the tests, and the exit code is
-    // the worst over ranks.
-    if (hpray::mpi::WorldRank() != 0) {
-        auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
-        delete listeners.Release(listeners.default_result_printer());
-    }
-    const int failed = RUN_ALL_TESTS();
-    int anyFailed = 0;
-    MPI_Allreduce(&failed, &anyFailed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-    return anyFailed;
-}

@@ -17,6 +17,7 @@
 #include "job/tile_dealer.h"
 #include "scene/scene.h"
 #include "util/mpi.h"
+#include "mpi/mpi_test_main.h"
 
 namespace hpray {
 namespace {
@@ -159,17 +160,3 @@ TEST(FrameJob, FramesOfOneJobEqualOneJobPerCamera) {
 
 }  // namespace
 }  // namespace hpray
-
-int main(int argc, char** argv) {
-    hpray::mpi::Session session(&argc, &argv);
-    hpray::mpi::EnsureInitialized();
-    ::testing::InitGoogleTest(&argc, argv);
-    if (hpray::mpi::WorldRank() != 0) {
-        auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
-        delete listeners.Release(listeners.default_result_printer());
-    }
-    const int failed = RUN_ALL_TESTS();
-    int anyFailed = 0;
-    MPI_Allreduce(&failed, &anyFailed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-    return anyFailed;
-}

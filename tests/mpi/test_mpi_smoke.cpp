@@ -4,6 +4,7 @@
 
 #include "util/log.h"
 #include "util/mpi.h"
+#include "mpi/mpi_test_main.h"
 
 namespace {
 
@@ -20,17 +21,3 @@ TEST(MpiSmoke, RanksSumAndThreadLevel) {
 }
 
 }  // namespace
-
-int main(int argc, char** argv) {
-    hpray::mpi::Session session(&argc, &argv);
-    ::testing::InitGoogleTest(&argc, argv);
-    // Only rank 0 prints gtest's report; every rank runs the tests.
-    if (hpray::mpi::WorldRank() != 0) {
-        auto& listeners = ::testing::UnitTest::GetInstance()->listeners();
-        delete listeners.Release(listeners.default_result_printer());
-    }
-    int failed = RUN_ALL_TESTS();
-    int anyFailed = 0;
-    MPI_Allreduce(&failed, &anyFailed, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-    return anyFailed;
-}
