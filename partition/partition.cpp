@@ -95,6 +95,7 @@ class DirLock {
   public:
     explicit DirLock(const std::string& dir) {
         const std::string path = (fs::path(dir) / kLock).string();
+        path_ = path;
         fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
         if (fd_ < 0)
             throw InputError(
@@ -106,6 +107,10 @@ class DirLock {
         }
     }
     ~DirLock() {
+        // No lock file is left behind: unlinked while still held, so a run that opened
+        // it meanwhile still finds it locked, and a later run creates a new one.
+        std::error_code ec;
+        fs::remove(path_, ec);
         if (fd_ >= 0) ::close(fd_);
     }
     DirLock(const DirLock&) = delete;
@@ -113,6 +118,7 @@ class DirLock {
 
   private:
     int fd_ = -1;
+    std::string path_;
 };
 
 /// Removes a folder tree on destruction unless released.
@@ -484,7 +490,19 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         options.memoryLimitBytes ? options.memoryLimitBytes : DefaultMemoryLimit();
     const std::string dir = options.outDir;
     {
+        // Never write into a folder of other files (a configs folder, a home folder)
+        // unless told to: only an empty folder, an earlier partition or its leftovers.
         std::error_code ec;
+        if (!options.force && fs::is_directory(dir, ec))
+            for (const auto& entry : fs::directory_iterator(dir, ec)) {
+                const std::string name = entry.path().filename().string();
+                if (IsOurOutput(name) || name == kLock || name.rfind(".spill-", 0) == 0)
+                    continue;
+                throw InputError(dir, "",
+                                 "is a folder that holds other files ('" + name +
+                                     "'), not a partition directory; give an empty or new "
+                                     "folder, or --force to write into it anyway");
+            }
         fs::create_directories(dir, ec);
         if (ec || !fs::is_directory(dir))
             throw InputError(dir, "",

@@ -48,6 +48,8 @@ struct PartitionOptions {
     /// Fields to keep (point or cell arrays; a component name selects its array);
     /// std::nullopt keeps every field.
     std::optional<std::vector<std::string>> fields;
+    /// Write into a folder that holds other files too (otherwise an input error).
+    bool force = false;
 };
 
 /// What PartitionMesh did (for logs and benchmarks).

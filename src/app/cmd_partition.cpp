@@ -19,6 +19,7 @@ int RunPartition(const PartitionArgs& args) {
     if (!args.memoryLimit.empty())
         options.memoryLimitBytes = partition::ParseMemorySize(args.memoryLimit);
     if (!args.fields.empty()) options.fields = args.fields;
+    options.force = args.force;
     const partition::PartitionReport r = partition::PartitionMesh(args.mesh, options);
     char line[256];
     std::snprintf(

@@ -13,6 +13,7 @@ namespace hpray::app {
 
 int RunRender(const RenderArgs& args) {
     const Scene scene = LoadScene(args.scene, args.overrides);
+    if (mpi::Root()) CheckJobOutputs(scene);  // before any work
     job::FrameJob frameJob(scene);
     RenderStats stats;
     const Image image = frameJob.Render(std::nullopt, stats);

@@ -47,6 +47,7 @@ struct PartitionArgs {
     std::string outDir;
     std::string memoryLimit;
     std::vector<std::string> fields;
+    bool force = false;
 };
 int RunPartition(const PartitionArgs& args);
 

@@ -59,6 +59,8 @@ int main(int argc, char** argv) {
     partCmd->add_option("--out", part.outDir, "output directory")->required();
     partCmd->add_option("--memory-limit", part.memoryLimit, "e.g. 512M, 4G");
     partCmd->add_option("--fields", part.fields, "fields to keep")->delimiter(',');
+    partCmd->add_flag("--force", part.force,
+                      "write into a folder that holds other files too");
 
     try {
         cli.parse(argc, argv);

@@ -4,8 +4,12 @@
 #include <tbb/info.h>
 #include <tbb/task_group.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cctype>
 #include <chrono>
+#include <filesystem>
 #include <cstdio>
 #include <limits>
 #include <set>
@@ -15,6 +19,7 @@
 #include "io/mesh_io.h"
 #include "render/brick_renderer.h"
 #include "trace/brick_traverser.h"
+#include "util/error.h"
 #include "util/log.h"
 
 namespace hpray {
@@ -192,6 +197,48 @@ void RenderOneBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene
                     std::vector<SegmentCostSample>* costSamples, const Image* front) {
     PreparedBrick brick(mesh, box, scene, stats);
     brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, costSamples, front);
+}
+
+void CheckJobOutputs(const Scene& scene) {
+    namespace fs = std::filesystem;
+    const SceneOutput& o = scene.output;
+    const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
+    const struct {
+        const char* key;
+        const std::string* path;
+        const char* extension;
+    } outputs[] = {{"output.exr", &o.exr, ".exr"},     {"output.png", &o.png, ".png"},
+                   {"output.stats", &o.stats, ".json"}, {"output.hits", &o.hits, ".npy"},
+                   {"output.rgba", &o.rgba, ".npy"}};
+    const std::set<std::string> known = {".exr",  ".png", ".jpg", ".jpeg", ".tif", ".tiff",
+                                         ".bmp",  ".gif", ".webp", ".ppm", ".npy", ".npz",
+                                         ".json", ".vtk", ".vtu", ".vti"};
+    for (const auto& out : outputs) {
+        if (out.path->empty()) continue;
+        const fs::path path(*out.path);
+        std::string ext = path.extension().string();
+        for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+        if (known.count(ext) && ext != out.extension)
+            throw InputError(source, out.key,
+                             "'" + *out.path + "' ends in " + ext + ", but this output is " +
+                                 "written as " + std::string(out.extension + 1) +
+                                 "; name it *" + out.extension);
+        std::error_code ec;
+        if (fs::is_directory(path, ec))
+            throw InputError(source, out.key, "'" + *out.path + "' is a folder");
+        // The nearest folder that exists must be one this process can write in.
+        fs::path folder = fs::absolute(path, ec).parent_path();
+        while (!folder.empty() && !fs::exists(folder, ec) && folder != folder.parent_path())
+            folder = folder.parent_path();
+        if (!fs::is_directory(folder, ec))
+            throw InputError(source, out.key,
+                             "cannot write '" + *out.path + "': '" + folder.string() +
+                                 "' is not a folder");
+        if (::access(folder.c_str(), W_OK | X_OK) != 0)
+            throw InputError(source, out.key,
+                             "cannot write '" + *out.path + "': no permission to write in '" +
+                                 folder.string() + "'");
+    }
 }
 
 void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats) {

@@ -78,6 +78,11 @@ class PreparedBrick {
     std::unique_ptr<Impl> impl_;
 };
 
+/// Checks the outputs the scene names before any work: an extension of another known
+/// format (output.png: x.jpg), a path that is a folder, or a folder that cannot be
+/// written are InputErrors naming the key.
+void CheckJobOutputs(const Scene& scene);
+
 /// Writes the outputs the scene names (EXR, PNG, hits, rgba; then stats), timing the
 /// writes into stats.timing.write.
 void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats);

@@ -95,6 +95,63 @@ TEST(Cli, PartitionWritesAManifest) {  // the partition tests are in tests/parti
 
 TEST(Cli, HelpExitsZero) { EXPECT_EQ(RunHpray("--help").code, 0); }
 
+// Outputs are checked before any work: a folder, or an extension of another format, is
+// an input error naming the key, and nothing is written.
+TEST(Cli, BadOutputPathsFailBeforeRendering) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_outputs";
+    fs::remove_all(dir);
+    fs::create_directories(dir / "folder");
+    const std::string scene = std::string(HPRAY_SOURCE_DIR) + "/configs/quickstart.yaml";
+    const std::string stats = (dir / "stats.json").string();
+    RunResult r = RunHpray("render " + scene + " --set output.png=" + (dir / "folder").string() +
+                           " --set output.exr=null --set output.stats=" + stats);
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("output.png: '" + (dir / "folder").string() + "' is a folder"),
+              std::string::npos)
+        << r.out;
+    EXPECT_FALSE(fs::exists(stats));
+    EXPECT_EQ(r.out.find("rendered"), std::string::npos) << r.out;
+    r = RunHpray("render " + scene + " --set output.png=" + (dir / "frame.jpg").string() +
+                 " --set output.exr=null --set output.stats=null");
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("output.png"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("ends in .jpg"), std::string::npos) << r.out;
+    r = RunHpray("render " + scene + " --set output.exr=" + (dir / "frame.png").string() +
+                 " --set output.png=null --set output.stats=null");
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("output.exr"), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(dir / "frame.png"));
+    fs::remove_all(dir);
+}
+
+// hpray partition never writes into a folder of other files unless told to, and leaves no
+// lock file behind.
+TEST(Cli, PartitionRefusesAForeignFolderAndLeavesNoLock) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_foreign";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    std::ofstream(dir / "notes.txt") << "not a partition\n";
+    RunResult r = RunHpray("partition builtin:cube-tets-2 --bricks 2 --out " + dir.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("notes.txt"), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(dir / "manifest.json"));
+    EXPECT_FALSE(fs::exists(dir / ".hpray-partition.lock"));
+    r = RunHpray("partition builtin:cube-tets-2 --bricks 2 --force --out " + dir.string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_TRUE(fs::exists(dir / "manifest.json"));
+    EXPECT_TRUE(fs::exists(dir / "notes.txt"));
+    EXPECT_FALSE(fs::exists(dir / ".hpray-partition.lock"));
+    // A partition directory may be written again without --force.
+    const fs::path part = dir / "part";
+    EXPECT_EQ(RunHpray("partition builtin:cube-tets-2 --bricks 2 --out " + part.string()).code, 0);
+    r = RunHpray("partition builtin:cube-tets-2 --bricks 3 --out " + part.string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_FALSE(fs::exists(part / ".hpray-partition.lock"));
+    fs::remove_all(dir);
+}
+
 }  // namespace
 
 namespace {
