@@ -1,13 +1,37 @@
 // hpray command line: parses arguments, dispatches to a subcommand, maps errors to exit codes.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <exception>
+#include <string>
+#include <vector>
 
 #include "app/commands.h"
 #include "util/error.h"
 #include "util/log.h"
 #include "util/mpi.h"
+
+namespace {
+
+/// Levenshtein distance between two short words.
+std::size_t EditDistance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1,
+                               diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = up;
+        }
+    }
+    return row[b.size()];
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
     using namespace hpray;
@@ -19,6 +43,7 @@ int main(int argc, char** argv) {
     bool verbose = false, quiet = false;
     cli.add_flag("-v,--verbose", verbose, "print debug messages");
     cli.add_flag("-q,--quiet", quiet, "print errors only");
+    cli.set_version_flag("--version", std::string("hpray ") + HPRAY_VERSION);
 
     app::InfoArgs info;
     auto* infoCmd = cli.add_subcommand("info", "summarise a mesh, builtin or partition");
@@ -62,6 +87,29 @@ int main(int argc, char** argv) {
     partCmd->add_flag("--force", part.force,
                       "write into a folder that holds other files too");
 
+    // The first word that is not an option names the subcommand: `hpray help` is --help,
+    // and a misspelt one gets the nearest name instead of "a subcommand is required".
+    for (int i = 1; i < argc; ++i) {
+        const std::string word = argv[i];
+        if (word.empty() || word[0] == '-') continue;
+        if (word == "help") {
+            std::printf("%s", cli.help().c_str());
+            return 0;
+        }
+        std::vector<std::string> names;
+        for (const CLI::App* sub : cli.get_subcommands({})) names.push_back(sub->get_name());
+        if (std::find(names.begin(), names.end(), word) != names.end()) break;
+        std::string nearest;
+        std::size_t best = std::string::npos;
+        for (const std::string& name : names) {
+            const std::size_t d = EditDistance(word, name);
+            if (d < best) best = d, nearest = name;
+        }
+        std::fprintf(stderr, "hpray: unknown subcommand '%s'%s (hpray --help lists them)\n",
+                     word.c_str(),
+                     best <= 2 ? ("; did you mean '" + nearest + "'?").c_str() : "");
+        return 2;
+    }
     try {
         cli.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

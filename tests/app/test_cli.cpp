@@ -95,6 +95,23 @@ TEST(Cli, PartitionWritesAManifest) {  // the partition tests are in tests/parti
 
 TEST(Cli, HelpExitsZero) { EXPECT_EQ(RunHpray("--help").code, 0); }
 
+TEST(Cli, VersionHelpAndMisspeltSubcommands) {
+    RunResult r = RunHpray("--version");
+    EXPECT_EQ(r.code, 0);
+    EXPECT_EQ(r.out.rfind("hpray ", 0), 0u) << r.out;
+    r = RunHpray("help");
+    EXPECT_EQ(r.code, 0);
+    EXPECT_NE(r.out.find("render"), std::string::npos) << r.out;
+    r = RunHpray("rendr x.yaml");
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.out.find("unknown subcommand 'rendr'; did you mean 'render'?"),
+              std::string::npos)
+        << r.out;
+    r = RunHpray("-q partiton builtin:cube-tets-1");
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.out.find("did you mean 'partition'?"), std::string::npos) << r.out;
+}
+
 // Outputs are checked before any work: a folder, or an extension of another format, is
 // an input error naming the key, and nothing is written.
 TEST(Cli, BadOutputPathsFailBeforeRendering) {
