@@ -268,7 +268,10 @@ int RunServe(const ServeArgs& args) {
                   "can render with this job's data");
 
     CommandQueue queue;
+    // The kept frames: their files are written on a thread of their own while the next
+    // frame renders; a request for a file waits for its frame's writing.
     std::mutex framesMutex;
+    std::map<int, std::shared_future<std::string>> written;  // "" or the write's error
     int lastFrame = 0;
 
     httplib::Server server;
@@ -330,7 +333,16 @@ int RunServe(const ServeArgs& args) {
     server.Get(R"(/api/frames/(\d+)/(image\.png|image\.exr|rgba\.npy|hits\.npy))",
                [&](const httplib::Request& req, httplib::Response& res) {
                    const std::string id = req.matches[1], name = req.matches[2];
-                   std::lock_guard<std::mutex> lock(framesMutex);
+                   std::shared_future<std::string> done;
+                   {
+                       std::lock_guard<std::mutex> lock(framesMutex);
+                       const auto it = written.find(std::atoi(id.c_str()));
+                       if (it == written.end())
+                           return fail(res, 404, "frame " + id + " is not kept");
+                       done = it->second;
+                   }
+                   const std::string error = done.get();
+                   if (!error.empty()) return fail(res, 500, error);
                    std::ifstream in(frames / id / name, std::ios::binary);
                    if (!in) return fail(res, 404, "frame " + id + " is not kept");
                    std::ostringstream bytes;
@@ -388,7 +400,7 @@ int RunServe(const ServeArgs& args) {
         try {
             Scene s = ParseScene(sceneText, args.scene, command->overrides, baseDir);
             RenderStats stats;
-            const Image image = frameJob.Render(
+            Image image = frameJob.Render(
                 s, cameraOnly ? job::FrameJob::Change::CameraOnly : job::FrameJob::Change::Scene,
                 stats);
             const int id = ++lastFrame;
@@ -400,14 +412,34 @@ int RunServe(const ServeArgs& args) {
             out.output.rgba = (dir / "rgba.npy").string();
             out.output.hits = (dir / "hits.npy").string();
             out.output.stats.clear();
-            WriteJobOutputs(out, image, stats);
+            // Answered before the files are written: the stats say so (timing_s.write 0).
+            const json statsJson = json::parse(StatsToJson(stats));
+            auto write = std::async(std::launch::async,
+                                    [out, image = std::move(image), stats]() mutable {
+                                        try {
+                                            WriteJobOutputs(out, image, stats);
+                                            return std::string();
+                                        } catch (const std::exception& e) {
+                                            return std::string(e.what());
+                                        }
+                                    })
+                             .share();
+            std::shared_future<std::string> evicted;
             {
                 std::lock_guard<std::mutex> lock(framesMutex);
+                written[id] = write;
+                const auto old = written.find(id - kKeptFrames);
+                if (old != written.end()) {
+                    evicted = old->second;
+                    written.erase(old);
+                }
+            }
+            if (evicted.valid()) {
+                evicted.wait();
                 std::error_code ec;
                 fs::remove_all(frames / std::to_string(id - kKeptFrames), ec);
             }
-            command->answer.set_value({200, json{{"frame", id},
-                                                 {"stats", json::parse(StatsToJson(stats))}}});
+            command->answer.set_value({200, json{{"frame", id}, {"stats", statsJson}}});
         } catch (const InputError& e) {
             current.reset();  // the next frame prepares again
             command->answer.set_value({400, json{{"error", e.what()}}});
@@ -415,6 +447,7 @@ int RunServe(const ServeArgs& args) {
     }
     server.stop();
     http.join();
+    for (auto& [id, done] : written) done.wait();
     std::error_code ec;
     fs::remove_all(frames, ec);
     return 0;
