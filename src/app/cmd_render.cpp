@@ -6,6 +6,7 @@
 #include "job/frame_job.h"
 #include "render/render_job.h"
 #include "scene/scene.h"
+#include "util/error.h"
 #include "util/log.h"
 #include "util/mpi.h"
 
@@ -18,6 +19,9 @@ int RunRender(const RenderArgs& args) {
     RenderStats stats;
     const Image image = frameJob.Render(std::nullopt, stats);
     if (!mpi::Root()) return 0;
+    frameJob.AddWarnings(frameJob.GetScene(), image, stats);
+    if (args.strict && !stats.warnings.empty())
+        throw InputError(scene.sourcePath, "--strict", stats.warnings.front());
     WriteJobOutputs(frameJob.GetScene(), image, stats);
     char line[512];
     if (frameJob.Distribution() == job::Split::None) {

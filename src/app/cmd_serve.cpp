@@ -412,6 +412,7 @@ int RunServe(const ServeArgs& args) {
             out.output.rgba = (dir / "rgba.npy").string();
             out.output.hits = (dir / "hits.npy").string();
             out.output.stats.clear();
+            frameJob.AddWarnings(frameJob.GetScene(), image, stats);
             // Answered before the files are written: the stats say so (timing_s.write 0).
             const json statsJson = json::parse(StatsToJson(stats));
             auto write = std::async(std::launch::async,

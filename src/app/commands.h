@@ -29,6 +29,7 @@ int RunProbe(const ProbeArgs& args);
 struct RenderArgs {
     std::string scene;
     std::vector<std::string> overrides;  ///< "key.path=value"
+    bool strict = false;                 ///< every warning is an error (exit 2)
 };
 int RunRender(const RenderArgs& args);
 

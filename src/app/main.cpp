@@ -45,6 +45,8 @@ int main(int argc, char** argv) {
     auto* renderCmd = cli.add_subcommand("render", "render a scene");
     renderCmd->add_option("scene", render.scene, "scene YAML file")->required();
     renderCmd->add_option("--set", render.overrides, "override a scene key: key.path=value");
+    renderCmd->add_flag("--strict", render.strict,
+                        "treat every warning as an error (exit 2, no outputs)");
 
     app::ServeArgs serve;
     auto* serveCmd = cli.add_subcommand(

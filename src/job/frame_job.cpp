@@ -234,6 +234,61 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
 
 FrameJob::~FrameJob() = default;
 
+void FrameJob::AddWarnings(const Scene& scene, const Image& image, RenderStats& stats) const {
+    auto warn = [&](const std::string& text) { stats.warnings.push_back(text); };
+    for (std::size_t k = 0; k < scene.isosurfaces.size(); ++k) {
+        const SceneIsosurface& iso = scene.isosurfaces[k];
+        std::optional<std::array<double, 2>> range;
+        if (whole_) {
+            if (const auto sel = SelectScalar(*whole_, iso.field))
+                range = sel->field->Range(sel->component);
+        } else if (part_) {
+            for (const partition::BrickInfo& b : part_->bricks) {
+                const auto it = b.ranges.find(iso.field);
+                if (it == b.ranges.end()) continue;
+                range = range ? std::array<double, 2>{std::min((*range)[0], it->second[0]),
+                                                      std::max((*range)[1], it->second[1])}
+                              : it->second;
+            }
+        }
+        if (range && (iso.value < (*range)[0] || iso.value > (*range)[1])) {
+            char text[256];
+            std::snprintf(text, sizeof text,
+                          "isosurfaces.%zu: value %.6g is outside the range [%.6g, %.6g] of "
+                          "field '%s' over the data: it draws nothing",
+                          k, iso.value, (*range)[0], (*range)[1], iso.field.c_str());
+            warn(text);
+        }
+    }
+    bool drawn = false;
+    for (std::size_t p = 0; p < image.PixelCount() && !drawn; ++p)
+        drawn = image.a[p] > 0 || image.r[p] > 0 || image.g[p] > 0 || image.b[p] > 0 ||
+                std::isfinite(image.z[p]);
+    if (!drawn)
+        warn("the image is empty: the camera sees none of the data (check camera.position "
+             "and camera.look_at against the data's bounds, hpray info), or nothing in view "
+             "contributes (isovalues, transfer functions, clip)");
+    const double segments = std::max(1.0, stats.counters.segments);
+    if (stats.counters.inversionFailures > 1e-3 * segments) {
+        char text[320];
+        std::snprintf(text, sizeof text,
+                      "%.0f mapping failures in %.0f segments: cells whose map from the "
+                      "reference cell could not be inverted; for a VTU of Lagrange hexes, a "
+                      "file version below 2.2 implies the pre-VTK-9 node order",
+                      stats.counters.inversionFailures, stats.counters.segments);
+        warn(text);
+    }
+    if (stats.counters.rootFailures > 1e-3 * segments) {
+        char text[256];
+        std::snprintf(text, sizeof text,
+                      "%.0f root failures in %.0f segments: isosurface crossings neither "
+                      "excluded nor resolved to the tolerances asked for",
+                      stats.counters.rootFailures, stats.counters.segments);
+        warn(text);
+    }
+    for (const std::string& w : stats.warnings) log::Warn(w);
+}
+
 Image FrameJob::Render(const std::optional<SceneCamera>& camera, RenderStats& stats) {
     Scene scene = scene_;
     if (camera) scene.camera = *camera;

@@ -51,6 +51,11 @@ class FrameJob {
     /// and prepared again). Throws InputError if `scene` names other data.
     Image Render(const Scene& scene, Change change, RenderStats& stats);
 
+    /// On rank 0, after a frame: what probably went wrong, in words a user can act on —
+    /// an isovalue outside its field's range over the data, an image with nothing drawn,
+    /// mapping or root failures on more than 0.1% of the segments. Added to stats.warnings.
+    void AddWarnings(const Scene& scene, const Image& image, RenderStats& stats) const;
+
     Split Distribution() const { return split_; }
     const Scene& GetScene() const { return scene_; }
     /// The whole mesh every rank holds (nullptr for a partition directory).

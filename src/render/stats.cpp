@@ -91,6 +91,7 @@ std::string StatsToJson(const RenderStats& s) {
     j["rays"] = c.rays;
     j["segments"] = c.segments;
     j["segments_culled"] = c.segmentsCulled;
+    j["warnings"] = s.warnings;
     j["bricks_loaded"] = s.bricksLoaded;
     j["bricks_total"] = s.bricksTotal;
     j["accel"] = {{"bytes", s.accelBytes}, {"bytes_per_cell", s.accelBytesPerCell}};

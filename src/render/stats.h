@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace hpray {
 
@@ -87,6 +88,8 @@ struct RenderStats {
     double accelBytesPerCell = 0;
     std::string scene;
     std::string mesh;
+    /// What probably went wrong, for the user (also logged once on rank 0).
+    std::vector<std::string> warnings;
 };
 
 /// The stats JSON of design.md (pretty-printed).

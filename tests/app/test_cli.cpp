@@ -95,6 +95,48 @@ TEST(Cli, PartitionWritesAManifest) {  // the partition tests are in tests/parti
 
 TEST(Cli, HelpExitsZero) { EXPECT_EQ(RunHpray("--help").code, 0); }
 
+// Warnings say what went wrong, on a result that is probably not what the user wanted; the
+// stats list them; --strict makes them errors (exit 2, no outputs).
+TEST(Cli, WarningsForSuspiciousResultsAndStrict) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_warnings";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string scene = std::string(HPRAY_SOURCE_DIR) + "/configs/ball_p2.yaml";
+    const std::string small = " --set camera.width=24 --set camera.height=24 --set "
+                              "output.exr=null --set output.hits=null --set output.png=";
+    const std::string outside =
+        "isosurfaces.0: value 5 is outside the range [0, 3] of field 'u' over the data";
+    // An isovalue outside the field's range (u = r^2 on [-1,1]^3 spans [0, 3]).
+    RunResult r = RunHpray("render " + scene + " --set isosurfaces.0.value=5" + small +
+                           (dir / "a.png").string() + " --set output.stats=" +
+                           (dir / "a.json").string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("warning: " + outside), std::string::npos) << r.out;
+    std::ifstream stats(dir / "a.json");
+    const nlohmann::json j = nlohmann::json::parse(stats);
+    ASSERT_EQ(j["warnings"].size(), 1u) << j["warnings"];
+    EXPECT_NE(j["warnings"][0].get<std::string>().find(outside), std::string::npos);
+    // The same with --strict: exit 2 naming the cause, and no output.
+    r = RunHpray("render " + scene + " --strict --set isosurfaces.0.value=5" + small +
+                 (dir / "b.png").string() + " --set output.stats=" + (dir / "b.json").string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("--strict: " + outside), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(dir / "b.png"));
+    EXPECT_FALSE(fs::exists(dir / "b.json"));
+    // A camera that looks away from the data: an empty image.
+    r = RunHpray("render " + scene + " --set camera.look_at=[9,9,9]" + small +
+                 (dir / "c.png").string() + " --set output.stats=null");
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_NE(r.out.find("warning: the image is empty"), std::string::npos) << r.out;
+    // A good scene: no warning, --strict passes.
+    r = RunHpray("render " + scene + " --strict" + small + (dir / "d.png").string() +
+                 " --set output.stats=null");
+    EXPECT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(r.out.find("warning"), std::string::npos) << r.out;
+    fs::remove_all(dir);
+}
+
 TEST(Cli, VersionHelpAndMisspeltSubcommands) {
     RunResult r = RunHpray("--version");
     EXPECT_EQ(r.code, 0);
