@@ -1,7 +1,7 @@
 // k-d decomposition of a mesh into load-balanced bricks (hpray partition): writing a
 // partition directory out of core, reading it back, and ordering its bricks for a camera.
 //
-// Partition directory (design.md "Partition directory"): brick-NNNN.vtu (one VTU piece
+// Partition directory (docs/contracts.md): brick-NNNN.vtu (one VTU piece
 // per k-d leaf, appended raw, points renumbered), bricks.pvtu (indexes the pieces) and
 // manifest.json, written last. Decisions this implementation documents:
 //  - Cell centroid: the arithmetic mean of the cell's nodes. The owner of a cell is the

@@ -28,7 +28,7 @@ struct Image {
     void Resize(int w, int h);
     std::size_t PixelCount() const { return static_cast<std::size_t>(width) * height; }
 
-    /// Names and pointers of every channel, in the EXR channel naming of design.md.
+    /// Names and pointers of every channel, in the EXR channel naming of docs/contracts.md.
     std::vector<std::pair<std::string, std::vector<double>*>> Channels();
     std::vector<std::pair<std::string, const std::vector<double>*>> Channels() const;
 };

@@ -61,7 +61,7 @@ struct BrickSetup {
     double tFar = std::numeric_limits<double>::infinity();
     std::optional<Box> clipBox;
 
-    /// The volume integral (design.md "Volume semantics"), when the scene has a volume.
+    /// The volume integral (docs/contracts.md, Volume), when the scene has a volume.
     std::optional<VolumeSetup> volume;
 
     /// A cut plane {x : normal . x = offset} showing the true field through `colorTf`.

@@ -90,7 +90,7 @@ void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats)
 /// A fresh RenderStats for a scene (scene, mesh, threads, image size).
 RenderStats StartStats(const Scene& scene);
 
-/// The float64 (H, W, 5) hits array of design.md: t, N.X, N.Y, N.Z, residual per pixel.
+/// The float64 (H, W, 5) hits array (docs/contracts.md): t, N, residual per pixel.
 std::vector<double> HitsArray(const Image& image);
 /// The float64 (H, W, 4) premultiplied R, G, B, A array.
 std::vector<double> RgbaArray(const Image& image);

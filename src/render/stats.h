@@ -1,4 +1,4 @@
-// Render statistics: the counters of the stats contract (design.md), merged over threads
+// Render statistics: the counters of the stats JSON (docs/contracts.md), merged over threads
 // and ranks, and written as JSON by rank 0.
 #pragma once
 
@@ -92,7 +92,7 @@ struct RenderStats {
     std::vector<std::string> warnings;
 };
 
-/// The stats JSON of design.md (pretty-printed).
+/// The stats JSON of docs/contracts.md (pretty-printed).
 std::string StatsToJson(const RenderStats& stats);
 /// Writes StatsToJson to `path` atomically (tmp + rename). Throws InputError(path).
 void WriteStats(const std::string& path, const RenderStats& stats);

@@ -1,4 +1,4 @@
-// The optical model of volume rendering (design.md "Volume semantics"): piecewise-linear
+// The optical model of volume rendering (docs/contracts.md, Volume): piecewise-linear
 // transfer functions, the closed-form integrals of a ray piece whose extinction is linear
 // in t, and the Gauss-Kronrod rule with its cumulative (spectral) integration matrix for
 // pieces where it is not.

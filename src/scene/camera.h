@@ -1,4 +1,4 @@
-// Primary rays of the scene camera (the camera contract of design.md), double precision.
+// Primary rays of the scene camera (docs/contracts.md, Camera), double precision.
 #pragma once
 
 #include <array>
@@ -14,7 +14,7 @@ struct CameraRay {
     std::array<double, 3> direction{0.0, 0.0, 1.0};
 };
 
-/// The camera frame and ray generation of design.md:
+/// The camera frame and ray generation of docs/contracts.md:
 /// forward = normalize(look_at - position), right = normalize(forward x up),
 /// trueUp = right x forward. Pixel (i, j): i left to right, j top to bottom, sampled at
 /// its centre. Cheap to copy; immutable after construction.

@@ -12,7 +12,7 @@
 namespace hpray {
 
 // Every struct below is plain data with the documented default of each key. LoadScene
-// fills them from a scene file (schema: design.md "Scene file (YAML)") and guarantees the
+// fills them from a scene file (schema: docs/contracts.md "Scene file") and guarantees the
 // documented ranges, so consumers need not re-validate. World units are the mesh's.
 
 /// `data:` what to render.
@@ -95,7 +95,7 @@ struct SceneLighting {
     double shininess = 32.0;
 };
 
-/// `accuracy:` the error budget of design.md (all tolerances > 0, absolute).
+/// `accuracy:` the error budget of docs/contracts.md (all tolerances > 0, absolute).
 struct SceneAccuracy {
     double mappingTolerance = 1e-12;  ///< eps_M: reference-coordinate inversion
     /// Order of the polynomial projection along a ray; 0 = `auto` (chosen per segment),
@@ -121,7 +121,7 @@ struct SceneClip {
 /// `output:` absolute paths (relative ones resolved against the working directory);
 /// an empty string means "not written". Every output is optional.
 struct SceneOutput {
-    std::string exr;    ///< OpenEXR channels of design.md
+    std::string exr;    ///< OpenEXR channels of docs/contracts.md
     std::string png;    ///< RGB over the background, sRGB, 8 bit
     std::string stats;  ///< JSON statistics
     std::string hits;   ///< float64 .npy (H, W, 5): t, N.X, N.Y, N.Z, residual
@@ -149,9 +149,9 @@ enum class Distribution {
     Image,
 };
 
-/// A whole scene. Top-level keys besides design.md's: `threads` (worker threads per rank,
-/// 0 = all hardware threads; default 0), `distribute` (see Distribution) and `edges` (see
-/// SceneEdges).
+/// A whole scene. Top-level keys besides the stable ones (docs/contracts.md): `threads`
+/// (worker threads per rank, 0 = all hardware threads; default 0), `distribute` (see
+/// Distribution) and `edges` (see SceneEdges).
 struct Scene {
     std::string sourcePath;  ///< the scene file as given (for messages); empty if parsed
     SceneData data;

@@ -1,5 +1,5 @@
 // hpray render on 1..5 MPI ranks, on a mesh and on a partition directory: the image must
-// equal the single-rank, unpartitioned image to 1e-6 per channel (design.md invariant 6),
+// equal the single-rank, unpartitioned image to 1e-6 per channel,
 // for cameras outside the data, inside it and looking along split planes.
 #include <gtest/gtest.h>
 

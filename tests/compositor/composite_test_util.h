@@ -113,7 +113,7 @@ inline bool ClipRay(const Box& box, const Vec3& origin, const Vec3& dir, double&
     return t0 <= t1;
 }
 
-/// The camera of design.md, built independently of the scene library.
+/// The camera of docs/contracts.md, built independently of the scene library.
 struct TestCamera {
     bool ortho = false;
     Vec3 position{}, forward{}, right{}, up{};

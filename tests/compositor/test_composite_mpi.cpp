@@ -92,7 +92,7 @@ struct SyntheticScene {
 
     /// The exact composite, serially: every rank's layer of the pixel, sorted by where
     /// the ray enters its box (the geometric truth, not the tree), accumulated front to
-    /// back with the closed form of design.md.
+    /// back with the closed form of docs/contracts.md.
     Image Expected() const {
         Image out;
         out.Resize(camera.width, camera.height);

@@ -1,4 +1,4 @@
-// Stats: reduction semantics and the keys of the stats contract in design.md.
+// Stats: reduction semantics and the keys of the stats contract in docs/contracts.md.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 

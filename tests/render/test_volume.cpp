@@ -1,6 +1,6 @@
 // Volume rendering against independent truth: the closed form of a linear piece against
 // long-double quadrature in every regime (d -> 0, huge and tiny depth, tiny segments),
-// whole images of linear tets against a long-double ODE reference of design.md's
+// whole images of linear tets against a long-double ODE reference of docs/contracts.md's
 // integrals (both glow models, transfer functions on different fields, breakpoints at
 // vertex values), HIAC's refinement check, constant extinction over every cell type
 // against the analytic chord, clipping, slices and thread invariance.

@@ -1,4 +1,4 @@
-// Independent reference for volume-rendering tests: the integrals of design.md ("Volume
+// Independent reference for volume-rendering tests: the integrals of docs/contracts.md ("Volume
 // semantics") along one ray, by adaptive Bulirsch-Stoer extrapolation in long double on
 // the ODE  phi' = tau(t),  C' = emission(t) exp(-phi),  restarted at every kink of the
 // integrand (cell faces, transfer-function breakpoints) and at embedded surfaces.

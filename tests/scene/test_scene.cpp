@@ -20,7 +20,7 @@ using Vec3 = std::array<double, 3>;
 
 const double kInf = std::numeric_limits<double>::infinity();
 
-/// The example of design.md "Scene file (YAML)"; only comments shortened to 90 columns.
+/// A scene with every stable key (docs/contracts.md "Scene file").
 const char* kDesignExample = R"(
 data: {mesh: path/to/mesh.vtu}        # a mesh file, builtin:NAME, or a partition dir
 camera: {position: [3, 2, 4], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0],
@@ -730,7 +730,7 @@ TEST(CameraTest, PerspectiveCornerAndEdgeAngles) {
     // The corner (0, 0): tan of the angle = sqrt(2^2 + 1^2).
     EXPECT_NEAR(AngleDegrees(cam.RayAt(0, 0).direction, f),
                 std::atan(std::sqrt(5.0)) * 180 / M_PI, 1e-12);
-    // Corner pixel centres against the formula of design.md.
+    // Corner pixel centres against the formula of docs/contracts.md.
     const double t = std::tan(M_PI / 4);
     for (const auto& [i, j] : {std::pair{0, 0}, std::pair{w - 1, 0}, std::pair{0, h - 1},
                                std::pair{w - 1, h - 1}, std::pair{17, 123}}) {
