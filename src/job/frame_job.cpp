@@ -172,8 +172,8 @@ void AddSetupStats(const RenderStats& setup, bool withTimes, RenderStats& stats)
                            std::max(stats.isoFieldRange[1], setup.isoFieldRange[1])};
 }
 
-}  // namespace
-
+/// Threads beyond the cores a rank may run on only share those cores: says so once, on
+/// rank 0.
 void WarnIfThreadsExceedBinding(int threads) {
     const int allowed = tbb::info::default_concurrency();
     if (threads <= allowed || !mpi::Root()) return;
@@ -183,6 +183,8 @@ void WarnIfThreadsExceedBinding(int threads) {
               "; mpirun binds each rank to one core when it starts 2 ranks or fewer: add "
               "--bind-to none, or a binding that gives each rank as many cores as threads");
 }
+
+}  // namespace
 
 FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     const int P = mpi::WorldSize();
@@ -292,10 +294,7 @@ void FrameJob::AddWarnings(const Scene& scene, const Image& image, RenderStats& 
 Image FrameJob::Render(const std::optional<SceneCamera>& camera, RenderStats& stats) {
     Scene scene = scene_;
     if (camera) scene.camera = *camera;
-    Image image = split_ == Split::None ? RenderSingle(scene, stats)
-                                        : RenderDistributed(scene, stats);
-    firstFrame_ = false;
-    return image;
+    return Render(scene, Change::CameraOnly, stats);
 }
 
 Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stats) {

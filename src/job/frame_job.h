@@ -79,8 +79,4 @@ class FrameJob {
     bool firstFrame_ = true;
 };
 
-/// Threads beyond the cores a rank may run on only share those cores: says so once, on
-/// rank 0.
-void WarnIfThreadsExceedBinding(int threads);
-
 }  // namespace hpray::job

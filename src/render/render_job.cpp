@@ -16,7 +16,6 @@
 
 #include "elements/mesh_geometry.h"
 #include "io/image.h"
-#include "io/mesh_io.h"
 #include "render/brick_renderer.h"
 #include "trace/brick_traverser.h"
 #include "util/error.h"
@@ -59,19 +58,6 @@ std::vector<double> RgbaArray(const Image& image) {
         out[4 * p + 3] = image.a[p];
     }
     return out;
-}
-
-Image RunRenderJob(const Scene& scene, RenderStats& stats) {
-    // Load only the fields the scene names.
-    const auto t0 = std::chrono::steady_clock::now();
-    ReadOptions options;
-    std::set<std::string> fields;
-    for (const std::string& name : scene.FieldNames()) fields.insert(name);
-    options.fields = fields;
-    const Mesh mesh = ReadMesh(scene.data.mesh, options);
-    log::Info("loaded " + scene.data.mesh + ": " + std::to_string(mesh.CellCount()) +
-              " cells, " + std::to_string(mesh.PointCount()) + " points");
-    return RenderMeshJob(mesh, scene, stats, Seconds(t0));
 }
 
 RenderStats StartStats(const Scene& scene) {

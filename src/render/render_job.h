@@ -18,13 +18,10 @@ struct SegmentCostSample;
 struct MeshGeometry;
 class Camera;
 
-/// Renders `scene` and writes every output it names (EXR, PNG, stats, hits, rgba). Returns
-/// the image and fills `stats`. Throws InputError for bad input; a failed job writes no
-/// output file.
-Image RunRenderJob(const Scene& scene, RenderStats& stats);
-
-/// The same for a mesh already in memory (tests, and callers that build meshes).
-/// `loadSeconds` is reported as timing_s.load.
+/// Renders `scene` for a mesh already in memory on this process and writes every output
+/// it names (EXR, PNG, stats, hits, rgba); returns the image and fills `stats`
+/// (`loadSeconds` is reported as timing_s.load). Jobs that read their data and may run on
+/// many ranks are job/frame_job.h's FrameJob.
 Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
                     double loadSeconds = 0);
 
