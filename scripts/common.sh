@@ -15,18 +15,21 @@ HPRAY_PACKAGES=(
   libgtest-dev libbenchmark-dev libssl-dev libcpp-httplib-dev
   python3-numpy
 )
+# What the test command needs beyond building: a headless browser and its driver for the
+# viewer's browser test (Debian's chromium, driven through python3-selenium).
+HPRAY_TEST_PACKAGES=(chromium chromium-driver python3-selenium)
 
 step() { printf '\n==> %s\n' "$*"; }
 
-install_packages() {
+install_packages() {  # [extra package ...]
   local missing=()
-  for p in "${HPRAY_PACKAGES[@]}"; do
+  for p in "${HPRAY_PACKAGES[@]}" "$@"; do
     if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
       missing+=("$p")
     fi
   done
   if [ ${#missing[@]} -eq 0 ]; then
-    step "all ${#HPRAY_PACKAGES[@]} Debian packages already installed"
+    step "all $((${#HPRAY_PACKAGES[@]} + $#)) Debian packages already installed"
     return
   fi
   local sudo=""

@@ -25,6 +25,7 @@
 #include <thread>
 
 #include "app/commands.h"
+#include "app/viewer_assets.h"
 #include "job/frame_job.h"
 #include "render/render_job.h"
 #include "scene/scene.h"
@@ -153,54 +154,6 @@ std::set<std::string> DataFields(const json& info) {
     return names;
 }
 
-const char* kViewerPage = R"(<!doctype html>
-<html><head><meta charset="utf-8"><title>hpray</title>
-<style>body{font-family:sans-serif;margin:1em}img{border:1px solid #ccc;cursor:grab}
-pre{font-size:11px;max-height:40em;overflow:auto}</style></head>
-<body><h3>hpray</h3><p>Drag to orbit around the camera's look-at point.</p>
-<img id="frame" width="512" height="512"><pre id="stats"></pre>
-<script>
-const token = new URLSearchParams(location.search).get('token') || '';
-const auth = {'Authorization': 'Bearer ' + token, 'Content-Type': 'application/json'};
-let camera = null, busy = false, pending = null;
-async function render(overrides) {
-  if (busy) { pending = overrides; return; }
-  busy = true;
-  const r = await fetch('/api/render', {method: 'POST', headers: auth,
-                                        body: JSON.stringify(overrides)});
-  const j = await r.json();
-  if (r.ok) {
-    document.getElementById('frame').src =
-        '/api/frames/' + j.frame + '/image.png?token=' + encodeURIComponent(token);
-    document.getElementById('stats').textContent = JSON.stringify(j.stats, null, 1);
-  } else {
-    document.getElementById('stats').textContent = j.error;
-  }
-  busy = false;
-  if (pending) { const p = pending; pending = null; render(p); }
-}
-async function start() {
-  const r = await fetch('/api/info', {headers: auth});
-  const info = await r.json();
-  camera = info.scene.camera || {};
-  render({});
-}
-let last = null;
-const img = document.getElementById('frame');
-img.onmousedown = e => { last = [e.clientX, e.clientY]; e.preventDefault(); };
-window.onmouseup = () => { last = null; };
-window.onmousemove = e => {
-  if (!last || !camera || !camera.position || !camera.look_at) return;
-  const dx = (e.clientX - last[0]) * 0.01; last = [e.clientX, e.clientY];
-  const p = camera.position, c = camera.look_at;
-  const x = p[0] - c[0], z = p[2] - c[2];
-  camera.position = [c[0] + x * Math.cos(dx) - z * Math.sin(dx), p[1],
-                     c[2] + x * Math.sin(dx) + z * Math.cos(dx)];
-  render({camera: {position: camera.position}});
-};
-start();
-</script></body></html>
-)";
 
 }  // namespace
 
@@ -289,9 +242,15 @@ int RunServe(const ServeArgs& args) {
         fail(res, 401, "missing or wrong token");
         return httplib::Server::HandlerResponse::Handled;
     });
-    server.Get("/", [&](const httplib::Request&, httplib::Response& res) {
-        res.set_content(kViewerPage, "text/html");
-    });
+    // The viewer: its files as compiled in (src/app/viewer/); "/" is index.html.
+    for (const ViewerAsset& asset : ViewerAssets()) {
+        const std::string name = asset.name;
+        auto serveAsset = [&asset](const httplib::Request&, httplib::Response& res) {
+            res.set_content(asset.bytes, asset.size, asset.mime);
+        };
+        server.Get("/" + name, serveAsset);
+        if (name == "index.html") server.Get("/", serveAsset);
+    }
     server.Get("/api/info", [&](const httplib::Request&, httplib::Response& res) {
         res.set_content(info.dump(), "application/json");
     });
