@@ -16,16 +16,21 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <future>
 #include <map>
 #include <mutex>
 #include <optional>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
+
+#include <unistd.h>
 
 #include "app/commands.h"
 #include "app/viewer_assets.h"
+#include "io/image.h"
 #include "job/frame_job.h"
 #include "render/render_job.h"
 #include "scene/scene.h"
@@ -89,18 +94,79 @@ json ToJson(const YAML::Node& n) {
     return s;
 }
 
+/// The server-sent events of a progressive request, from the render loop to the HTTP
+/// thread that streams them.
+class EventChannel {
+  public:
+    void Push(const std::string& event, const json& data) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        events_.push_back("event: " + event + "\ndata: " + data.dump() + "\n\n");
+        ready_.notify_one();
+    }
+    void Close() {
+        std::lock_guard<std::mutex> lock(mutex_);
+        closed_ = true;
+        ready_.notify_one();
+    }
+    enum class Got { Event, Timeout, Closed };
+    /// The next event's text; Closed once every event has been taken after Close.
+    Got Pop(std::string& text, std::chrono::milliseconds timeout) {
+        std::unique_lock<std::mutex> lock(mutex_);
+        ready_.wait_for(lock, timeout, [&] { return !events_.empty() || closed_; });
+        if (!events_.empty()) {
+            text = std::move(events_.front());
+            events_.pop_front();
+            return Got::Event;
+        }
+        return closed_ ? Got::Closed : Got::Timeout;
+    }
+
+  private:
+    std::mutex mutex_;
+    std::condition_variable ready_;
+    std::deque<std::string> events_;
+    bool closed_ = false;
+};
+
 /// One frame to render, or the end of the service; its answer when done.
 struct Command {
     enum Kind { Render = 1, Shutdown = 2 } kind = Render;
     std::vector<std::string> overrides;  ///< --set items, then the body's (validated)
     std::promise<std::pair<int, json>> answer;  ///< HTTP status and body
+    /// Progressive: the scale divisors of the passes, coarsest first (the last is 1);
+    /// each pass is a frame of its own, sent on `events`. Empty: one frame, `answer`.
+    std::vector<int> passes;
+    int width = 0, height = 0;  ///< the frame's full size
+    EventChannel events;
+    std::atomic<bool> abandoned{false};  ///< the client of a progressive request left
 };
+
+/// The passes of `?progressive=1&passes=8,2,1`: scale divisors from 1 to 64, each smaller
+/// than the one before, ending with 1 (added when missing). Default 8, 1.
+std::vector<int> ParsePasses(const httplib::Request& req) {
+    if (!req.has_param("passes")) return {8, 1};
+    std::vector<int> passes;
+    std::istringstream in(req.get_param_value("passes"));
+    for (std::string item; std::getline(in, item, ',');) {
+        char* end = nullptr;
+        const long v = std::strtol(item.c_str(), &end, 10);
+        if (item.empty() || *end != '\0' || v < 1 || v > 64 ||
+            (!passes.empty() && v >= passes.back()))
+            throw std::invalid_argument(
+                "passes: a comma-separated list of decreasing scale divisors from 64 to 1, "
+                "e.g. 8,2,1");
+        passes.push_back(static_cast<int>(v));
+    }
+    if (passes.empty() || passes.back() != 1) passes.push_back(1);
+    return passes;
+}
 
 class CommandQueue {
   public:
     void Push(std::shared_ptr<Command> c) {
         std::lock_guard<std::mutex> lock(mutex_);
         queue_.push_back(std::move(c));
+        waiting_ = true;
         ready_.notify_one();
     }
     /// The next command, or nullptr after `timeout` without one.
@@ -109,13 +175,18 @@ class CommandQueue {
         if (!ready_.wait_for(lock, timeout, [&] { return !queue_.empty(); })) return nullptr;
         auto c = queue_.front();
         queue_.pop_front();
+        waiting_ = !queue_.empty();
         return c;
     }
+    /// Whether a command is waiting (any thread; lock-free): a newer request supersedes
+    /// the passes of a progressive one.
+    bool Waiting() const { return waiting_.load(std::memory_order_relaxed); }
 
   private:
     std::mutex mutex_;
     std::condition_variable ready_;
     std::deque<std::shared_ptr<Command>> queue_;
+    std::atomic<bool> waiting_{false};
 };
 
 void SendText(const std::string& text) {
@@ -177,21 +248,34 @@ int RunServe(const ServeArgs& args) {
     std::signal(SIGTERM, OnSignal);
     job::FrameJob frameJob(scene);
 
+    // Every rank's process id and host, for /api/info (whom to look at when one fails).
+    constexpr int kHostChars = 64;
+    struct RankId {
+        long long pid;
+        char host[kHostChars];
+    } self{static_cast<long long>(::getpid()), {}};
+    ::gethostname(self.host, kHostChars - 1);
+    std::vector<RankId> rankIds(root ? mpi::WorldSize() : 0);
+    MPI_Gather(&self, sizeof self, MPI_BYTE, rankIds.data(), sizeof self, MPI_BYTE, 0,
+               MPI_COMM_WORLD);
+
     if (!root) {
         // Follow rank 0's commands until it says to stop.
         while (true) {
             int kind = 0;
             MPI_Bcast(&kind, 1, MPI_INT, 0, MPI_COMM_WORLD);
             if (kind == Command::Shutdown) return 0;
-            int cameraOnly = 0;
-            MPI_Bcast(&cameraOnly, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            int flags[2] = {0, 0};  // camera only, cancellable
+            MPI_Bcast(flags, 2, MPI_INT, 0, MPI_COMM_WORLD);
             const std::vector<std::string> overrides = SplitLines(ReceiveText());
             try {
                 Scene s = ParseScene(sceneText, args.scene, overrides, baseDir);
                 RenderStats stats;
-                frameJob.Render(s, cameraOnly ? job::FrameJob::Change::CameraOnly
-                                              : job::FrameJob::Change::Scene,
-                                stats);
+                frameJob.Render(s, flags[0] ? job::FrameJob::Change::CameraOnly
+                                            : job::FrameJob::Change::Scene,
+                                stats,
+                                flags[1] ? std::function<bool()>([] { return false; })
+                                         : std::function<bool()>());
             } catch (const InputError&) {
                 // Rank 0 reports it; every rank fails the same way on the same data.
             }
@@ -207,6 +291,10 @@ int RunServe(const ServeArgs& args) {
     if (!sceneRoot.IsMap()) sceneRoot = YAML::Node(YAML::NodeType::Map);
     info["scene"] = ToJson(sceneRoot);
     info["overrides"] = args.overrides;
+    info["ranks"] = json::array();
+    for (int r = 0; r < static_cast<int>(rankIds.size()); ++r)
+        info["ranks"].push_back(
+            {{"rank", r}, {"pid", rankIds[r].pid}, {"host", std::string(rankIds[r].host)}});
     const std::set<std::string> fields = DataFields(info["data"]);
     const fs::path frames =
         fs::temp_directory_path() / ("hpray-serve-" + std::to_string(::getpid()));
@@ -269,6 +357,15 @@ int RunServe(const ServeArgs& args) {
                                 ": is fixed when the service starts; it cannot change per "
                                 "frame");
         auto command = std::make_shared<Command>();
+        const bool progressive = req.has_param("progressive") &&
+                                 req.get_param_value("progressive") != "0";
+        if (progressive) {
+            try {
+                command->passes = ParsePasses(req);
+            } catch (const std::invalid_argument& e) {
+                return fail(res, 400, e.what());
+            }
+        }
         command->overrides = args.overrides;
         Flatten(body, "", command->overrides);
         for (const std::string& item : command->overrides)
@@ -280,8 +377,40 @@ int RunServe(const ServeArgs& args) {
             for (const std::string& name : s.FieldNames())
                 if (!fields.count(name))
                     return fail(res, 400, "field '" + name + "' is not in " + dataPath);
+            command->width = s.camera.width;
+            command->height = s.camera.height;
         } catch (const InputError& e) {
             return fail(res, 400, e.what());
+        }
+        if (progressive) {
+            // Server-sent events on the answer: one `pass` per finished pass, then `end`.
+            // A client that leaves cancels the passes not yet rendered.
+            queue.Push(command);
+            res.set_header("Cache-Control", "no-cache");
+            res.set_chunked_content_provider(
+                "text/event-stream",
+                [command](std::size_t, httplib::DataSink& sink) {
+                    std::string text;
+                    while (true) {
+                        switch (command->events.Pop(text, std::chrono::seconds(1))) {
+                            case EventChannel::Got::Closed:
+                                sink.done();
+                                return true;
+                            case EventChannel::Got::Timeout:
+                                text = ":\n\n";  // a comment: finds a client that left
+                                [[fallthrough]];
+                            case EventChannel::Got::Event:
+                                if (!sink.write(text.data(), text.size())) {
+                                    command->abandoned = true;
+                                    return false;
+                                }
+                        }
+                    }
+                },
+                [command](bool success) {
+                    if (!success) command->abandoned = true;
+                });
+            return;
         }
         auto answer = command->answer.get_future();
         queue.Push(command);
@@ -289,7 +418,7 @@ int RunServe(const ServeArgs& args) {
         res.status = status;
         res.set_content(reply.dump(), "application/json");
     });
-    server.Get(R"(/api/frames/(\d+)/(image\.png|image\.exr|rgba\.npy|hits\.npy))",
+    server.Get(R"(/api/frames/(\d+)/(image\.png|image\.exr|rgba\.npy|hits\.npy|errors\.npy))",
                [&](const httplib::Request& req, httplib::Response& res) {
                    const std::string id = req.matches[1], name = req.matches[2];
                    std::shared_future<std::string> done;
@@ -339,29 +468,26 @@ int RunServe(const ServeArgs& args) {
     };
     std::optional<std::vector<std::string>> current = nonCamera(args.overrides);
 
-    // The main thread: one frame at a time, in arrival order, on every rank.
-    while (true) {
-        std::shared_ptr<Command> command = queue.Pop(std::chrono::milliseconds(50));
-        if (!command && !gStop) continue;
-        if (!command) {
-            int kind = Command::Shutdown;
-            MPI_Bcast(&kind, 1, MPI_INT, 0, MPI_COMM_WORLD);
-            break;
-        }
-        const std::vector<std::string> scenePart = nonCamera(command->overrides);
-        int kind = Command::Render, cameraOnly = current && *current == scenePart ? 1 : 0;
+    // One frame on every rank: broadcasts it, renders, keeps its files (written on a
+    // thread of their own) and returns its id and stats; 0 when it was cancelled.
+    auto renderFrame = [&](const std::vector<std::string>& overrides,
+                           const std::function<bool()>& cancel) -> std::pair<int, json> {
+        const std::vector<std::string> scenePart = nonCamera(overrides);
+        int kind = Command::Render;
+        int flags[2] = {current && *current == scenePart ? 1 : 0, cancel ? 1 : 0};
         current = scenePart;
         MPI_Bcast(&kind, 1, MPI_INT, 0, MPI_COMM_WORLD);
-        MPI_Bcast(&cameraOnly, 1, MPI_INT, 0, MPI_COMM_WORLD);
+        MPI_Bcast(flags, 2, MPI_INT, 0, MPI_COMM_WORLD);
         std::string joined;
-        for (const std::string& item : command->overrides) joined += item + "\n";
+        for (const std::string& item : overrides) joined += item + "\n";
         SendText(joined);
         try {
-            Scene s = ParseScene(sceneText, args.scene, command->overrides, baseDir);
+            Scene s = ParseScene(sceneText, args.scene, overrides, baseDir);
             RenderStats stats;
             Image image = frameJob.Render(
-                s, cameraOnly ? job::FrameJob::Change::CameraOnly : job::FrameJob::Change::Scene,
-                stats);
+                s, flags[0] ? job::FrameJob::Change::CameraOnly : job::FrameJob::Change::Scene,
+                stats, cancel);
+            if (frameJob.Cancelled()) return {0, json()};
             const int id = ++lastFrame;
             const fs::path dir = frames / std::to_string(id);
             fs::create_directories(dir);
@@ -373,11 +499,15 @@ int RunServe(const ServeArgs& args) {
             out.output.stats.clear();
             frameJob.AddWarnings(frameJob.GetScene(), image, stats);
             // Answered before the files are written: the stats say so (timing_s.write 0).
-            const json statsJson = json::parse(StatsToJson(stats));
+            json statsJson = json::parse(StatsToJson(stats));
             auto write = std::async(std::launch::async,
-                                    [out, image = std::move(image), stats]() mutable {
+                                    [out, dir, image = std::move(image), stats]() mutable {
                                         try {
                                             WriteJobOutputs(out, image, stats);
+                                            WriteNpyFloat32((dir / "errors.npy").string(),
+                                                     ErrorArray(image),
+                                                     {std::size_t(image.height),
+                                                      std::size_t(image.width), 2});
                                             return std::string();
                                         } catch (const std::exception& e) {
                                             return std::string(e.what());
@@ -399,11 +529,74 @@ int RunServe(const ServeArgs& args) {
                 std::error_code ec;
                 fs::remove_all(frames / std::to_string(id - kKeptFrames), ec);
             }
-            command->answer.set_value({200, json{{"frame", id}, {"stats", statsJson}}});
-        } catch (const InputError& e) {
+            return {id, std::move(statsJson)};
+        } catch (const InputError&) {
             current.reset();  // the next frame prepares again
-            command->answer.set_value({400, json{{"error", e.what()}}});
+            throw;
         }
+    };
+
+    // The main thread: one request at a time, in arrival order, on every rank.
+    while (true) {
+        std::shared_ptr<Command> command = queue.Pop(std::chrono::milliseconds(50));
+        if (!command && !gStop) continue;
+        if (!command) {
+            int kind = Command::Shutdown;
+            MPI_Bcast(&kind, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            break;
+        }
+        if (command->passes.empty()) {
+            try {
+                const auto [id, stats] = renderFrame(command->overrides, {});
+                command->answer.set_value({200, json{{"frame", id}, {"stats", stats}}});
+            } catch (const InputError& e) {
+                command->answer.set_value({400, json{{"error", e.what()}}});
+            }
+            continue;
+        }
+        // Progressive: the passes coarsest first, each a frame of the same view at 1/s of
+        // the width and height. A newer request, a client that left or the end of the
+        // service cancels the passes still to come and the one under way, on every rank.
+        const std::function<bool()> superseded = [&queue, command] {
+            return queue.Waiting() || command->abandoned.load() || gStop.load();
+        };
+        bool cancelled = false;
+        int lastId = 0;
+        const int n = static_cast<int>(command->passes.size());
+        for (int k = 0; k < n && !cancelled; ++k) {
+            if (superseded()) {
+                cancelled = true;
+                break;
+            }
+            const int s = command->passes[k];
+            std::vector<std::string> overrides = command->overrides;
+            const int w = (command->width + s - 1) / s, h = (command->height + s - 1) / s;
+            if (s > 1) {
+                overrides.push_back("camera.width=" + std::to_string(w));
+                overrides.push_back("camera.height=" + std::to_string(h));
+            }
+            try {
+                const auto [id, stats] = renderFrame(overrides, superseded);
+                if (id == 0) {
+                    cancelled = true;
+                    break;
+                }
+                lastId = id;
+                command->events.Push("pass", json{{"frame", id},
+                                                  {"pass", k},
+                                                  {"passes", n},
+                                                  {"scale", s},
+                                                  {"final", k + 1 == n},
+                                                  {"width", w},
+                                                  {"height", h},
+                                                  {"stats", stats}});
+            } catch (const InputError& e) {
+                command->events.Push("error", json{{"error", e.what()}});
+                break;
+            }
+        }
+        command->events.Push("end", json{{"cancelled", cancelled}, {"frame", lastId}});
+        command->events.Close();
     }
     server.stop();
     http.join();

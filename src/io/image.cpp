@@ -163,16 +163,18 @@ class NpyHeaderParser {
 
 }  // namespace
 
-void WriteNpy(const std::string& path, const std::vector<double>& data,
-              const std::vector<std::size_t>& shape) {
-    std::size_t count = 1;
-    for (std::size_t extent : shape) count *= extent;
-    HPRAY_CHECK_EQ(count, data.size());
+namespace {
+/// Writes a C-order little-endian array of `count` elements of `itemSize` bytes with NumPy
+/// type `descr`: byte for byte what numpy.save writes (format 1.0).
+void WriteNpyBytes(const std::string& path, const char* descr, const void* data,
+                   std::size_t itemSize, std::size_t count,
+                   const std::vector<std::size_t>& shape) {
+    std::size_t expected = 1;
+    for (std::size_t extent : shape) expected *= extent;
+    HPRAY_CHECK_EQ(expected, count);
     HPRAY_CHECK(IsLittleEndianHost());
-
-    // Byte for byte what numpy.save writes for a C-order float64 array (format 1.0).
-    std::string dict =
-        "{'descr': '<f8', 'fortran_order': False, 'shape': " + ShapeRepr(shape) + ", }";
+    std::string dict = std::string("{'descr': '") + descr +
+                       "', 'fortran_order': False, 'shape': " + ShapeRepr(shape) + ", }";
     if (!shape.empty()) {
         const std::size_t digits = std::to_string(shape[0]).size();
         if (digits < kNpyGrowthDigits) dict.append(kNpyGrowthDigits - digits, ' ');
@@ -196,8 +198,8 @@ void WriteNpy(const std::string& path, const std::vector<double>& data,
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
         if (out) {
             out.write(header.data(), static_cast<std::streamsize>(header.size()));
-            out.write(reinterpret_cast<const char*>(data.data()),
-                      static_cast<std::streamsize>(data.size() * sizeof(double)));
+            out.write(static_cast<const char*>(data),
+                      static_cast<std::streamsize>(count * itemSize));
             out.flush();
         }
         if (!out) {
@@ -206,6 +208,17 @@ void WriteNpy(const std::string& path, const std::vector<double>& data,
         }
     }
     detail::CommitOutputFile(tmp, path);
+}
+}  // namespace
+
+void WriteNpy(const std::string& path, const std::vector<double>& data,
+              const std::vector<std::size_t>& shape) {
+    WriteNpyBytes(path, "<f8", data.data(), sizeof(double), data.size(), shape);
+}
+
+void WriteNpyFloat32(const std::string& path, const std::vector<float>& data,
+              const std::vector<std::size_t>& shape) {
+    WriteNpyBytes(path, "<f4", data.data(), sizeof(float), data.size(), shape);
 }
 
 std::vector<double> ReadNpy(const std::string& path, std::vector<std::size_t>& shape) {

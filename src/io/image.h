@@ -28,6 +28,9 @@ double LinearToSrgb(double linear);
 /// Writes a float64 NumPy .npy array of shape `shape` (C order) from `data`.
 void WriteNpy(const std::string& path, const std::vector<double>& data,
               const std::vector<std::size_t>& shape);
+/// The same for a float32 array.
+void WriteNpyFloat32(const std::string& path, const std::vector<float>& data,
+              const std::vector<std::size_t>& shape);
 /// Reads a float64 little-endian C-order .npy file.
 std::vector<double> ReadNpy(const std::string& path, std::vector<std::size_t>& shape);
 

@@ -6,10 +6,14 @@
 #include <tbb/info.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
+#include <optional>
 #include <set>
+#include <thread>
 
 #include <unistd.h>
 
@@ -186,6 +190,92 @@ void WarnIfThreadsExceedBinding(int threads) {
 
 }  // namespace
 
+/// The cancellation of one frame across ranks. Rank 0 asks the request function; once it
+/// answers true, rank 0 stops taking tiles and tells every other rank, with one message
+/// each, sent from the thread that may call MPI (the one that started the frame, which
+/// renders tiles too). Every other rank has a receive for that message posted and tests
+/// it from its MPI thread before its tiles; its other threads read the flag. When all
+/// ranks have stopped rendering (Finish), rank 0 sends "not cancelled" to the ranks it has
+/// not told, so each posted receive is matched exactly once per frame, and every rank
+/// then knows the same answer.
+class FrameJob::FrameCancel {
+  public:
+    FrameCancel(std::function<bool()> request, MPI_Comm comm)
+        : request_(std::move(request)), comm_(comm), mpiThread_(std::this_thread::get_id()) {
+        if (comm_ != MPI_COMM_NULL && !mpi::Root())
+            MPI_Irecv(&message_, 1, MPI_INT, 0, kTag, comm_, &receive_);
+    }
+    FrameCancel(const FrameCancel&) = delete;
+    FrameCancel& operator=(const FrameCancel&) = delete;
+
+    /// Whether the frame is cancelled; called before each tile, from any thread.
+    bool operator()() {
+        if (cancelled_.load(std::memory_order_relaxed)) {
+            if (OnMpiThread()) Tell(1);
+            return true;
+        }
+        if (comm_ == MPI_COMM_NULL || mpi::Root()) {
+            if (request_()) {
+                cancelled_ = true;
+                if (OnMpiThread()) Tell(1);
+            }
+        } else if (OnMpiThread() && !received_) {
+            int done = 0;
+            MPI_Test(&receive_, &done, MPI_STATUS_IGNORE);
+            if (done) {
+                received_ = true;
+                if (message_ == 1) cancelled_ = true;
+            }
+        }
+        return cancelled_.load(std::memory_order_relaxed);
+    }
+
+    /// Collective, once every rank has rendered its part: waits for all ranks (rank 0
+    /// still passing a cancellation on meanwhile), then settles the answer everywhere.
+    /// Returns the seconds spent waiting for the slowest rank.
+    double Finish() {
+        const auto t0 = std::chrono::steady_clock::now();
+        if (comm_ == MPI_COMM_NULL) return 0;
+        MPI_Request barrier;
+        MPI_Ibarrier(comm_, &barrier);
+        for (int done = 0; !done;) {
+            if (mpi::Root()) (*this)();
+            MPI_Test(&barrier, &done, MPI_STATUS_IGNORE);
+            if (!done) std::this_thread::sleep_for(std::chrono::microseconds(200));
+        }
+        const double waited = Seconds(t0);
+        if (mpi::Root()) {
+            Tell(cancelled_ ? 1 : 0);
+        } else if (!received_) {
+            MPI_Wait(&receive_, MPI_STATUS_IGNORE);
+            received_ = true;
+            cancelled_ = message_ == 1;
+        }
+        return waited;
+    }
+
+    bool Cancelled() const { return cancelled_; }
+
+  private:
+    static constexpr int kTag = 1;
+    bool OnMpiThread() const { return std::this_thread::get_id() == mpiThread_; }
+    /// Rank 0: sends `value` to every other rank, once per frame.
+    void Tell(int value) {
+        if (comm_ == MPI_COMM_NULL || !mpi::Root() || told_) return;
+        told_ = true;
+        for (int r = 1; r < mpi::WorldSize(); ++r) MPI_Send(&value, 1, MPI_INT, r, kTag, comm_);
+    }
+
+    std::function<bool()> request_;
+    MPI_Comm comm_;
+    std::thread::id mpiThread_;
+    std::atomic<bool> cancelled_{false};
+    bool told_ = false;
+    MPI_Request receive_ = MPI_REQUEST_NULL;
+    int message_ = 0;
+    bool received_ = false;
+};
+
 FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     const int P = mpi::WorldSize();
     const bool isPartition = partition::IsPartitionDirectory(scene_.data.mesh);
@@ -203,6 +293,7 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
                              "whole mesh on every rank; use distribute: space (or auto) "
                              "for a partition, or give the mesh file");
         split_ = mode == hpray::Distribution::Image ? Split::Image : Split::Space;
+        MPI_Comm_dup(MPI_COMM_WORLD, &cancelComm_);
     }
     setupStats_ = StartStats(scene_);
     for (const std::string& name : scene_.FieldNames()) loadedFields_.insert(name);
@@ -234,7 +325,9 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
 }
 
-FrameJob::~FrameJob() = default;
+FrameJob::~FrameJob() {
+    if (cancelComm_ != MPI_COMM_NULL) MPI_Comm_free(&cancelComm_);
+}
 
 void FrameJob::AddWarnings(const Scene& scene, const Image& image, RenderStats& stats) const {
     auto warn = [&](const std::string& text) { stats.warnings.push_back(text); };
@@ -297,7 +390,8 @@ Image FrameJob::Render(const std::optional<SceneCamera>& camera, RenderStats& st
     return Render(scene, Change::CameraOnly, stats);
 }
 
-Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stats) {
+Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stats,
+                       const std::function<bool()>& cancelRequest) {
     if (frameScene.data.mesh != scene_.data.mesh)
         throw InputError(frameScene.data.mesh, "",
                          "a job renders the data it loaded (" + scene_.data.mesh + ")");
@@ -336,24 +430,39 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
         }
     }
     scene_ = scene;
-    Image image = split_ == Split::None ? RenderSingle(scene, stats)
-                                        : RenderDistributed(scene, stats);
-    firstFrame_ = false;
+    std::optional<FrameCancel> cancel;
+    if (cancelRequest) cancel.emplace(cancelRequest, cancelComm_);
+    FrameCancel* c = cancel ? &*cancel : nullptr;
+    if (prepared_)
+        prepared_->SetCancel(c ? std::function<bool()>([c] { return (*c)(); })
+                               : std::function<bool()>());
+    Image image = split_ == Split::None ? RenderSingle(scene, stats, c)
+                                        : RenderDistributed(scene, stats, c);
+    if (prepared_) prepared_->SetCancel({});
+    cancelled_ = c && c->Cancelled();
+    if (cancelled_) {
+        image = Image{};
+        stats.warnings.clear();
+    } else {
+        firstFrame_ = false;
+    }
     return image;
 }
 
-Image FrameJob::RenderSingle(const Scene& scene, RenderStats& stats) {
+Image FrameJob::RenderSingle(const Scene& scene, RenderStats& stats, FrameCancel* cancel) {
     const auto start = std::chrono::steady_clock::now();
     stats = StartStats(scene);
     AddSetupStats(setupStats_, firstFrame_, stats);
     stats.bricksLoaded = stats.bricksTotal = 1;
     Image image;
     prepared_->Render(scene, Camera(scene.camera), std::nullopt, image, stats);
+    if (cancel) cancel->Finish();
     stats.timing.total = Seconds(start) + (firstFrame_ ? stats.timing.load + stats.timing.accel : 0);
     return image;
 }
 
-Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
+Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats,
+                                  FrameCancel* cancel) {
     const auto start = std::chrono::steady_clock::now();
     const int P = mpi::WorldSize(), rank = mpi::WorldRank();
     stats = StartStats(scene);
@@ -374,7 +483,10 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
             std::vector<SegmentCostSample> samples;
             Image preview;
             RenderStats ignored = StartStats(scene);
+            // Never cancelled: the split needs every sample (the pre-pass is short).
+            prepared_->SetCancel({});
             prepared_->Render(scene, Camera(low), std::nullopt, preview, ignored, &samples);
+            if (cancel) prepared_->SetCancel([cancel] { return (*cancel)(); });
             plan = SplitMesh(*whole_, prepared_->Geometry(), P, samples);
             std::string planes;
             for (const KdNode& n : plan.tree.nodes)
@@ -406,7 +518,7 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
         const int chunk = std::max(1, std::min(8 * scene.threads, tiles / (16 * P)));
         dealer = std::make_unique<TileDealer>(tiles, chunk);
         int begin = 0, end = 0;
-        while (dealer->Next(begin, end))
+        while (!(cancel && (*cancel)()) && dealer->Next(begin, end))
             prepared_->RenderTiles(scene, cam, begin, end, accumulated, stats);
         loaded = mpi::Root() ? 1 : 0;
         stats.bricksTotal = 1;
@@ -415,6 +527,7 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
         stats.bricksTotal = static_cast<int>(plan.boxes.size());
         for (int b : plan.tree.FrontToBack(view)) {
             if (plan.rank[b] != rank) continue;
+            if (cancel && (*cancel)()) break;
             if (part_ && !BrickMayContribute(scene, part_->bricks[b], plan.boxes[b])) continue;
             Image image;
             if (part_) {
@@ -422,7 +535,9 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
                 const Mesh mesh = partition::LoadBrick(*part_, b, readOptions_);
                 stats.timing.load += Seconds(t0);
                 RenderOneBrick(mesh, plan.boxes[b], scene, image, stats, nullptr,
-                               &accumulated);
+                               &accumulated,
+                               cancel ? std::function<bool()>([cancel] { return (*cancel)(); })
+                                      : std::function<bool()>());
             } else {
                 prepared_->Render(scene, Camera(scene.camera), plan.boxes[b], image, stats,
                                   nullptr, &accumulated);
@@ -434,9 +549,18 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats) {
     }
 
     // Waiting for the slowest rank is imbalance, not compositing: timed apart.
-    t0 = std::chrono::steady_clock::now();
-    MPI_Barrier(MPI_COMM_WORLD);
-    stats.timing.wait = Seconds(t0);
+    if (cancel) {
+        stats.timing.wait = cancel->Finish();
+        if (cancel->Cancelled()) {
+            // Every rank knows: nothing is composited or reduced.
+            dealer.reset();
+            return Image{};
+        }
+    } else {
+        t0 = std::chrono::steady_clock::now();
+        MPI_Barrier(MPI_COMM_WORLD);
+        stats.timing.wait = Seconds(t0);
+    }
     dealer.reset();
     t0 = std::chrono::steady_clock::now();
     compositor::CompositeStats cs;

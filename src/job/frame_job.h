@@ -2,10 +2,13 @@
 // once, the ranks' plan; each frame renders a camera on every rank and composites it.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <set>
 #include <string>
+
+#include <mpi.h>
 
 #include "image/image.h"
 #include "job/brick_plan.h"
@@ -49,7 +52,16 @@ class FrameJob {
     /// Scene keeps the data and the traversal and rebuilds the per-scene set-up (field
     /// ranges, transfer functions), loading fields not yet loaded (then the mesh is read
     /// and prepared again). Throws InputError if `scene` names other data.
-    Image Render(const Scene& scene, Change change, RenderStats& stats);
+    ///
+    /// `cancelRequest` makes the frame cancellable. It is part of the collective contract:
+    /// every rank passes one, or none does. Rank 0's is asked while the frame renders
+    /// (from any of its threads; other ranks' are never called); once it answers true,
+    /// every rank stops taking tiles within about one tile's time, the frame is neither
+    /// composited nor reduced, Cancelled() is true on every rank and the image is empty.
+    Image Render(const Scene& scene, Change change, RenderStats& stats,
+                 const std::function<bool()>& cancelRequest = {});
+    /// Whether the last frame was cancelled (the same answer on every rank).
+    bool Cancelled() const { return cancelled_; }
 
     /// On rank 0, after a frame: what probably went wrong, in words a user can act on —
     /// an isovalue outside its field's range over the data, an image with nothing drawn,
@@ -64,8 +76,9 @@ class FrameJob {
     const partition::Partition* GetPartition() const { return part_ ? &*part_ : nullptr; }
 
   private:
-    Image RenderSingle(const Scene& scene, RenderStats& stats);
-    Image RenderDistributed(const Scene& scene, RenderStats& stats);
+    class FrameCancel;
+    Image RenderSingle(const Scene& scene, RenderStats& stats, FrameCancel* cancel);
+    Image RenderDistributed(const Scene& scene, RenderStats& stats, FrameCancel* cancel);
 
     Scene scene_;
     Split split_ = Split::None;
@@ -77,6 +90,10 @@ class FrameJob {
     RenderStats setupStats_;  ///< load and preparation, reported with the next frame
     std::set<std::string> loadedFields_;
     bool firstFrame_ = true;
+    bool cancelled_ = false;
+    /// Rank 0's cancellation messages to the other ranks (a communicator of their own, so
+    /// they never match the compositor's messages).
+    MPI_Comm cancelComm_ = MPI_COMM_NULL;
 };
 
 }  // namespace hpray::job

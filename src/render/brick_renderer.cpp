@@ -517,6 +517,7 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
     tbb::enumerable_thread_specific<ThreadState> states;
     const int tilesX = (W + kRenderTile - 1) / kRenderTile;
     tbb::parallel_for(begin, end, [&](int tile) {
+        if (setup.cancelled && setup.cancelled()) return;
         ThreadState& st = states.local();
         const int x0 = (tile % tilesX) * kRenderTile, y0 = (tile / tilesX) * kRenderTile;
         Pixel s;

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -73,6 +74,11 @@ struct BrickSetup {
         double opacity = 1;
     };
     std::vector<Slice> slices;
+
+    /// Cooperative cancellation: when set, asked before each tile (from any rendering
+    /// thread); once it answers true, the remaining tiles are skipped and left empty. The
+    /// image is then incomplete and must be discarded by whoever asked.
+    std::function<bool()> cancelled;
 };
 
 /// Builds the setup of a brick for a scene: resolves the isosurface, slice and volume

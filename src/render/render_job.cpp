@@ -49,6 +49,15 @@ std::vector<double> HitsArray(const Image& image) {
     return out;
 }
 
+std::vector<float> ErrorArray(const Image& image) {
+    std::vector<float> out(image.PixelCount() * 2);
+    for (std::size_t p = 0; p < image.PixelCount(); ++p) {
+        out[2 * p] = static_cast<float>(image.isoResidual[p]);
+        out[2 * p + 1] = static_cast<float>(image.volError[p]);
+    }
+    return out;
+}
+
 std::vector<double> RgbaArray(const Image& image) {
     std::vector<double> out(image.PixelCount() * 4);
     for (std::size_t p = 0; p < image.PixelCount(); ++p) {
@@ -78,6 +87,7 @@ struct PreparedBrick::Impl {
     MeshGeometry geometry;
     std::unique_ptr<BrickTraverser> traverser;
     BrickSetup setup;
+    std::function<bool()> cancel;
 };
 
 PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
@@ -142,6 +152,10 @@ void PreparedBrick::Reconfigure(const Scene& scene, RenderStats& stats) {
 
 double PreparedBrick::MappingTolerance() const { return impl_->mappingTolerance; }
 
+void PreparedBrick::SetCancel(std::function<bool()> cancelled) {
+    impl_->cancel = std::move(cancelled);
+}
+
 const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
 
 void PreparedBrick::Render(const Scene& scene, const Camera& camera,
@@ -163,6 +177,7 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
         setup.clipBox = box;
     }
     const TraceCounters before = impl_->traverser->Counters();
+    setup.cancelled = impl_->cancel;
     RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples, front);
     AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     setup.clipBox = sceneClip;
@@ -173,6 +188,7 @@ void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int be
                                 int end, Image& image, RenderStats& stats) {
     const auto t0 = std::chrono::steady_clock::now();
     const TraceCounters before = impl_->traverser->Counters();
+    impl_->setup.cancelled = impl_->cancel;
     RenderBrickTiles(impl_->setup, camera, scene.threads, begin, end, image, stats.counters);
     AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     stats.timing.render += Seconds(t0);
@@ -180,8 +196,10 @@ void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int be
 
 void RenderOneBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
-                    std::vector<SegmentCostSample>* costSamples, const Image* front) {
+                    std::vector<SegmentCostSample>* costSamples, const Image* front,
+                    const std::function<bool()>& cancelled) {
     PreparedBrick brick(mesh, box, scene, stats);
+    brick.SetCancel(cancelled);
     brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats, costSamples, front);
 }
 

@@ -6,6 +6,7 @@
 #include "mesh/mesh.h"
 #include "trace/ray.h"
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -32,7 +33,8 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
 void RenderOneBrick(const Mesh& mesh, const std::optional<Box>& box, const Scene& scene,
                     Image& image, RenderStats& stats,
                     std::vector<SegmentCostSample>* costSamples = nullptr,
-                    const Image* front = nullptr);
+                    const Image* front = nullptr,
+                    const std::function<bool()>& cancelled = {});
 
 /// A brick ready to render many times: geometry, traverser and per-field setup built once
 /// (the in-memory split renders a pre-pass and then its own box of the same mesh).
@@ -68,6 +70,10 @@ class PreparedBrick {
     void Reconfigure(const Scene& scene, RenderStats& stats);
     double MappingTolerance() const;
 
+    /// Cooperative cancellation of the following renders (BrickSetup::cancelled): asked
+    /// before each tile; an empty function (the default) renders every tile.
+    void SetCancel(std::function<bool()> cancelled);
+
     const MeshGeometry& Geometry() const;
 
   private:
@@ -89,6 +95,8 @@ RenderStats StartStats(const Scene& scene);
 
 /// The float64 (H, W, 5) hits array (docs/contracts.md): t, N, residual per pixel.
 std::vector<double> HitsArray(const Image& image);
+/// The float32 (H, W, 2) error array: iso.residual (NaN where no hit), vol.error.
+std::vector<float> ErrorArray(const Image& image);
 /// The float64 (H, W, 4) premultiplied R, G, B, A array.
 std::vector<double> RgbaArray(const Image& image);
 

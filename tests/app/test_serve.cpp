@@ -1,14 +1,26 @@
 // hpray serve on 2 ranks (oversubscribed), on a builtin and on a partition directory:
 // frames for several cameras, isovalues and transfer functions equal `hpray render` of
 // the merged scene to 1e-6; the token, bad requests (400, 413), evicted frames (404)
-// and the service answering after each; a clean exit on /api/shutdown.
+// and the service answering after each; a clean exit on /api/shutdown. Progressive
+// requests: each pass is the frame `hpray render` makes at its size; a newer request or a
+// client that leaves cancels the pass under way on every rank.
 #include <gtest/gtest.h>
 #include <httplib.h>
 
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <csignal>
+#include <cstdlib>
 #include <filesystem>
+#include <future>
+#include <thread>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <optional>
+#include <sstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <sys/wait.h>
@@ -215,6 +227,204 @@ void Exercise(const std::string& mesh, const std::string& tag) {
     EXPECT_EQ(service.Close(), 0);
 }
 
+/// The server-sent events of a progressive request, as (event, data) pairs, collected as
+/// they arrive; `onEvent` may end the stream early by returning false (the client leaves).
+struct EventStream {
+    std::vector<std::pair<std::string, json>> events;
+    std::string pending;
+    std::function<bool(const std::string&, const json&)> onEvent;
+
+    bool Feed(const char* data, std::size_t size) {
+        pending.append(data, size);
+        for (std::size_t end; (end = pending.find("\n\n")) != std::string::npos;) {
+            const std::string block = pending.substr(0, end);
+            pending.erase(0, end + 2);
+            std::string event, payload;
+            std::istringstream lines(block);
+            for (std::string line; std::getline(lines, line);) {
+                if (line.rfind("event: ", 0) == 0) event = line.substr(7);
+                if (line.rfind("data: ", 0) == 0) payload = line.substr(6);
+            }
+            if (event.empty()) continue;  // a keep-alive comment
+            events.emplace_back(event, json::parse(payload));
+            if (onEvent && !onEvent(event, events.back().second)) return false;
+        }
+        return true;
+    }
+};
+
+httplib::Result PostStream(httplib::Client& client, const std::string& path,
+                           const std::string& body, EventStream& stream) {
+    httplib::Request req;
+    req.method = "POST";
+    req.path = path;
+    req.headers = Auth();
+    req.body = body;
+    req.set_header("Content-Type", "application/json");
+    req.content_receiver = [&](const char* data, std::size_t size, std::uint64_t,
+                               std::uint64_t) { return stream.Feed(data, size); };
+    return client.send(req);
+}
+
+/// The frame's rgba.npy and hits.npy against `hpray render` of `sets` at 1e-6, and its
+/// errors.npy (float32) against the render's residuals.
+void ExpectFrameEqualsRender(httplib::Client& client, int frame, const std::string& mesh,
+                             const std::string& sets, const std::string& base) {
+    for (const char* name : {"rgba.npy", "hits.npy", "errors.npy"}) {
+        auto f = client.Get(("/api/frames/" + std::to_string(frame) + "/" + name).c_str(),
+                            Auth());
+        ASSERT_TRUE(f);
+        ASSERT_EQ(f->status, 200) << name;
+        std::FILE* out = std::fopen((base + "." + name).c_str(), "wb");
+        std::fwrite(f->body.data(), 1, f->body.size(), out);
+        std::fclose(out);
+    }
+    std::string log;
+    const std::string cmd = std::string(HPRAY_BINARY) + " render " +
+                            std::string(HPRAY_SOURCE_DIR) + "/configs/ball_p2.yaml -q" +
+                            " --set data.mesh=" + mesh + kFixed + sets +
+                            " --set output.exr=null --set output.png=null"
+                            " --set output.stats=null --set output.rgba=" + base +
+                            ".ref_rgba.npy --set output.hits=" + base + ".ref_hits.npy";
+    ASSERT_EQ(RunCommand(cmd, &log), 0) << cmd << "\n" << log;
+    EXPECT_LE(WorstDifference(ReadBoth(base + ".ref_rgba.npy", base + ".ref_hits.npy"),
+                              ReadBoth(base + ".rgba.npy", base + ".hits.npy")),
+              1e-6)
+        << sets;
+    // errors.npy: (H, W, 2) float32, the residual and the volume error of each pixel.
+    std::ifstream in(base + ".errors.npy", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GT(bytes.size(), 10u);
+    const std::size_t headerLength =
+        10 + static_cast<unsigned char>(bytes[8]) + 256 * static_cast<unsigned char>(bytes[9]);
+    const std::string header = bytes.substr(10, headerLength - 10);
+    EXPECT_NE(header.find("'<f4'"), std::string::npos) << header;
+    std::vector<std::size_t> shape;
+    const std::vector<double> hits = ReadNpy(base + ".ref_hits.npy", shape);
+    ASSERT_EQ(shape.size(), 3u);
+    EXPECT_NE(header.find("(" + std::to_string(shape[0]) + ", " + std::to_string(shape[1]) +
+                          ", 2)"),
+              std::string::npos)
+        << header;
+    const std::size_t pixels = shape[0] * shape[1];
+    ASSERT_EQ(bytes.size(), headerLength + pixels * 2 * sizeof(float));
+    std::vector<float> errors(pixels * 2);
+    std::memcpy(errors.data(), bytes.data() + headerLength, errors.size() * sizeof(float));
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const double residual = hits[5 * p + 4];
+        if (std::isnan(residual)) {
+            EXPECT_TRUE(std::isnan(errors[2 * p])) << p;
+        } else {
+            EXPECT_NEAR(errors[2 * p], residual, 1e-6 * std::abs(residual) + 1e-30) << p;
+        }
+        EXPECT_GE(errors[2 * p + 1], 0.0f);
+    }
+}
+
+/// Progressive requests on 2 ranks: the passes (a quarter of the width and height, then
+/// the full frame) are the frames `hpray render` makes at those sizes; a newer request
+/// sent while the last pass of a slow frame renders cancels it on every rank (no final
+/// pass, `cancelled` in the end event, the frames that follow still exact); so does a
+/// client that leaves.
+void ExerciseProgressive(const std::string& mesh, const std::string& tag) {
+    Service service(mesh);
+    ASSERT_GT(service.Port(), 0) << "no start-up line";
+    httplib::Client client("127.0.0.1", service.Port());
+    client.set_read_timeout(300, 0);
+
+    const json body = {{"isosurfaces", {{{"field", "u"}, {"value", 0.7}, {"opacity", 0.6}}}},
+                       {"volume",
+                        {{"color_field", "u"},
+                         {"color_tf", {{0, 0.1, 0.2, 0.9}, {3, 1, 0.4, 0.1}}},
+                         {"extinction_tf", {{0, 0.5}, {3, 2.0}}}}}};
+    std::string sets;
+    Flatten(body, "", sets);
+    {
+        EventStream stream;
+        auto r = PostStream(client, "/api/render?progressive=1&passes=4,1", body.dump(), stream);
+        ASSERT_TRUE(r);
+        ASSERT_EQ(r->status, 200);
+        EXPECT_EQ(r->get_header_value("Content-Type"), "text/event-stream");
+        ASSERT_EQ(stream.events.size(), 3u) << stream.pending;
+        const json& coarse = stream.events[0].second;
+        const json& fine = stream.events[1].second;
+        EXPECT_EQ(stream.events[0].first, "pass");
+        EXPECT_EQ(coarse["pass"], 0);
+        EXPECT_EQ(coarse["passes"], 2);
+        EXPECT_EQ(coarse["scale"], 4);
+        EXPECT_EQ(coarse["final"], false);
+        EXPECT_EQ(coarse["width"], 10);  // 40 / 4
+        EXPECT_EQ(coarse["height"], 9);  // 36 / 4
+        EXPECT_EQ(coarse["stats"]["image"], json::array({10, 9}));
+        EXPECT_EQ(fine["final"], true);
+        EXPECT_EQ(fine["width"], 40);
+        EXPECT_EQ(stream.events[2].first, "end");
+        EXPECT_EQ(stream.events[2].second["cancelled"], false);
+        EXPECT_EQ(stream.events[2].second["frame"], fine["frame"]);
+        ExpectFrameEqualsRender(client, coarse["frame"].get<int>(), mesh,
+                                sets + " --set camera.width=10 --set camera.height=9",
+                                (kDir / (tag + "_coarse")).string());
+        ExpectFrameEqualsRender(client, fine["frame"].get<int>(), mesh, sets,
+                                (kDir / (tag + "_fine")).string());
+    }
+    // A slow last pass (the volume at 2048^2), superseded by a small frame once the coarse
+    // pass has arrived: the slow pass stops on every rank and is never delivered.
+    const json slow = {{"camera", {{"width", 2048}, {"height", 2048}}},
+                       {"volume", body["volume"]}};
+    {
+        EventStream stream;
+        httplib::Client other("127.0.0.1", service.Port());
+        other.set_read_timeout(300, 0);
+        std::optional<httplib::Result> newer;
+        stream.onEvent = [&](const std::string& event, const json&) {
+            if (event == "pass" && !newer)
+                newer = other.Post("/api/render", Auth(), R"({"camera": {"position": [2, 2, 2]}})",
+                                   "application/json");
+            return true;
+        };
+        auto r = PostStream(client, "/api/render?progressive=1&passes=64,1", slow.dump(), stream);
+        ASSERT_TRUE(r);
+        ASSERT_TRUE(newer && *newer);
+        EXPECT_EQ((*newer)->status, 200);
+        ASSERT_EQ(stream.events.size(), 2u);
+        EXPECT_EQ(stream.events[0].first, "pass");
+        EXPECT_EQ(stream.events[0].second["final"], false);
+        EXPECT_EQ(stream.events[1].first, "end");
+        EXPECT_EQ(stream.events[1].second["cancelled"], true);
+        // The newer frame took the next id: the cancelled pass kept none.
+        EXPECT_EQ(json::parse((*newer)->body)["frame"].get<int>(),
+                  stream.events[0].second["frame"].get<int>() + 1);
+    }
+    // A client that leaves after the coarse pass: the slow pass is cancelled too (the next
+    // frame again takes the next id), and the service goes on with exact frames.
+    int coarseId = 0;
+    {
+        EventStream stream;
+        stream.onEvent = [&](const std::string& event, const json& data) {
+            if (event == "pass") coarseId = data["frame"].get<int>();
+            return false;  // leave
+        };
+        PostStream(client, "/api/render?progressive=1&passes=64,1", slow.dump(), stream);
+        ASSERT_EQ(stream.events.size(), 1u);
+    }
+    httplib::Client after("127.0.0.1", service.Port());
+    after.set_read_timeout(300, 0);
+    auto r = after.Post("/api/render", Auth(), body.dump(), "application/json");
+    ASSERT_TRUE(r);
+    ASSERT_EQ(r->status, 200) << r->body;
+    const int id = json::parse(r->body)["frame"].get<int>();
+    EXPECT_EQ(id, coarseId + 1);
+    ExpectFrameEqualsRender(after, id, mesh, sets, (kDir / (tag + "_after")).string());
+    // Bad passes are a 400.
+    auto bad = after.Post("/api/render?progressive=1&passes=1,8", Auth(), "{}",
+                          "application/json");
+    ASSERT_TRUE(bad);
+    EXPECT_EQ(bad->status, 400);
+    auto stop = after.Post("/api/shutdown", Auth(), "", "application/json");
+    ASSERT_TRUE(stop);
+    EXPECT_EQ(service.Close(), 0);
+}
+
 class Serve : public ::testing::Test {
   protected:
     static void SetUpTestSuite() {
@@ -236,6 +446,58 @@ TEST_F(Serve, PartitionFramesEqualRenderAndBadRequestsAreAnswered) {
               0)
         << out;
     Exercise((kDir / "part4").string(), "partition");
+}
+
+TEST_F(Serve, ProgressivePassesAreFramesAndNewerRequestsCancelThemOnEveryRank) {
+    ExerciseProgressive("builtin:ball-p2", "progressive_builtin");
+}
+
+TEST_F(Serve, ProgressiveCancelOnAPartition) {
+    std::string out;
+    ASSERT_EQ(RunCommand(std::string(HPRAY_BINARY) + " partition builtin:ball-p2 --bricks 4 --out " +
+                             (kDir / "part4p").string(),
+                         &out),
+              0)
+        << out;
+    ExerciseProgressive((kDir / "part4p").string(), "progressive_partition");
+}
+
+// A rank that dies (SIGKILL, as on a node failure) ends the whole job within 10 s with a
+// non-zero exit and a message naming the rank (the launcher's own report).
+TEST_F(Serve, ADeadRankEndsTheJobWithinTenSecondsNamingIt) {
+    const std::string log = (kDir / "dead_rank.log").string();
+    // In a session of its own: the launcher ends its whole process group on an abort.
+    const std::string cmd = "setsid " + Mpirun(2) + HPRAY_BINARY + " serve " +
+                            std::string(HPRAY_SOURCE_DIR) + "/configs/ball_p2.yaml" +
+                            " --port 0 --token " + kToken + kFixed + " > " + log + " 2>&1";
+    auto status = std::async(std::launch::async, [cmd] { return std::system(cmd.c_str()); });
+    int port = -1;
+    for (int k = 0; k < 600 && port < 0; ++k) {
+        std::ifstream in(log);
+        for (std::string line; std::getline(in, line);) {
+            const auto at = line.find("http://127.0.0.1:");
+            if (line.rfind("hpray serve: listening", 0) == 0 && at != std::string::npos)
+                port = std::stoi(line.substr(at + 17));
+        }
+        if (port < 0) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    ASSERT_GT(port, 0) << "the service did not start";
+    httplib::Client client("127.0.0.1", port);
+    auto info = client.Get("/api/info", Auth());
+    ASSERT_TRUE(info);
+    const json ranks = json::parse(info->body)["ranks"];
+    ASSERT_EQ(ranks.size(), 2u);
+    const pid_t rank0 = ranks[0]["pid"].get<pid_t>(), rank1 = ranks[1]["pid"].get<pid_t>();
+    EXPECT_EQ(ranks[1]["rank"], 1);
+    ASSERT_EQ(kill(rank1, SIGKILL), 0);
+    const bool ended = status.wait_for(std::chrono::seconds(10)) == std::future_status::ready;
+    if (!ended) kill(rank0, SIGKILL);  // never leave a job behind
+    EXPECT_TRUE(ended) << "the job still runs 10 s after rank 1 died";
+    const int code = status.get();
+    EXPECT_NE(code, 0);
+    std::ifstream in(log);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("rank 1"), std::string::npos) << text;
 }
 
 }  // namespace
