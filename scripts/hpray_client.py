@@ -7,6 +7,8 @@ As a module:
     c = Client("http://127.0.0.1:8080/", token="...")
     rgba, stats = c.render({"camera": {"position": [4, 0, 0]}})
     # rgba: float64 array (H, W, 4), premultiplied; stats: the frame's stats dict
+    for p in c.render_passes({"camera": {"position": [4, 0, 0]}}, passes=(8, 1)):
+        print(p["pass"], p["width"], p["stats"]["timing_s"]["total"])  # coarse, then full
 
 From the command line:
 
@@ -66,9 +68,50 @@ class Client:
         return answer["frame"], answer["stats"]
 
     def frame_file(self, frame, name):
-        """The bytes of one output of a kept frame: image.png, image.exr, rgba.npy or
-        hits.npy."""
+        """The bytes of one output of a kept frame: image.png, image.exr, rgba.npy,
+        hits.npy or errors.npy."""
         return self._request("GET", f"/api/frames/{frame}/{name}")
+
+    def errors(self, frame):
+        """A kept frame's error channels: float32 (H, W, 2), iso.residual (NaN where no
+        isosurface is hit) and vol.error."""
+        return np.load(io.BytesIO(self.frame_file(frame, "errors.npy")))
+
+    def render_passes(self, overrides=None, passes=(8, 1)):
+        """A progressive frame: yields each pass as it arrives, a dict with frame, pass,
+        passes, scale, final, width, height and stats (README, "Progressive frames").
+        Ends after the final pass, or early when a newer request cancelled the rest
+        (then the generator's last value was not final)."""
+        data = json.dumps(overrides or {}).encode()
+        query = "?progressive=1&passes=" + ",".join(str(int(p)) for p in passes)
+        req = urllib.request.Request(self.url + "/api/render" + query, data=data,
+                                     method="POST")
+        req.add_header("Authorization", "Bearer " + self.token)
+        req.add_header("Content-Type", "application/json")
+        try:
+            answer = urllib.request.urlopen(req, timeout=self.timeout)
+        except urllib.error.HTTPError as e:
+            text = e.read().decode(errors="replace")
+            try:
+                text = json.loads(text).get("error", text)
+            except ValueError:
+                pass
+            raise ServiceError(e.code, text) from None
+        with answer:
+            event = None
+            for raw in answer:
+                line = raw.decode().rstrip("\n")
+                if line.startswith("event: "):
+                    event = line[7:]
+                elif line.startswith("data: ") and event:
+                    payload = json.loads(line[6:])
+                    if event == "pass":
+                        yield payload
+                    elif event == "error":
+                        raise ServiceError(400, payload.get("error", ""))
+                    elif event == "end":
+                        return
+                    event = None
 
     def render(self, overrides=None):
         """Renders a frame; returns (premultiplied RGBA float64 array (H, W, 4), stats)."""
