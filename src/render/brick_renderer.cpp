@@ -17,7 +17,10 @@
 namespace hpray {
 
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                          const BrickTraverser& traverser, const Scene& scene) {
+                          const BrickTraverser& traverser, const Scene& scene,
+                          FieldCache* cache) {
+    std::optional<FieldCache> own;
+    if (!cache) cache = &own.emplace(mesh, geometry);
     BrickSetup s;
     s.mesh = &mesh;
     s.geometry = &geometry;
@@ -46,19 +49,10 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         s.isos.push_back({index, iso.value, iso.color, iso.opacity});
     }
     // Per field: the nodal values gathered once per cell (shared with the ray loop), and
-    // from them the guaranteed per-cell ranges.
-    const std::int64_t cells = mesh.CellCount();
-    for (const ScalarSelector& f : s.fields)
-        s.fieldData.push_back(FieldCellData::Build(mesh, geometry, f));
-    s.cellRanges.assign(s.fields.size(), std::vector<Interval>(cells));
-    for (std::size_t f = 0; f < s.fields.size(); ++f) {
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
-                          [&](const tbb::blocked_range<std::int64_t>& range) {
-                              for (std::int64_t c = range.begin(); c < range.end(); ++c)
-                                  s.cellRanges[f][c] = FieldBounds(
-                                      *geometry.cells[c].basis,
-                                      s.fieldData[f].values.data() + mesh.cellOffsets[c]);
-                          });
+    // the guaranteed per-cell ranges.
+    for (const ScalarSelector& f : s.fields) {
+        s.fieldData.push_back(cache->Data(f));
+        s.cellRanges.push_back(cache->Ranges(f));
     }
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
@@ -79,7 +73,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
     if (scene.clip.box) s.clipBox = *scene.clip.box;
-    if (scene.volume) s.volume = MakeVolumeSetup(mesh, geometry, scene);
+    if (scene.volume) s.volume = MakeVolumeSetup(mesh, scene, *cache);
     for (std::size_t k = 0; k < scene.slices.size(); ++k) {
         const SceneSlice& in = scene.slices[k];
         const auto sel = SelectScalar(mesh, in.field);
@@ -322,7 +316,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         }
         bool any = false;
         for (std::size_t k = 0; k < nIso; ++k) {
-            const Interval& r = setup.cellRanges[setup.isos[k].field][seg.cell];
+            const Interval& r = (*setup.cellRanges[setup.isos[k].field])[seg.cell];
             relevant_[k] = setup.isos[k].value >= r.lo && setup.isos[k].value <= r.hi;
             any |= relevant_[k] != 0;
         }
@@ -365,7 +359,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                     any |= relevant_[k] && setup.isos[k].field == int(f) &&
                            (setup.isos[k].opacity >= 1) == (pass == 0);
                 if (!any) continue;
-                field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f],
+                field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f],
                              seg.cell, ray, setup.inversion);
                 if (fieldUsed_[f] == 1) {  // project once per field and segment
                     fieldUsed_[f] = 2;
@@ -451,7 +445,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             } else {
                 const int f = setup.isos[e.iso].field;
                 if (f != loaded) {
-                    field_.Begin(setup.fieldData[f], *setup.geometry, setup.fields[f],
+                    field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f],
                                  seg.cell, ray, setup.inversion);
                     loaded = f;
                 }

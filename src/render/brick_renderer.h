@@ -12,6 +12,7 @@
 #include "elements/bounds.h"
 #include "elements/mesh_geometry.h"
 #include "image/image.h"
+#include "render/field_cache.h"
 #include "render/ray_field.h"
 #include "render/ray_roots.h"
 #include "render/stats.h"
@@ -34,10 +35,11 @@ struct BrickSetup {
     /// guaranteed range (Bernstein hull), so a cell is skipped when no isovalue lies in
     /// it.
     std::vector<ScalarSelector> fields;
-    std::vector<std::vector<Interval>> cellRanges;  ///< [field][cell]
+    /// Per field, per cell (shared with the FieldCache and other scenes' setups).
+    std::vector<std::shared_ptr<const std::vector<Interval>>> cellRanges;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
     /// Per field: nodal values gathered per cell and derivative bounds (ray_field.h).
-    std::vector<FieldCellData> fieldData;
+    std::vector<std::shared_ptr<const FieldCellData>> fieldData;
 
     struct Iso {
         int field = 0;
@@ -84,9 +86,12 @@ struct BrickSetup {
 /// Builds the setup of a brick for a scene: resolves the isosurface, slice and volume
 /// fields (InputError naming the scene and the key if one is missing, or an isosurface
 /// field is not a point field), computes the per-cell guaranteed ranges (parallel), and
-/// the numerical options from scene.accuracy.
+/// the numerical options from scene.accuracy. Per-field ranges and cell data come from
+/// `cache` (render/field_cache.h; a private one when null), so a setup for a scene that
+/// changes only values, transfer functions or the camera recomputes no per-cell data.
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                          const BrickTraverser& traverser, const Scene& scene);
+                          const BrickTraverser& traverser, const Scene& scene,
+                          FieldCache* cache = nullptr);
 
 /// The measured cost of one ray segment: where its work was done and how long it took.
 /// Sampled on request (a steady-clock read per segment) to calibrate the partitioner's

@@ -87,6 +87,7 @@ struct PreparedBrick::Impl {
     MeshGeometry geometry;
     std::unique_ptr<BrickTraverser> traverser;
     BrickSetup setup;
+    std::optional<FieldCache> fields;  ///< per-field data kept across Reconfigure
     std::function<bool()> cancel;
 };
 
@@ -108,7 +109,8 @@ PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
     TraceOptions traceOptions;
     traceOptions.mappingTolerance = scene.accuracy.mappingTolerance;
     impl_->traverser = std::make_unique<BrickTraverser>(brick, traceOptions);
-    impl_->setup = MakeBrickSetup(mesh, geometry, *impl_->traverser, scene);
+    impl_->fields.emplace(mesh, impl_->geometry);
+    impl_->setup = MakeBrickSetup(mesh, geometry, *impl_->traverser, scene, &*impl_->fields);
     stats.timing.accel += Seconds(t0);
     const TraverserStats& ts = impl_->traverser->Stats();
     // Mismatches at the rounding level of single-precision files (deal.II writes
@@ -141,7 +143,8 @@ PreparedBrick::~PreparedBrick() = default;
 
 void PreparedBrick::Reconfigure(const Scene& scene, RenderStats& stats) {
     const auto t0 = std::chrono::steady_clock::now();
-    impl_->setup = MakeBrickSetup(*impl_->mesh, impl_->geometry, *impl_->traverser, scene);
+    impl_->setup = MakeBrickSetup(*impl_->mesh, impl_->geometry, *impl_->traverser, scene,
+                                  &*impl_->fields);
     for (const ScalarSelector& f : impl_->setup.fields) {
         const auto r = f.field->Range(f.component);
         stats.isoFieldRange = {std::min(stats.isoFieldRange[0], r[0]),

@@ -40,8 +40,7 @@ PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points) {
     return PiecewiseLinearTf(std::move(s), std::move(v), 3);
 }
 
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                            const Scene& scene) {
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache) {
     HPRAY_CHECK(scene.volume.has_value());
     const SceneVolume& vol = *scene.volume;
     const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
@@ -64,23 +63,9 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
                   s.fields[0].component == s.fields[1].component;
     const int count = s.sameField ? 1 : 2;
     const std::int64_t cells = mesh.CellCount();
-    s.ranges.assign(count, std::vector<Interval>(cells));
     for (int f = 0; f < count; ++f) {
         const ScalarSelector sel = s.fields[f];
-        tbb::parallel_for(
-            tbb::blocked_range<std::int64_t>(0, cells, 512),
-            [&](const tbb::blocked_range<std::int64_t>& range) {
-                std::vector<double> nodal;
-                for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                    if (sel.field->association == Association::Cell) {
-                        const double v = ScalarValue(sel, c);
-                        s.ranges[f][c] = {v, v};
-                        continue;
-                    }
-                    GatherCellValues(mesh, *sel.field, sel.component, c, nodal);
-                    s.ranges[f][c] = FieldBounds(*geometry.cells[c].basis, nodal.data());
-                }
-            });
+        s.ranges.push_back(cache.Ranges(sel));
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
     }
@@ -89,8 +74,8 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
         tbb::blocked_range<std::int64_t>(0, cells, 4096),
         [&](const tbb::blocked_range<std::int64_t>& range) {
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                const Interval& rc = s.ranges[0][c];
-                const Interval& re = s.ranges[count - 1][c];
+                const Interval& rc = (*s.ranges[0])[c];
+                const Interval& re = (*s.ranges[count - 1])[c];
                 double eMin, eMax, cMin[3], cMax[3];
                 s.extinctionTf.RangeOver(re.lo, re.hi, &eMin, &eMax);
                 s.colorTf.RangeOver(rc.lo, rc.hi, cMin, cMax);
@@ -184,8 +169,8 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     if (kind_ == VolumeSetup::kConstant) {
         // Both transfer functions are constant over the guaranteed ranges: any value in
         // them gives the constants.
-        const Interval& rc = s.ranges[0][seg.cell];
-        const Interval& re = s.ranges.back()[seg.cell];
+        const Interval& rc = (*s.ranges[0])[seg.cell];
+        const Interval& re = (*s.ranges.back())[seg.cell];
         s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
         constTau_ = std::max(0.0, constTau_);
         s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
@@ -206,7 +191,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
         // (reference units) times the field's variation over the cell.
-        const Interval& range = s.ranges[f][seg.cell];
+        const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
         if (!sf.ExactAlongLine())
             st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
@@ -250,7 +235,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
     const VolumeSetup& s = *setup_;
     FieldState& st = state_[f];
     if (st.constant) return;
-    const Interval& range = s.ranges[f][seg.cell];
+    const Interval& range = (*s.ranges[f])[seg.cell];
     // The control points of the transfer functions this field drives.
     auto forEachBreakpoint = [&](auto&& visit) {
         if (f == 0)

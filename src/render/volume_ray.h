@@ -11,6 +11,7 @@
 
 #include "elements/bounds.h"
 #include "elements/mesh_geometry.h"
+#include "render/field_cache.h"
 #include "render/ray_field.h"
 #include "render/ray_roots.h"
 #include "render/stats.h"
@@ -28,8 +29,9 @@ struct VolumeSetup {
     /// fields[0] drives colour, fields[1] extinction; sameField: both are fields[0].
     ScalarSelector fields[2];
     bool sameField = true;
-    /// Guaranteed range of each field per cell ([field][cell]; one entry when sameField).
-    std::vector<std::vector<Interval>> ranges;
+    /// Guaranteed range of each field per cell ([field][cell]; one entry when sameField),
+    /// shared with the FieldCache.
+    std::vector<std::shared_ptr<const std::vector<Interval>>> ranges;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
@@ -56,9 +58,10 @@ struct VolumeSetup {
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
 
 /// Resolves the volume fields of `scene.volume` (InputError naming the scene and the key
-/// if a field is missing), computes the per-cell ranges and classes (parallel).
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                            const Scene& scene);
+/// if a field is missing), takes their per-cell ranges from `cache` (computed there the
+/// first time a field is used) and classifies the cells for the transfer functions
+/// (parallel).
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache);
 
 /// Front-to-back compositing state of one ray: premultiplied colour and opacity (rgba),
 /// transmittance, and the error bookkeeping of the volume integration.

@@ -529,3 +529,53 @@ TEST(IsoRender, CostSamplesCoverEverySegmentAndRecordOpaqueStops) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Per-field data is computed once per mesh: setups for scenes that change isovalues or
+// transfer functions share it (the service's frames), and the ranges are those the field
+// has (every nodal value lies in its cell's range; u = x^2 + y^2 + z^2 >= 0).
+TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    FieldCache cache(mesh, geometry);
+    Scene scene = MakeScene(kBallScene);
+    const BrickSetup first = MakeBrickSetup(mesh, geometry, traverser, scene, &cache);
+    EXPECT_EQ(cache.DataBuilt(), 1);
+    EXPECT_EQ(cache.RangesBuilt(), 1);
+    scene.isosurfaces[0].value = 0.25;
+    scene.volume.emplace();
+    scene.volume->colorField = "u";
+    scene.volume->colorTf = {{0.0, {0.1, 0.2, 0.9}}, {3.0, {1.0, 0.4, 0.1}}};
+    scene.volume->extinctionTf = {{0.0, 0.5}, {3.0, 2.0}};
+    const BrickSetup second = MakeBrickSetup(mesh, geometry, traverser, scene, &cache);
+    EXPECT_EQ(cache.DataBuilt(), 1);
+    EXPECT_EQ(cache.RangesBuilt(), 1);
+    ASSERT_EQ(second.cellRanges.size(), 1u);
+    EXPECT_EQ(first.cellRanges[0].get(), second.cellRanges[0].get());
+    EXPECT_EQ(first.fieldData[0].get(), second.fieldData[0].get());
+    ASSERT_TRUE(second.volume);
+    EXPECT_EQ(second.volume->ranges[0].get(), second.cellRanges[0].get());
+    const auto sel = SelectScalar(mesh, "u");
+    ASSERT_TRUE(sel);
+    const std::vector<Interval>& ranges = *cache.Ranges(*sel);
+    ASSERT_EQ(static_cast<std::int64_t>(ranges.size()), mesh.CellCount());
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+        const std::int64_t* nodes = mesh.CellNodes(c);
+        EXPECT_GE(ranges[c].hi, ranges[c].lo);
+        EXPECT_GE(ranges[c].hi, -1e-12);
+        for (int m = 0; m < mesh.CellNodeCount(c); ++m) {
+            const double v = ScalarValue(*sel, nodes[m]);
+            EXPECT_LE(ranges[c].lo, v + 1e-15) << c;
+            EXPECT_GE(ranges[c].hi, v - 1e-15) << c;
+        }
+    }
+    // A setup without a cache computes its own.
+    const BrickSetup own = MakeBrickSetup(mesh, geometry, traverser, scene);
+    EXPECT_NE(own.cellRanges[0].get(), first.cellRanges[0].get());
+}
+
+}  // namespace
+}  // namespace hpray

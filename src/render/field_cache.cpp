@@ -1,0 +1,42 @@
+// FieldCache: per-field ranges and cell data built once per mesh.
+#include "render/field_cache.h"
+
+#include <tbb/parallel_for.h>
+
+namespace hpray {
+
+std::shared_ptr<const std::vector<Interval>> FieldCache::Ranges(const ScalarSelector& sel) {
+    const Key key{sel.field, sel.component};
+    if (const auto it = ranges_.find(key); it != ranges_.end()) return it->second;
+    const std::int64_t cells = mesh_->CellCount();
+    auto ranges = std::make_shared<std::vector<Interval>>(cells);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 512),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          std::vector<double> nodal;
+                          for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                              if (sel.field->association == Association::Cell) {
+                                  const double v = ScalarValue(sel, c);
+                                  (*ranges)[c] = {v, v};
+                                  continue;
+                              }
+                              GatherCellValues(*mesh_, *sel.field, sel.component, c, nodal);
+                              (*ranges)[c] =
+                                  FieldBounds(*geometry_->cells[c].basis, nodal.data());
+                          }
+                      });
+    ++rangesBuilt_;
+    ranges_[key] = ranges;
+    return ranges;
+}
+
+std::shared_ptr<const FieldCellData> FieldCache::Data(const ScalarSelector& sel) {
+    const Key key{sel.field, sel.component};
+    if (const auto it = data_.find(key); it != data_.end()) return it->second;
+    auto data = std::make_shared<const FieldCellData>(
+        FieldCellData::Build(*mesh_, *geometry_, sel));
+    ++dataBuilt_;
+    data_[key] = data;
+    return data;
+}
+
+}  // namespace hpray
