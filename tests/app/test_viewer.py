@@ -1,0 +1,360 @@
+#!/usr/bin/env python3
+"""Browser test of the viewer that `hpray serve` serves (src/app/viewer/).
+
+Starts `hpray serve tests/data/viewer_scene.yaml --port 0`, opens the page in headless
+Chromium with the token and, with real mouse and keyboard input, checks that:
+
+- the first frame arrives, as progressive passes (a coarse one, then the final one);
+- a left-drag on the frame orbits the camera: a new final frame arrives whose PNG (fetched
+  from the API) differs from the first one's in many pixels;
+- moving the isovalue slider renders the new isovalue: the body sent carries it and the
+  frame's iso hit count changes;
+- the error overlay draws errors.npy of the frame on screen: the overlay canvas is shown
+  with opaque pixels exactly where the frame has error data, and the legend's log10
+  minimum and maximum are those of the frame (recomputed here from errors.npy);
+- a value the service refuses shows its message on the page, and the viewer goes on
+  rendering once it is taken back;
+
+then saves a screenshot, shuts the service down through /api/shutdown and checks that it
+exits 0. Every wait has a deadline and the whole test stops after TOTAL_SECONDS.
+
+    /usr/bin/python3 tests/app/test_viewer.py --hpray build/bin/hpray --screenshot shot.png
+"""
+import argparse
+import base64
+import io
+import json
+import math
+import os
+import queue
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+
+try:
+    from selenium import webdriver
+    from selenium.common.exceptions import TimeoutException, WebDriverException
+    from selenium.webdriver.chrome.service import Service as ChromeService
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+except ImportError as error:
+    sys.exit(f"test_viewer: cannot import selenium ({error}); install the Debian packages "
+             "chromium chromium-driver python3-selenium (scripts/test.sh does) and run this "
+             "with /usr/bin/python3")
+
+SCENE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data",
+                     "viewer_scene.yaml")
+CHROMIUM = "/usr/bin/chromium"
+CHROMEDRIVER = "/usr/bin/chromedriver"
+TOTAL_SECONDS = 85   # the whole test, whatever hangs
+START_SECONDS = 30   # hpray serve's start-up line
+FRAME_SECONDS = 20   # one interaction's final frame
+
+
+class Failure(Exception):
+    """A check that failed, in words."""
+
+
+def check(condition, message):
+    if not condition:
+        raise Failure(message)
+
+
+def on_alarm(signum, frame):
+    raise Failure(f"the test did not finish within {TOTAL_SECONDS} s")
+
+
+class HprayService:
+    """hpray serve on the test scene: its URL and token, its requests, its end."""
+
+    def __init__(self, hpray, log_path):
+        self.log = open(log_path, "w")
+        self.proc = subprocess.Popen([hpray, "serve", SCENE, "--port", "0"],
+                                     stdout=subprocess.PIPE, stderr=self.log, text=True)
+        lines = queue.Queue()
+        threading.Thread(target=lambda: lines.put(self.proc.stdout.readline()),
+                         daemon=True).start()
+        try:
+            line = lines.get(timeout=START_SECONDS)
+        except queue.Empty:
+            raise Failure(f"hpray serve printed no start-up line within {START_SECONDS} s "
+                          f"(log: {log_path})")
+        match = re.fullmatch(r"hpray serve: listening on (http://\S+/) token (\S+)\n?", line)
+        check(match, f"unexpected start-up line {line!r} (log: {log_path})")
+        self.url, self.token = match.group(1), match.group(2)
+
+    def request(self, method, path, body=None):
+        data = None if body is None else json.dumps(body).encode()
+        req = urllib.request.Request(self.url.rstrip("/") + path, data=data, method=method)
+        req.add_header("Authorization", "Bearer " + self.token)
+        with urllib.request.urlopen(req, timeout=10) as answer:
+            return answer.read()
+
+    def shutdown(self):
+        self.request("POST", "/api/shutdown", {})
+        try:
+            return self.proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            raise Failure("hpray serve did not exit within 15 s of /api/shutdown")
+
+    def kill(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(timeout=10)
+        self.log.close()
+
+
+def start_browser():
+    for path in (CHROMIUM, CHROMEDRIVER):
+        check(os.path.exists(path), f"{path} is missing; install the Debian packages chromium "
+                                    "chromium-driver python3-selenium (scripts/test.sh does)")
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1200,800", "--force-device-scale-factor=1"):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=ChromeService(CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(20)
+    driver.set_script_timeout(20)
+    return driver
+
+
+# The newest request's final frame is on screen and nothing is in flight: its frame id.
+SETTLED_JS = """
+const v = window.hprayViewer, img = document.getElementById('frame');
+if (!v || v.busy || !img.complete || img.dataset.final !== 'true') return null;
+if (Number(img.dataset.request) !== v.requestsSent || v.requestsSent <= arguments[0]) return null;
+return Number(img.dataset.frame);
+"""
+
+
+def wait_settled(driver, after_request, what):
+    """Waits for the final frame of a request sent after request number `after_request`."""
+    try:
+        return WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(
+            lambda d: d.execute_script(SETTLED_JS, after_request))
+    except TimeoutException:
+        state = driver.execute_script(
+            "const v = window.hprayViewer; return v && {busy: v.busy, frame: v.frame, "
+            "final: v.final, requestsSent: v.requestsSent, request: v.request, error: v.error};")
+        raise Failure(f"{what}: no final frame within {FRAME_SECONDS} s (viewer: {state})")
+
+
+def viewer(driver, expression):
+    return driver.execute_script(f"return window.hprayViewer.{expression};")
+
+
+# Pixels of two PNGs (base64) that differ in R, G or B, decoded by the browser.
+DIFF_JS = """
+const [a, b, done] = arguments;
+async function pixels(text) {
+  const bytes = Uint8Array.from(atob(text), (c) => c.charCodeAt(0));
+  const bitmap = await createImageBitmap(new Blob([bytes], {type: 'image/png'}));
+  const canvas = new OffscreenCanvas(bitmap.width, bitmap.height);
+  const ctx = canvas.getContext('2d');
+  ctx.drawImage(bitmap, 0, 0);
+  return ctx.getImageData(0, 0, bitmap.width, bitmap.height).data;
+}
+Promise.all([pixels(a), pixels(b)]).then(([p, q]) => {
+  if (p.length !== q.length) return done({error: 'the images differ in size'});
+  let differing = 0;
+  for (let k = 0; k < p.length; k += 4)
+    if (p[k] !== q[k] || p[k + 1] !== q[k + 1] || p[k + 2] !== q[k + 2]) ++differing;
+  done({differing, total: p.length / 4});
+}).catch((e) => done({error: String(e)}));
+"""
+
+# The overlay canvas: its size, whether it is shown, and its pixels with alpha > 0.
+OVERLAY_JS = """
+const c = document.getElementById('overlay');
+const data = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+let opaque = 0;
+for (let k = 3; k < data.length; k += 4) if (data[k] > 0) ++opaque;
+const r = c.getBoundingClientRect();
+return {width: c.width, height: c.height, opaque, hidden: c.hidden,
+        shownWidth: r.width, shownHeight: r.height, opacity: getComputedStyle(c).opacity};
+"""
+
+
+def png(service, frame):
+    return service.request("GET", f"/api/frames/{frame}/image.png")
+
+
+def scroll_to(driver, element):
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'});", element)
+
+
+def run(args, service, driver):
+    driver.get(f"{service.url}?token={service.token}")
+
+    # The first frame, as progressive passes.
+    first = wait_settled(driver, 0, "first frame")
+    first_png = png(service, first)
+    passes = viewer(driver, "passLog")
+    check(viewer(driver, "streaming") is True,
+          "the service did not answer /api/render?progressive=1 with an event stream")
+    check(any(p["scale"] > 1 for p in passes) and passes[-1]["final"],
+          f"expected a coarse pass, then the final one; passes received: {passes}")
+    width, height = driver.execute_script(
+        "const i = document.getElementById('frame'); return [i.naturalWidth, i.naturalHeight];")
+    check((width, height) == (256, 256), f"the final frame is {width}x{height}, not 256x256")
+    position = viewer(driver, "camera.position")
+
+    # Orbit: a left-drag on the frame.
+    image = driver.find_element(By.ID, "frame")
+    sent = viewer(driver, "requestsSent")
+    drag = ActionChains(driver, duration=30).move_to_element(image).click_and_hold()
+    for _ in range(6):
+        drag.move_by_offset(18, 3)
+    drag.release().perform()
+    orbited = wait_settled(driver, sent, "orbit")
+    check(orbited > first, f"orbit: frame {orbited} is not newer than frame {first}")
+    moved = viewer(driver, "camera.position")
+    check(math.dist(position, moved) > 0.1, f"orbit: the camera stayed at {position} ({moved})")
+    diff = driver.execute_async_script(
+        DIFF_JS, base64.b64encode(first_png).decode(),
+        base64.b64encode(png(service, orbited)).decode())
+    check("error" not in diff, f"orbit: comparing the frames' PNGs failed: {diff}")
+    check(diff["differing"] > 0.05 * diff["total"],
+          f"orbit: frames {first} and {orbited} differ in only {diff['differing']} of "
+          f"{diff['total']} pixels")
+
+    # The isovalue slider: a click on it (input events), then the frame of that value.
+    hits_before = viewer(driver, "stats.iso.hits")
+    slider = driver.find_element(By.ID, "iso-value")
+    scroll_to(driver, slider)
+    sent = viewer(driver, "requestsSent")
+    ActionChains(driver).move_to_element_with_offset(
+        slider, int(slider.size["width"] * 0.3), 0).click().perform()
+    wait_settled(driver, sent, "isovalue slider")
+    value = float(driver.find_element(By.ID, "iso-value-number").get_attribute("value"))
+    check(abs(value) > 0.05, f"isovalue slider: the value box still shows {value}")
+    body_value = viewer(driver, "lastBody.isosurfaces[0].value")
+    check(body_value == value, f"isovalue slider: sent {body_value}, the box shows {value}")
+    hits_after = viewer(driver, "stats.iso.hits")
+    check(hits_after != hits_before,
+          f"isovalue slider: the hit count stayed {hits_before} at isovalue {value}")
+
+    # Error overlay of the frame on screen.
+    toggle = driver.find_element(By.ID, "overlay-toggle")
+    toggle.click()
+    try:
+        WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(lambda d: d.execute_script(
+            "const v = window.hprayViewer; return v.overlay.frame === v.frame && v.overlay.pixels > 0;"))
+    except TimeoutException:
+        note = driver.find_element(By.ID, "legend-note").text
+        raise Failure(f"error overlay: not drawn within {FRAME_SECONDS} s ({note!r})")
+    shown = driver.execute_script(OVERLAY_JS)
+    check(not shown["hidden"] and driver.find_element(By.ID, "overlay").is_displayed(),
+          f"error overlay: the canvas is hidden ({shown})")
+    check(shown["shownWidth"] > 300 and float(shown["opacity"]) > 0,
+          f"error overlay: not shown over the frame ({shown})")
+    frame = viewer(driver, "frame")
+    errors = np.load(io.BytesIO(service.request("GET", f"/api/frames/{frame}/errors.npy")))
+    check(errors.shape == (shown["height"], shown["width"], 2),
+          f"error overlay: canvas {shown['width']}x{shown['height']}, errors.npy {errors.shape}")
+    # The default channel: the larger of residual / field range and vol.error, where > 0.
+    span = np.subtract(*viewer(driver, "stats.iso.field_range")[::-1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        residual = np.where(errors[..., 0] > 0, errors[..., 0] / span, np.nan)
+        volume = np.where(errors[..., 1] > 0, errors[..., 1], np.nan)
+        combined = np.fmax(residual, volume).astype(np.float64)
+    valid = np.isfinite(combined)
+    check(shown["opaque"] == int(valid.sum()) > 0,
+          f"error overlay: {shown['opaque']} opaque pixels, errors.npy has data in "
+          f"{int(valid.sum())}")
+    legend = driver.find_element(By.ID, "legend")
+    check(legend.is_displayed(), "error overlay: the legend is hidden")
+    texts = [driver.find_element(By.ID, i).text for i in ("legend-min", "legend-max")]
+    try:
+        low, high = (float(t) for t in texts)
+    except ValueError:
+        raise Failure(f"error overlay: legend min/max are not numbers: {texts}")
+    logs = np.log10(combined[valid])
+    check(abs(low - logs.min()) < 0.006 and abs(high - logs.max()) < 0.006,
+          f"error overlay: legend {low}..{high}, errors.npy gives "
+          f"{logs.min():.3f}..{logs.max():.3f}")
+
+    # A value the service refuses: its message on the page; then the viewer goes on.
+    extra = driver.find_element(By.ID, "extra-keys")
+    scroll_to(driver, extra)
+    driver.execute_script("arguments[0].closest('details').open = true;", extra)
+    extra.send_keys('{"accuracy": {"volume_tolerance": -1}}')
+    sent = viewer(driver, "requestsSent")
+    driver.find_element(By.ID, "extra-apply").click()
+    message = driver.find_element(By.ID, "message")
+    try:
+        WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(
+            lambda d: message.is_displayed() and "volume_tolerance" in message.text)
+    except TimeoutException:
+        raise Failure(f"refused value: no message naming volume_tolerance on the page "
+                      f"(message {message.text!r}, shown {message.is_displayed()})")
+    check(viewer(driver, "requestsSent") == sent + 1, "refused value: no request sent")
+    driver.find_element(By.ID, "extra-clear").click()
+    recovered = wait_settled(driver, sent + 1, "after the refused value")
+    check(recovered > frame, f"after the refused value: frame {recovered} is not new")
+    check(not message.is_displayed(), "after the refused value: the message is still shown")
+
+    # A screenshot with the overlay at half opacity over the isosurface and the volume.
+    opacity = driver.find_element(By.ID, "overlay-opacity")
+    driver.execute_script("arguments[0].value = 0.5; arguments[0].dispatchEvent(new Event('input'));",
+                          opacity)
+    driver.execute_script("document.getElementById('panels').scrollTop = 0;")
+    WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(lambda d: d.execute_script(
+        "const v = window.hprayViewer; return v.overlay.frame === v.frame;"))
+    check(driver.save_screenshot(args.screenshot), f"cannot write {args.screenshot}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hpray", required=True, help="the hpray executable")
+    parser.add_argument("--screenshot", required=True, help="where to save a PNG of the page")
+    args = parser.parse_args()
+    signal.signal(signal.SIGALRM, on_alarm)
+    signal.alarm(TOTAL_SECONDS)
+    log_path = os.path.join(tempfile.gettempdir(), f"test_viewer_serve_{os.getpid()}.log")
+    service = driver = None
+    try:
+        service = HprayService(args.hpray, log_path)
+        try:
+            driver = start_browser()
+        except WebDriverException as error:
+            raise Failure(f"cannot start headless Chromium through {CHROMEDRIVER}: {error.msg}")
+        run(args, service, driver)
+        code = service.shutdown()
+        check(code == 0, f"hpray serve exited {code} after /api/shutdown (log: {log_path})")
+    except (Failure, WebDriverException, urllib.error.URLError) as error:
+        print(f"FAILED: {error}", file=sys.stderr)
+        if driver is not None:
+            try:
+                for entry in driver.get_log("browser")[-20:]:
+                    print(f"  browser: {entry['level']} {entry['message']}", file=sys.stderr)
+            except WebDriverException:
+                pass
+        if os.path.exists(log_path):
+            with open(log_path) as log:
+                for line in log.read().splitlines()[-20:]:
+                    print(f"  hpray serve: {line}", file=sys.stderr)
+        return 1
+    finally:
+        signal.alarm(0)
+        if driver is not None:
+            driver.quit()
+        if service is not None:
+            service.kill()
+    print(f"viewer test passed; screenshot {args.screenshot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
