@@ -45,6 +45,8 @@ try:
     from selenium.webdriver.chrome.service import Service as ChromeService
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+    from selenium.webdriver.support.select import Select
     from selenium.webdriver.support.ui import WebDriverWait
 except ImportError as error:
     sys.exit(f"test_viewer: cannot import selenium ({error}); install the Debian packages "
@@ -124,6 +126,10 @@ def start_browser():
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=ChromeService(CHROMEDRIVER), options=options)
+    # A viewport of 1200 x 800, whatever the window's own decorations take.
+    driver.set_window_size(1200, 800)
+    inner = driver.execute_script("return [window.innerWidth, window.innerHeight];")
+    driver.set_window_size(1200 + 1200 - inner[0], 800 + 800 - inner[1])
     driver.set_page_load_timeout(20)
     driver.set_script_timeout(20)
     return driver
@@ -305,13 +311,34 @@ def run(args, service, driver):
     check(recovered > frame, f"after the refused value: frame {recovered} is not new")
     check(not message.is_displayed(), "after the refused value: the message is still shown")
 
-    # A screenshot with the overlay at half opacity over the isosurface and the volume.
-    opacity = driver.find_element(By.ID, "overlay-opacity")
-    driver.execute_script("arguments[0].value = 0.5; arguments[0].dispatchEvent(new Event('input'));",
-                          opacity)
+    # "reset view" brings the scene's camera back.
+    sent = viewer(driver, "requestsSent")
+    driver.find_element(By.ID, "reset-view").click()
+    wait_settled(driver, sent, "reset view")
+    check(math.dist(viewer(driver, "camera.position"), position) < 1e-9,
+          f"reset view: the camera is at {viewer(driver, 'camera.position')}, not {position}")
+
+    # The screenshot: the zero isosurface typed in, 480 x 480, the overlay of its residual.
+    sent = viewer(driver, "requestsSent")
+    for box_id, text in (("iso-value-number", "0"), ("cam-width", "480"), ("cam-height", "480")):
+        box = driver.find_element(By.ID, box_id)
+        scroll_to(driver, box)
+        box.send_keys(Keys.CONTROL, "a")  # select what the box holds
+        box.send_keys(text, Keys.ENTER)
+    Select(driver.find_element(By.ID, "overlay-channel")).select_by_value("residual")
+    wait_settled(driver, sent, "isovalue and size typed in")
+    body = viewer(driver, "lastBody")
+    check(body["isosurfaces"][0]["value"] == 0 and body["camera"]["width"] == 480 and
+          body["camera"]["height"] == 480, f"typed values not sent: {body}")
+    try:
+        WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(lambda d: d.execute_script(
+            "const v = window.hprayViewer; return v.overlay.frame === v.frame && "
+            "v.overlay.channel === 'residual' && v.overlay.pixels > 0;"))
+    except TimeoutException:
+        raise Failure("residual overlay: not drawn for the frame on screen")
+    check("iso.residual" in driver.find_element(By.ID, "legend-title").text,
+          "residual overlay: the legend does not name iso.residual")
     driver.execute_script("document.getElementById('panels').scrollTop = 0;")
-    WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(lambda d: d.execute_script(
-        "const v = window.hprayViewer; return v.overlay.frame === v.frame;"))
     check(driver.save_screenshot(args.screenshot), f"cannot write {args.screenshot}")
 
 

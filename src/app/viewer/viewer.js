@@ -209,6 +209,7 @@ const view = {
   frame: null,        // id of the frame on screen
   pass: null,         // its pass index (0-based) and the request's number of passes
   passes: null,
+  scale: null,        // its scale divisor (1: full size)
   final: false,       // whether it is the request's last pass
   cancelled: false,   // whether its request was cancelled by a newer one (any client)
   request: 0,         // the viewer's number of the request it belongs to
@@ -1280,7 +1281,7 @@ async function display(request, pass) {
     frameImage.src = url;
     if (shown.url) URL.revokeObjectURL(shown.url);
     shown = {request: request.seq, pass: pass.pass, url, width: request.width, height: request.height};
-    Object.assign(view, {frame: pass.frame, pass: pass.pass, passes: pass.passes, final: pass.final,
+    Object.assign(view, {frame: pass.frame, pass: pass.pass, passes: pass.passes, final: pass.final, scale: pass.scale,
                          request: request.seq, stats: pass.stats, cancelled: request.cancelled && !pass.final});
     Object.assign(frameImage.dataset, {frame: pass.frame, pass: pass.pass, passes: pass.passes,
                                        final: pass.final, scale: pass.scale, request: request.seq});
@@ -1300,13 +1301,21 @@ function showStatus() {
   const s = view.stats || {};
   const parts = [`pass ${view.pass + 1}/${view.passes}`, `frame ${view.frame}`,
                  formatSeconds(s.timing_s && s.timing_s.total)];
-  if (s.image) parts.push(`${s.image[0]}×${s.image[1]}`);
+  if (s.image) parts.push(`${s.image[0]}×${s.image[1]}${view.scale > 1 ? ` (1/${view.scale} scale)` : ''}`);
   const status = $('status');
   status.replaceChildren(parts.join(' · '));
   if (view.cancelled) {
+    // Cancelled by another client's request: this view is not rendered again by itself
+    // (two viewers would cancel each other for ever), but on a click.
     const tag = document.createElement('span');
     tag.className = 'cancelled';
-    tag.textContent = ' · cancelled';
+    tag.textContent = ' · cancelled ';
+    const again = document.createElement('button');
+    again.type = 'button';
+    again.id = 'render-again';
+    again.textContent = 'render again';
+    again.addEventListener('click', requestFrame);
+    tag.append(again);
     status.append(tag);
   }
   const warnings = (s.warnings || []).length;
@@ -1319,12 +1328,14 @@ function showStatus() {
   frameImage.dataset.cancelled = view.cancelled;
 }
 
-/** Sizes the stage (image and overlay) to the largest box of the frame's aspect that fits. */
+/** Sizes the stage (image and overlay) to the largest box of the frame's aspect that fits
+ *  above the legend. */
 function layoutStage() {
   const area = $('view');
   const width = shown.width || (camera && camera.width) || 1;
   const height = shown.height || (camera && camera.height) || 1;
-  const aw = area.clientWidth - 24, ah = area.clientHeight - 24;
+  const legend = $('legend').hidden ? 0 : $('legend').offsetHeight + 8;
+  const aw = area.clientWidth - 24, ah = area.clientHeight - 24 - legend;
   if (aw <= 0 || ah <= 0) return;
   const scale = Math.min(aw / width, ah / height);
   $('stage').style.width = `${Math.floor(width * scale)}px`;
@@ -1411,9 +1422,13 @@ async function refreshOverlay() {
   if (!overlay.enabled || frame === null) {
     overlayCanvas.hidden = true;
     $('legend').hidden = true;
+    layoutStage();
     return;
   }
-  $('legend').hidden = false;
+  if ($('legend').hidden) {
+    $('legend').hidden = false;
+    layoutStage();
+  }
   let array = errorArrays.get(frame);
   if (!array) {
     try {
