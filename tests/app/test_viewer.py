@@ -14,6 +14,8 @@ Chromium with the token and, with real mouse and keyboard input, checks that:
   minimum and maximum are those of the frame (recomputed here from errors.npy);
 - a value the service refuses shows its message on the page, and the viewer goes on
   rendering once it is taken back;
+- "reset view" brings the scene's camera back;
+- another client's request cancels the passes still to come, and the page says so;
 
 then saves a screenshot, shuts the service down through /api/shutdown and checks that it
 exits 0. Every wait has a deadline and the whole test stops after TOTAL_SECONDS.
@@ -200,6 +202,14 @@ def scroll_to(driver, element):
     driver.execute_script("arguments[0].scrollIntoView({block: 'center'});", element)
 
 
+def type_into(driver, box_id, text):
+    """Replaces what an input box holds by `text`, as typed, and presses Enter."""
+    box = driver.find_element(By.ID, box_id)
+    scroll_to(driver, box)
+    box.send_keys(Keys.CONTROL, "a")
+    box.send_keys(text, Keys.ENTER)
+
+
 def run(args, service, driver):
     driver.get(f"{service.url}?token={service.token}")
 
@@ -318,13 +328,32 @@ def run(args, service, driver):
     check(math.dist(viewer(driver, "camera.position"), position) < 1e-9,
           f"reset view: the camera is at {viewer(driver, 'camera.position')}, not {position}")
 
+    # Another client's request cancels the passes still to come: a wide frame's coarse pass
+    # is on screen when a plain request arrives, and the page says its view was cancelled.
+    sent = viewer(driver, "requestsSent")
+    type_into(driver, "cam-width", "2048")
+    try:
+        WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.02).until(lambda d: d.execute_script(
+            "const i = document.getElementById('frame');"
+            "return Number(i.dataset.request) > arguments[0] && i.dataset.pass === '0';", sent))
+    except TimeoutException:
+        raise Failure("cancellation: the coarse pass of the 2048-wide frame was not shown")
+    service.request("POST", "/api/render", {})
+    try:
+        WebDriverWait(driver, FRAME_SECONDS, poll_frequency=0.05).until(
+            lambda d: "cancelled" in d.find_element(By.ID, "status").text and
+            d.find_element(By.ID, "render-again").is_displayed())
+    except TimeoutException:
+        raise Failure(f"cancellation: the status line says "
+                      f"{driver.find_element(By.ID, 'status').text!r}, not cancelled")
+    check(driver.find_element(By.ID, "frame").get_attribute("data-cancelled") == "true" and
+          driver.find_element(By.ID, "frame").get_attribute("data-final") == "false",
+          "cancellation: the frame's data-cancelled/data-final attributes disagree")
+
     # The screenshot: the zero isosurface typed in, 480 x 480, the overlay of its residual.
     sent = viewer(driver, "requestsSent")
     for box_id, text in (("iso-value-number", "0"), ("cam-width", "480"), ("cam-height", "480")):
-        box = driver.find_element(By.ID, box_id)
-        scroll_to(driver, box)
-        box.send_keys(Keys.CONTROL, "a")  # select what the box holds
-        box.send_keys(text, Keys.ENTER)
+        type_into(driver, box_id, text)
     Select(driver.find_element(By.ID, "overlay-channel")).select_by_value("residual")
     wait_settled(driver, sent, "isovalue and size typed in")
     body = viewer(driver, "lastBody")

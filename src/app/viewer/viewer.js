@@ -1176,7 +1176,6 @@ function pump() {
     if (!current.streaming || current.passesReceived === 0) return;
     current.superseded = true;
     current.controller.abort();
-    markCancelled(current);
   }
   flight.pending = false;
   send(requestBody());
@@ -1185,6 +1184,7 @@ function pump() {
 function showBusy() {
   view.busy = !!flight.current || flight.pending;
   $('busy').hidden = !view.busy;
+  $('render-again').hidden = !view.cancelled || view.busy;
 }
 
 async function send(body) {
@@ -1238,7 +1238,8 @@ async function send(body) {
   }
 }
 
-/** Marks a request cancelled (by a newer one of this page or of another client). */
+/** Marks a request whose remaining passes the service cancelled for a newer request (of
+ *  another client: this page closes the streams it supersedes). */
 function markCancelled(request) {
   request.cancelled = true;
   if (view.request === request.seq && !view.final) {
@@ -1305,17 +1306,9 @@ function showStatus() {
   const status = $('status');
   status.replaceChildren(parts.join(' · '));
   if (view.cancelled) {
-    // Cancelled by another client's request: this view is not rendered again by itself
-    // (two viewers would cancel each other for ever), but on a click.
     const tag = document.createElement('span');
     tag.className = 'cancelled';
-    tag.textContent = ' · cancelled ';
-    const again = document.createElement('button');
-    again.type = 'button';
-    again.id = 'render-again';
-    again.textContent = 'render again';
-    again.addEventListener('click', requestFrame);
-    tag.append(again);
+    tag.textContent = ' · cancelled';
     status.append(tag);
   }
   const warnings = (s.warnings || []).length;
@@ -1326,6 +1319,7 @@ function showStatus() {
     status.append(tag);
   }
   frameImage.dataset.cancelled = view.cancelled;
+  showBusy();
 }
 
 /** Sizes the stage (image and overlay) to the largest box of the frame's aspect that fits
@@ -1621,6 +1615,9 @@ function setupMouse() {
 
 async function start() {
   $('message-close').addEventListener('click', clearMessage);
+  // A view cancelled by another client is not rendered again by itself (two viewers would
+  // cancel each other for ever), but on a click.
+  $('render-again').addEventListener('click', requestFrame);
   setupOverlayControls();
   setupMouse();
   new ResizeObserver(layoutStage).observe($('view'));
