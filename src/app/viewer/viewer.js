@@ -300,10 +300,12 @@ function listPointFields() {
   return names;
 }
 
-/** The value range of a field (a component: its field's range); never empty. */
+/** The value range of a field or of a component name[i] (`component_ranges` of /api/info,
+ *  else the field's range); never empty. */
 function fieldRange(name) {
-  const f = (info.data.fields || {})[String(name).replace(/\[\d+\]$/, '')];
-  const r = f && f.range;
+  const match = /^(.*)\[(\d+)\]$/.exec(name);
+  const f = (info.data.fields || {})[match ? match[1] : name];
+  const r = f && (match && f.component_ranges ? f.component_ranges[Number(match[2])] : f.range);
   if (!r || !Number.isFinite(r[0]) || !Number.isFinite(r[1])) return [0, 1];
   return r[1] > r[0] ? [r[0], r[1]] : [r[0] - 0.5, r[0] + 0.5];
 }
@@ -541,6 +543,8 @@ function setupVolumePanel() {
   Object.assign(volume, {
     enabled: !!scene.volume,
     field,
+    // The scene's own extinction field stays until another field is picked.
+    extinctionField: sv.extinction_field || field,
     glow: sv.glow || 'williams-max',
     glowScale: brightest,
     colorStops: colorTf.map(([s, r, g, b]) => ({s, rgb: [r, g, b].map((c) => c / brightest)})),
@@ -561,7 +565,7 @@ function setupVolumePanel() {
     touch('volume');
   });
   $('vol-field').addEventListener('change', (e) => {
-    volume.field = e.target.value;
+    volume.field = volume.extinctionField = e.target.value;
     const to = fieldRange(volume.field);
     rescalePoints(volume.colorStops, volume.domain, to);
     rescalePoints(volume.extinction, volume.domain, to);
@@ -598,7 +602,7 @@ function volumeKeys() {
   const scale = volume.glow === 'wilhelms-van-gelder' ? volume.glowScale : 1;
   return {
     color_field: volume.field,
-    extinction_field: volume.field,
+    extinction_field: volume.extinctionField,
     glow: volume.glow,
     color_tf: volume.colorStops.map((p) => [p.s, ...p.rgb.map((c) => tidy(c * scale))]),
     extinction_tf: volume.extinction.map((p) => [p.s, p.e]),
