@@ -39,7 +39,11 @@ import time
 import urllib.error
 import urllib.request
 
-import numpy as np
+try:
+    import numpy as np
+except ImportError as error:
+    sys.exit(f"test_viewer: cannot import numpy ({error}); install the Debian package "
+             "python3-numpy and run this with /usr/bin/python3")
 
 try:
     from selenium import webdriver
