@@ -371,7 +371,7 @@ def run(args, service, driver):
         raise Failure("residual overlay: not drawn for the frame on screen")
     check("iso.residual" in driver.find_element(By.ID, "legend-title").text,
           "residual overlay: the legend does not name iso.residual")
-    driver.execute_script("document.getElementById('panels').scrollTop = 0;")
+    driver.execute_script("document.getElementById('stats-table').closest('details').scrollIntoView();")
     check(driver.save_screenshot(args.screenshot), f"cannot write {args.screenshot}")
 
 

@@ -1506,7 +1506,7 @@ function drawOverlay(frame, array, stats) {
     $('legend-mid').textContent = ((min + max) / 2).toFixed(2);
     $('legend-max').textContent = max.toFixed(2);
     $('legend-note').textContent = `frame ${frame}: ${pixels.toLocaleString('en-US')} of ` +
-        `${(width * height).toLocaleString('en-US')} pixels with data; ` +
+        `${(width * height).toLocaleString('en-US')} pixels with an error above 0; ` +
         `largest ${formatNumber(Math.pow(10, max), 3)}`;
   } else {
     for (const id of ['legend-min', 'legend-mid', 'legend-max']) $(id).textContent = '–';
