@@ -17,13 +17,16 @@ Chromium with the token and, with real mouse and keyboard input, checks that:
 - "reset view" brings the scene's camera back;
 - another client's request cancels the passes still to come, and the page says so;
 
-then saves a screenshot, shuts the service down through /api/shutdown and checks that it
+then saves a screenshot; opens the page once more through a proxy that drops
+`?progressive=1`, as a service without progressive frames would, and checks that frames
+still arrive, in one piece, and that orbiting still works; shuts the service down through /api/shutdown and checks that it
 exits 0. Every wait has a deadline and the whole test stops after TOTAL_SECONDS.
 
     /usr/bin/python3 tests/app/test_viewer.py --hpray build/bin/hpray --screenshot shot.png
 """
 import argparse
 import base64
+import http.server
 import io
 import json
 import math
@@ -119,6 +122,50 @@ class HprayService:
             self.proc.kill()
             self.proc.wait(timeout=10)
         self.log.close()
+
+
+class PlainProxy:
+    """A service without progressive frames, on a port of its own: forwards every request
+    to hpray serve without the `progressive` and `passes` query parameters."""
+
+    def __init__(self, upstream):
+        upstream = upstream.rstrip("/")
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def forward(self):
+                path, _, query = self.path.partition("?")
+                kept = [p for p in query.split("&")
+                        if p and not p.startswith(("progressive=", "passes="))]
+                url = upstream + path + ("?" + "&".join(kept) if kept else "")
+                length = int(self.headers.get("Content-Length") or 0)
+                req = urllib.request.Request(url, data=self.rfile.read(length) if length else None,
+                                             method=self.command)
+                for name in ("Authorization", "Content-Type"):
+                    if self.headers.get(name):
+                        req.add_header(name, self.headers[name])
+                try:
+                    with urllib.request.urlopen(req, timeout=FRAME_SECONDS) as answer:
+                        status, headers, body = answer.status, answer.headers, answer.read()
+                except urllib.error.HTTPError as error:
+                    status, headers, body = error.code, error.headers, error.read()
+                self.send_response(status)
+                self.send_header("Content-Type", headers.get("Content-Type", "text/plain"))
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                self.wfile.write(body)
+
+            do_GET = do_POST = forward
+
+            def log_message(self, *args):
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
 
 
 def start_browser():
@@ -373,6 +420,25 @@ def run(args, service, driver):
           "residual overlay: the legend does not name iso.residual")
     driver.execute_script("document.getElementById('stats-table').closest('details').scrollIntoView();")
     check(driver.save_screenshot(args.screenshot), f"cannot write {args.screenshot}")
+
+    # A service without progressive frames: the plain answer, one final frame a request.
+    proxy = PlainProxy(service.url)
+    try:
+        driver.get(f"{proxy.url}?token={service.token}")
+        plain = wait_settled(driver, 0, "first frame without progressive frames")
+        check(viewer(driver, "streaming") is False,
+              "without progressive frames: the viewer did not take the plain answer")
+        passes = viewer(driver, "passLog")
+        check(passes == [{"request": 1, "frame": plain, "pass": 0, "passes": 1, "scale": 1,
+                          "final": True}], f"without progressive frames: passes {passes}")
+        sent = viewer(driver, "requestsSent")
+        ActionChains(driver, duration=30).move_to_element(
+            driver.find_element(By.ID, "frame")).click_and_hold().move_by_offset(
+            -60, 0).release().perform()
+        orbited = wait_settled(driver, sent, "orbit without progressive frames")
+        check(orbited > plain, "without progressive frames: orbiting rendered no new frame")
+    finally:
+        proxy.close()
 
 
 def main():
