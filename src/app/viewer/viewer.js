@@ -104,7 +104,7 @@ function parseNpy(buffer) {
 }
 
 // ---------------------------------------------------------------------------------------
-// Small helpers: vectors, colours, numbers
+// Vectors, colours, numbers
 
 const vec = {
   add: (a, b) => a.map((x, i) => x + b[i]),
