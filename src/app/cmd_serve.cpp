@@ -45,7 +45,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 constexpr std::size_t kMaxBody = 1 << 20;  // 1 MiB
-constexpr int kKeptFrames = 16;
+constexpr int kKeptFrames = 32;  // a progressive request keeps one per pass
 
 std::atomic<bool> gStop{false};
 extern "C" void OnSignal(int) { gStop = true; }
@@ -287,7 +287,8 @@ int RunServe(const ServeArgs& args) {
     info["data"] = frameJob.WholeMesh()
                        ? MeshSummaryJson(*frameJob.WholeMesh())
                        : partition::SummarizePartition(dataPath);
-    YAML::Node sceneRoot = YAML::Load(sceneText);
+    // The scene as loaded: the file with the command line's --set items applied.
+    YAML::Node sceneRoot = YAML::Load(MergeSceneOverrides(sceneText, args.scene, args.overrides));
     if (!sceneRoot.IsMap()) sceneRoot = YAML::Node(YAML::NodeType::Map);
     info["scene"] = ToJson(sceneRoot);
     info["overrides"] = args.overrides;

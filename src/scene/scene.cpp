@@ -927,6 +927,18 @@ Scene ParseScene(const std::string& yamlText, const std::string& sourceName,
     }
 }
 
+std::string MergeSceneOverrides(const std::string& yamlText, const std::string& sourceName,
+                                const std::vector<std::string>& overrides) {
+    ParseScene(yamlText, sourceName, overrides);  // every check, with its messages
+    YAML::Node root = YAML::Load(yamlText);
+    if (!root.IsDefined() || root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
+    SceneParser parser(sourceName, "");
+    for (const std::string& text : overrides) parser.ApplyOverride(root, text);
+    YAML::Emitter out;
+    out << root;
+    return out.c_str();
+}
+
 Scene LoadScene(const std::string& path, const std::vector<std::string>& overrides) {
     std::error_code ec;
     const fs::file_status status = fs::status(path, ec);

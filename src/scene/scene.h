@@ -187,6 +187,11 @@ Scene ParseScene(const std::string& yamlText, const std::string& sourceName,
                  const std::vector<std::string>& overrides = {},
                  const std::string& baseDir = "");
 
+/// The scene text with `overrides` applied (as ParseScene applies them), emitted as YAML:
+/// what a scene file holding the merged scene would say. Throws InputError as ParseScene.
+std::string MergeSceneOverrides(const std::string& yamlText, const std::string& sourceName,
+                                const std::vector<std::string>& overrides);
+
 /// Every key path of the schema, e.g. "camera.fov_y", "isosurfaces.#.value" (# = any
 /// index); for help texts and tests.
 std::vector<std::string> SceneKeyPaths();

@@ -129,7 +129,12 @@ void Exercise(const std::string& mesh, const std::string& tag) {
     auto withParam = client.Get(("/api/info?token=" + kToken).c_str());
     ASSERT_TRUE(withParam);
     EXPECT_EQ(withParam->status, 200);
-    EXPECT_EQ(json::parse(withParam->body)["data"]["fields"].contains("u"), true);
+    const json info = json::parse(withParam->body);
+    EXPECT_EQ(info["data"]["fields"].contains("u"), true);
+    // The scene as loaded: the file with the command line's --set items applied.
+    EXPECT_EQ(info["scene"]["camera"]["width"], 40);
+    EXPECT_EQ(info["scene"]["camera"]["height"], 36);
+    EXPECT_EQ(info["scene"]["data"]["mesh"], mesh);
 
     // Frames against hpray render of the merged scene.
     const std::vector<json> bodies = {
@@ -203,9 +208,9 @@ void Exercise(const std::string& mesh, const std::string& tag) {
     ASSERT_TRUE(unknown);
     EXPECT_EQ(unknown->status, 404);
 
-    // Old frames are evicted: after 16 more, the first is gone, the last is there.
+    // Old frames are evicted: after 32 more, the first is gone, the last is there.
     int last = 0;
-    for (int k = 0; k < 16; ++k) {
+    for (int k = 0; k < 32; ++k) {
         auto r = client.Post("/api/render", Auth(), R"({"camera": {"width": 8, "height": 8}})",
                              "application/json");
         ASSERT_TRUE(r);
