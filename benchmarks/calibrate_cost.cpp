@@ -202,10 +202,11 @@ int main(int argc, char** argv) {
             brick.Render(scene, Camera(scene.camera), std::nullopt, image, stats,
                          &samples);
             std::map<ClassKey, ClassTally> rep;
+            CellScratch scratch;
             auto keyOf = [&](std::int64_t c) {
                 return ClassKey{static_cast<int>(mesh.cellShape[c]), mesh.cellOrder[c],
                                 static_cast<int>(mesh.cellFamily[c]),
-                                g.cells[c].affine ? 0 : 1};
+                                g.Cell(c, scratch).affine ? 0 : 1};
             };
             for (const SegmentCostSample& s : samples) {
                 ClassTally& t = rep[keyOf(s.cell)];

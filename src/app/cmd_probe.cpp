@@ -116,7 +116,8 @@ int RunProbe(const ProbeArgs& args) {
         e["cell"] = hit.cell;
         e["ref"] = {hit.ref[0], hit.ref[1], hit.ref[2]};
         nlohmann::ordered_json values = nlohmann::ordered_json::object(), gradients = nlohmann::ordered_json::object();
-        const CellGeometry& cell = geometry.cells[hit.cell];
+        CellScratch scratch;
+        const CellGeometry& cell = geometry.Cell(hit.cell, scratch);
         for (const Probed& f : probed) {
             CellScalar scalar;
             if (f.sel.field->association == Association::Point) {

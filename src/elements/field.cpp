@@ -12,6 +12,12 @@ double FieldValue(const CellGeometry& cell, const CellScalar& field, const doubl
     if (!field.nodal) return field.constant;
     if (cell.basis->kind == BasisKind::HexLagrange)
         return HexFieldValue(cell.basis->order, field.nodal, ref);
+    if (cell.basis->shape == CellShape::Tet && cell.basis->order == 1) {
+        // Barycentric: corner m sits at reference point e_m (corner 0 at the origin).
+        const double* v = field.nodal;
+        return v[0] * (1.0 - ref[0] - ref[1] - ref[2]) + v[1] * ref[0] + v[2] * ref[1] +
+               v[3] * ref[2];
+    }
     const int n = cell.basis->nodeCount;
     EvalBasis(*cell.basis, ref, ws.values.data(), nullptr);
     double v = 0.0;

@@ -154,6 +154,38 @@ CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
     g.lineDegree = basis.lineDegree;
     g.lineDenominatorPower = basis.lineDenominatorPower;
     const int n = basis.nodeCount;
+    if (basis.shape == CellShape::Tet && basis.order == 1) {
+        // The linear tetrahedron (reference corners 0, e1, e2, e3): the map through its
+        // corners is x = p0 + [p1 - p0, p2 - p0, p3 - p0] r, in closed form. Large linear
+        // meshes derive this per ray segment (MeshGeometry), so no fit is run.
+        double lo[3], hi[3];
+        for (int d = 0; d < 3; ++d) {
+            g.origin[d] = nodeXyz[d];
+            lo[d] = hi[d] = nodeXyz[d];
+            for (int m = 1; m < 4; ++m) {
+                const double x = nodeXyz[3 * m + d];
+                g.linear[3 * d + (m - 1)] = x - nodeXyz[d];
+                lo[d] = std::min(lo[d], x);
+                hi[d] = std::max(hi[d], x);
+            }
+        }
+        g.size = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                           (hi[2] - lo[2]) * (hi[2] - lo[2]));
+        // Corner m maps to origin + column m - 1: exact up to the rounding of x - p0.
+        double dev = 0.0;
+        for (int m = 1; m < 4; ++m) {
+            double e2 = 0.0;
+            for (int d = 0; d < 3; ++d) {
+                const double e = (g.origin[d] + g.linear[3 * d + (m - 1)]) - nodeXyz[3 * m + d];
+                e2 += e * e;
+            }
+            dev = std::max(dev, std::sqrt(e2));
+        }
+        g.affineDeviation = dev;
+        g.linearInvertible = Invert3x3(g.linear.data(), g.inverseLinear.data()) != 0.0;
+        g.affine = g.linearInvertible && dev <= affineTolerance * g.size;
+        return g;
+    }
     // Least-squares affine fit about the centroids: x - xBar = A (r - rBar).
     double rBar[3] = {0, 0, 0}, xBar[3] = {0, 0, 0}, lo[3], hi[3];
     for (int d = 0; d < 3; ++d) {

@@ -1,6 +1,7 @@
 // Whole-mesh geometry cache and the point locator (see mesh_geometry.h).
 #include "elements/mesh_geometry.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -9,37 +10,103 @@
 
 namespace hpray {
 
+namespace {
+/// Cells whose geometry is derived on request: linear tetrahedra.
+bool Derived(const Mesh& mesh, std::int64_t c) {
+    return mesh.cellShape[c] == CellShape::Tet && mesh.cellOrder[c] == 1 &&
+           mesh.CellNodeCount(c) == 4;
+}
+}  // namespace
+
 MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
     MeshGeometry g;
+    g.mesh_ = &mesh;
     const std::int64_t n = mesh.CellCount();
-    g.offsets = mesh.cellOffsets;
-    g.nodeXyz.resize(3 * mesh.connectivity.size());
-    g.cells.resize(n);
-    g.boxes.resize(n);
+    // Which cells are stored, and where their nodes go.
+    std::vector<std::int64_t> index(n, -1), nodeStart;
+    std::int64_t stored = 0, nodes = 0;
+    for (std::int64_t c = 0; c < n; ++c) {
+        if (Derived(mesh, c)) continue;
+        index[c] = stored++;
+        nodeStart.push_back(nodes);
+        nodes += mesh.CellNodeCount(c);
+    }
+    g.derivedCells = n - stored;
+    g.allStored_ = stored == n;
+    if (stored > 0 && stored < n) g.stored_ = std::move(index);
+    g.nodeXyz_.resize(3 * nodes);
+    g.cells_.resize(stored);
+    g.boxes_.resize(stored);
+    struct Partial {
+        Box box{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+        std::int64_t affine = 0;
+    };
+    tbb::enumerable_thread_specific<Partial> partials;
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 256),
                       [&](const tbb::blocked_range<std::int64_t>& range) {
+        Partial& part = partials.local();
+        CellScratch scratch;
         for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-            const BasisTable& basis =
-                GetBasis(mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]);
-            double* xyz = g.nodeXyz.data() + 3 * g.offsets[c];
-            const std::int64_t* nodes = mesh.CellNodes(c);
-            for (int m = 0; m < basis.nodeCount; ++m)
-                for (int d = 0; d < 3; ++d) xyz[3 * m + d] = mesh.points[3 * nodes[m] + d];
-            g.cells[c] = MakeCellGeometry(basis, xyz);
-            g.boxes[c] = GeometryBox(basis, xyz);
+            const std::int64_t k = g.stored_.empty() ? (g.allStored_ ? c : -1) : g.stored_[c];
+            Box box;
+            if (k < 0) {
+                part.affine += g.Derive(c, scratch).affine;
+                box = g.CellBox(c);
+            } else {
+                const BasisTable& basis = g.Basis(c);
+                double* xyz = g.nodeXyz_.data() + 3 * nodeStart[k];
+                const std::int64_t* cellNodes = mesh.CellNodes(c);
+                for (int m = 0; m < basis.nodeCount; ++m)
+                    for (int d = 0; d < 3; ++d) xyz[3 * m + d] = mesh.points[3 * cellNodes[m] + d];
+                g.cells_[k] = MakeCellGeometry(basis, xyz);
+                g.boxes_[k] = GeometryBox(basis, xyz);
+                part.affine += g.cells_[k].affine;
+                box = g.boxes_[k];
+            }
+            for (int d = 0; d < 3; ++d) {
+                part.box.lo[d] = std::min(part.box.lo[d], box.lo[d]);
+                part.box.hi[d] = std::max(part.box.hi[d], box.hi[d]);
+            }
         }
     });
     const double inf = std::numeric_limits<double>::infinity();
     g.bounds.lo = {inf, inf, inf};
     g.bounds.hi = {-inf, -inf, -inf};
-    for (std::int64_t c = 0; c < n; ++c) {
-        g.affineCells += g.cells[c].affine;
+    for (const Partial& part : partials) {
+        g.affineCells += part.affine;
         for (int d = 0; d < 3; ++d) {
-            g.bounds.lo[d] = std::min(g.bounds.lo[d], g.boxes[c].lo[d]);
-            g.bounds.hi[d] = std::max(g.bounds.hi[d], g.boxes[c].hi[d]);
+            g.bounds.lo[d] = std::min(g.bounds.lo[d], part.box.lo[d]);
+            g.bounds.hi[d] = std::max(g.bounds.hi[d], part.box.hi[d]);
         }
     }
     return g;
+}
+
+const BasisTable& MeshGeometry::Basis(std::int64_t c) const {
+    return GetBasis(mesh_->cellShape[c], mesh_->cellOrder[c], mesh_->cellFamily[c]);
+}
+
+const CellGeometry& MeshGeometry::Derive(std::int64_t c, CellScratch& scratch) const {
+    const std::int64_t* cellNodes = mesh_->CellNodes(c);
+    for (int m = 0; m < 4; ++m)
+        for (int d = 0; d < 3; ++d) scratch.xyz[3 * m + d] = mesh_->points[3 * cellNodes[m] + d];
+    scratch.geometry = MakeCellGeometry(Basis(c), scratch.xyz);
+    return scratch.geometry;
+}
+
+Box MeshGeometry::CellBox(std::int64_t c) const {
+    const std::int64_t k = stored_.empty() ? (allStored_ ? c : -1) : stored_[c];
+    if (k >= 0) return boxes_[k];
+    double xyz[12];
+    const std::int64_t* cellNodes = mesh_->CellNodes(c);
+    for (int m = 0; m < 4; ++m)
+        for (int d = 0; d < 3; ++d) xyz[3 * m + d] = mesh_->points[3 * cellNodes[m] + d];
+    return GeometryBox(Basis(c), xyz);
+}
+
+std::size_t MeshGeometry::Bytes() const {
+    return nodeXyz_.size() * sizeof(double) + cells_.size() * sizeof(CellGeometry) +
+           boxes_.size() * sizeof(Box) + stored_.size() * sizeof(std::int64_t);
 }
 
 void GatherCellValues(const Mesh& mesh, const Field& field, int component, std::int64_t c,
@@ -54,6 +121,12 @@ void GatherCellValues(const Mesh& mesh, const Field& field, int component, std::
 PointLocator::PointLocator(const Mesh& mesh, const MeshGeometry& geometry)
     : geometry_(geometry) {
     const std::int64_t n = mesh.CellCount();
+    boxes_.resize(n);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 1024),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                              boxes_[c] = geometry.CellBox(c);
+                      });
     if (n == 0) {
         start_.assign(2, 0);
         return;
@@ -89,7 +162,7 @@ PointLocator::PointLocator(const Mesh& mesh, const MeshGeometry& geometry)
             std::fill(counts.begin(), counts.end(), 0);
         }
         for (std::int64_t c = 0; c < n; ++c) {
-            range(geometry.boxes[c], i0, i1);
+            range(boxes_[c], i0, i1);
             for (int z = i0[2]; z <= i1[2]; ++z)
                 for (int y = i0[1]; y <= i1[1]; ++y)
                     for (int x = i0[0]; x <= i1[0]; ++x) {
@@ -115,11 +188,13 @@ PointLocator::Hit PointLocator::Locate(const double world[3], EvalWorkspace& ws,
     double best = std::numeric_limits<double>::infinity();
     for (std::int64_t i = start_[k]; i < start_[k + 1]; ++i) {
         const std::int64_t c = items_[i];
-        const Box& b = geometry_.boxes[c];
+        const Box& b = boxes_[c];
         bool inBox = true;
         for (int d = 0; d < 3; ++d) inBox &= world[d] >= b.lo[d] && world[d] <= b.hi[d];
         if (!inBox) continue;
-        const InversionResult r = RefFromWorld(geometry_.cells[c], world, ws, options);
+        CellScratch scratch;
+        const InversionResult r =
+            RefFromWorld(geometry_.Cell(c, scratch), world, ws, options);
         ++hit.inversions;
         if (r.status == InversionStatus::NotConverged || r.status == InversionStatus::Singular)
             ++hit.failures;

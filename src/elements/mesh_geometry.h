@@ -11,24 +11,60 @@
 
 namespace hpray {
 
-/// Geometry of every cell of a mesh. `cells[c].nodes` points into `nodeXyz`, so the
-/// object must not be copied after Build (it is move-only; moving keeps the buffers).
-struct MeshGeometry {
-    std::vector<double> nodeXyz;         ///< x y z per node of each cell, cell by cell
-    std::vector<std::int64_t> offsets;   ///< cell c's nodes start at nodeXyz[3 * offsets[c]]
-    std::vector<CellGeometry> cells;
-    std::vector<Box> boxes;             ///< guaranteed world boxes (Bernstein hull)
-    Box bounds;                         ///< union of the boxes
-    std::int64_t affineCells = 0;
+/// Room for the geometry of one cell derived on request (MeshGeometry::Cell): its
+/// CellGeometry and the node coordinates that CellGeometry::nodes points to.
+struct CellScratch {
+    CellGeometry geometry;
+    double xyz[3 * 4] = {};
+};
 
+/// Geometry of every cell of a mesh. Linear tetrahedra (the bulk of large unstructured
+/// meshes) keep nothing: their four corners are the mesh's points, and their CellGeometry
+/// (the same MakeCellGeometry of the same coordinates, so bitwise the same numbers) and
+/// box are derived when asked, which costs less than reading 400 stored bytes per cell.
+/// Every other cell keeps its gathered node coordinates, CellGeometry and box. Stored
+/// cells' `nodes` point into this object's buffers: it is move-only (moving keeps them).
+class MeshGeometry {
+  public:
     MeshGeometry() = default;
     MeshGeometry(MeshGeometry&&) = default;
     MeshGeometry& operator=(MeshGeometry&&) = default;
     MeshGeometry(const MeshGeometry&) = delete;
     MeshGeometry& operator=(const MeshGeometry&) = delete;
 
-    /// Builds the geometry of every cell (parallel over cells).
+    /// Builds the geometry of every cell (parallel over cells). The mesh is borrowed: it
+    /// must outlive this object and not change.
     static MeshGeometry Build(const Mesh& mesh);
+
+    /// The geometry of cell c: a stored one, or one derived into `scratch` (then valid
+    /// until `scratch` is reused). Thread-safe with a scratch per thread.
+    const CellGeometry& Cell(std::int64_t c, CellScratch& scratch) const {
+        const std::int64_t k = stored_.empty() ? (allStored_ ? c : -1) : stored_[c];
+        return k >= 0 ? cells_[k] : Derive(c, scratch);
+    }
+    /// The basis of cell c.
+    const BasisTable& Basis(std::int64_t c) const;
+    /// A guaranteed world box of cell c (Bernstein hull of its nodes).
+    Box CellBox(std::int64_t c) const;
+
+    Box bounds;  ///< union of the cells' boxes
+    std::int64_t affineCells = 0;
+    std::int64_t derivedCells = 0;  ///< linear tetrahedra, derived on request
+
+    /// Bytes held per the whole mesh.
+    std::size_t Bytes() const;
+
+  private:
+    const CellGeometry& Derive(std::int64_t c, CellScratch& scratch) const;
+
+    const Mesh* mesh_ = nullptr;
+    std::vector<double> nodeXyz_;      ///< x y z per node of each stored cell
+    std::vector<CellGeometry> cells_;  ///< stored cells
+    std::vector<Box> boxes_;           ///< stored cells' boxes
+    /// Cell -> index in cells_, -1 for derived cells; empty when every cell is stored
+    /// (allStored_: index = cell) or none is.
+    std::vector<std::int64_t> stored_;
+    bool allStored_ = false;
 };
 
 /// The nodal values of point-field component `component` (-1: magnitude) of cell c,
@@ -56,6 +92,7 @@ public:
 
 private:
     const MeshGeometry& geometry_;
+    std::vector<Box> boxes_;  ///< of every cell
     std::array<double, 3> lo_{}, cellSize_{};
     std::array<int, 3> dims_{1, 1, 1};
     std::vector<std::int64_t> start_;  ///< CSR over grid cells

@@ -86,7 +86,10 @@ BrickPlan SplitMesh(const Mesh& mesh, const MeshGeometry& geometry, int count,
             items.push_back(x);
         }
     } else {
-        for (const Box& b : geometry.boxes) items.push_back({b.lo, b.hi, 1.0, false, {}});
+        for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+            const Box b = geometry.CellBox(c);
+            items.push_back({b.lo, b.hi, 1.0, false, {}});
+        }
     }
     // Planes snap to node coordinates: exactly where axis-aligned faces lie.
     std::array<std::vector<double>, 3> bounds;

@@ -21,7 +21,7 @@ std::shared_ptr<const std::vector<Interval>> FieldCache::Ranges(const ScalarSele
                               }
                               GatherCellValues(*mesh_, *sel.field, sel.component, c, nodal);
                               (*ranges)[c] =
-                                  FieldBounds(*geometry_->cells[c].basis, nodal.data());
+                                  FieldBounds(geometry_->Basis(c), nodal.data());
                           }
                       });
     ++rangesBuilt_;

@@ -25,10 +25,11 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
                       [&](const tbb::blocked_range<std::int64_t>& range) {
         std::vector<double> nodal, deriv[3];
         EvalWorkspace ws;
+        CellScratch scratch;
         for (std::int64_t c = range.begin(); c < range.end(); ++c) {
             GatherCellValues(mesh, *field.field, field.component, c, nodal);
             std::copy(nodal.begin(), nodal.end(), d.values.begin() + mesh.cellOffsets[c]);
-            const CellGeometry& cell = geometry.cells[c];
+            const CellGeometry& cell = geometry.Cell(c, scratch);
             const BasisTable& basis = *cell.basis;
             if (!cell.affine || !basis.polynomial) continue;
             // Reference derivatives at the nodes: exact nodal interpolants of dF/dref_d.
@@ -102,7 +103,7 @@ bool SegmentField::MayReach(const double* isovalues, int count, double t0, doubl
 
 void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, const Ray& ray,
                                const InversionOptions& inversion) {
-    cell_ = &geometry.cells[c];
+    cell_ = &geometry.Cell(c, cellScratch_);
     ray_ = ray;
     inversion_ = inversion;
     gradBound_ = nullptr;

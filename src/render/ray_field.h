@@ -67,7 +67,8 @@ private:
                      const InversionOptions& inversion);
     void RefAt(double t, double ref[3]);
 
-    const CellGeometry* cell_ = nullptr;
+    const CellGeometry* cell_ = nullptr;  ///< stored, or derived into cellScratch_
+    CellScratch cellScratch_;
     const std::array<double, 3>* gradBound_ = nullptr;
     CellScalar scalar_;
     std::vector<double> nodal_;

@@ -4,6 +4,7 @@
 #include <cerf.h>
 
 #include <algorithm>
+#include <array>
 #include <boost/math/quadrature/gauss.hpp>
 #include <boost/math/quadrature/gauss_kronrod.hpp>
 #include <cmath>
@@ -91,14 +92,22 @@ constexpr int kMaxExpMoment = 2 + 2 * kMaxSlopeTerms;
 /// exp(-alpha x - beta x^2), c_0 = 1, (n + 1) c_{n+1} = -alpha c_n - 2 beta c_{n-1}, so
 /// I_m = sum c_n / (n + m + 1). |c_n| <= 2^n / n!: 30 terms reach 1e-23, and the
 /// alternating sum loses at most a factor e^2 to cancellation.
+/// 1 / k for k = 0..kMaxTaylorTerms + 2 (index 0 unused): the series below multiply by
+/// these instead of dividing (each product is within an ulp of the quotient).
+const std::array<double, kMaxTaylorTerms + 3> kReciprocal = [] {
+    std::array<double, kMaxTaylorTerms + 3> r{};
+    for (int k = 1; k < kMaxTaylorTerms + 3; ++k) r[k] = 1.0 / k;
+    return r;
+}();
+
 void TaylorMoments(double alpha, double beta, double m[3]) {
     double cPrev = 0, c = 1;
     m[0] = m[1] = m[2] = 0;
     for (int n = 0; n < kMaxTaylorTerms; ++n) {
-        m[0] += c / (n + 1);
-        m[1] += c / (n + 2);
-        m[2] += c / (n + 3);
-        const double next = (-alpha * c - 2 * beta * cPrev) / (n + 1);
+        m[0] += c * kReciprocal[n + 1];
+        m[1] += c * kReciprocal[n + 2];
+        m[2] += c * kReciprocal[n + 3];
+        const double next = (-alpha * c - 2 * beta * cPrev) * kReciprocal[n + 1];
         cPrev = c;
         c = next;
         if (std::abs(c) + std::abs(cPrev) <= 1e-19) break;

@@ -215,11 +215,14 @@ TEST(Geometry, InversionInMfemOrderNineSpiral) {
     if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
     const Mesh mesh = ReadMesh(path);
     const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    ASSERT_EQ(geometry.cells.size(), 8u);
+    ASSERT_EQ(mesh.CellCount(), 8);
+    EXPECT_EQ(geometry.derivedCells, 0);
     EvalWorkspace ws;
     std::mt19937_64 rng(99);
     double worst = 0, deviation = 0;
-    for (const CellGeometry& g : geometry.cells) {
+    CellScratch scratch;
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+        const CellGeometry& g = geometry.Cell(c, scratch);
         ASSERT_EQ(g.basis->order, 9);
         deviation = std::max(deviation, g.affineDeviation / g.size);
         ASSERT_GT(MinDetJ(g, rng, ws), 0.0);
@@ -509,6 +512,73 @@ TEST(Bounds, ExactForConstantAndLinearData) {
         EXPECT_NEAR(io.lo, 1e6 + lo, 1e-9) << Name(k);
         EXPECT_NEAR(io.hi, 1e6 + hi, 1e-9) << Name(k);
     }
+}
+
+}  // namespace
+}  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Linear tetrahedra keep no per-cell geometry: what MeshGeometry derives on request is
+// bitwise what MakeCellGeometry and GeometryBox give for the gathered corners, and every
+// other cell (hexes, wedges, pyramids of MFEM's mixed Fichera mesh) is stored as before.
+TEST(Geometry, DerivedLinearTetsEqualStoredGeometry) {
+    const std::string path =
+        std::string(HPRAY_SHARED_DATA) + "/mfem_fichera_mixed16_linear.vtu";
+    if (!std::filesystem::exists(path)) GTEST_SKIP() << "no shared data";
+    const Mesh mesh = ReadMesh(path);
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    std::int64_t tets = 0, affine = 0;
+    CellScratch scratch;
+    Box bounds{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+    for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
+        tets += mesh.cellShape[c] == CellShape::Tet && mesh.cellOrder[c] == 1;
+        const BasisTable& basis = GetBasis(mesh.cellShape[c], mesh.cellOrder[c],
+                                           mesh.cellFamily[c]);
+        ASSERT_EQ(&geometry.Basis(c), &basis);
+        std::vector<double> xyz(3 * basis.nodeCount);
+        for (int m = 0; m < basis.nodeCount; ++m)
+            for (int d = 0; d < 3; ++d)
+                xyz[3 * m + d] = mesh.points[3 * mesh.CellNodes(c)[m] + d];
+        const CellGeometry expected = MakeCellGeometry(basis, xyz.data());
+        const CellGeometry& got = geometry.Cell(c, scratch);
+        EXPECT_EQ(got.basis, expected.basis);
+        EXPECT_EQ(got.affine, expected.affine);
+        EXPECT_EQ(got.linear, expected.linear) << c;
+        EXPECT_EQ(got.origin, expected.origin) << c;
+        EXPECT_EQ(got.inverseLinear, expected.inverseLinear) << c;
+        EXPECT_EQ(got.size, expected.size);
+        for (int k = 0; k < 3 * basis.nodeCount; ++k) ASSERT_EQ(got.nodes[k], xyz[k]);
+        const Box box = geometry.CellBox(c), want = GeometryBox(basis, xyz.data());
+        EXPECT_EQ(box.lo, want.lo);
+        EXPECT_EQ(box.hi, want.hi);
+        affine += got.affine;
+        // The map sends each reference node to its node (to rounding).
+        EvalWorkspace ws;
+        for (int m = 0; m < basis.nodeCount; ++m) {
+            double x[3];
+            WorldFromRef(got, basis.refNodes[m].data(), ws, x, nullptr);
+            for (int d = 0; d < 3; ++d)
+                EXPECT_NEAR(x[d], xyz[3 * m + d], 1e-14 * (1 + got.size)) << c << " " << m;
+        }
+        for (int d = 0; d < 3; ++d) {
+            bounds.lo[d] = std::min(bounds.lo[d], box.lo[d]);
+            bounds.hi[d] = std::max(bounds.hi[d], box.hi[d]);
+        }
+    }
+    EXPECT_GT(tets, 0);
+    EXPECT_LT(tets, mesh.CellCount());  // a mixed mesh
+    EXPECT_EQ(geometry.derivedCells, tets);
+    EXPECT_EQ(geometry.affineCells, affine);
+    EXPECT_EQ(geometry.bounds.lo, bounds.lo);
+    EXPECT_EQ(geometry.bounds.hi, bounds.hi);
+    // Only the other cells take memory.
+    const Mesh cube = ReadMesh("builtin:cube-tets-4");
+    const MeshGeometry allTets = MeshGeometry::Build(cube);
+    EXPECT_EQ(allTets.Bytes(), 0u);
+    EXPECT_EQ(allTets.derivedCells, cube.CellCount());
+    EXPECT_EQ(allTets.affineCells, cube.CellCount());
 }
 
 }  // namespace
