@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Soak test of `hpray serve` (not a timed test): starts the service on 2 ranks on this
-machine's loopback, sends REQUESTS requests (10% malformed) from CLIENTS concurrent
-clients, and reports failures of valid requests, answers to malformed ones, latency, and
+machine's loopback, sends REQUESTS requests (10% malformed; a quarter of the valid ones progressive, whose
+passes the other clients' requests may cancel) from CLIENTS concurrent clients, and reports failures of valid requests, answers to malformed ones, latency, and
 the resident memory of every rank after the first 100 requests and at the end.
 
 Usage: scripts/soak_serve.py [--build build] [--requests 1000] [--clients 4]
@@ -70,8 +70,8 @@ def main():
     client = Client(url, token)
 
     lock = threading.Lock()
-    counts = {"valid": 0, "valid_failed": 0, "malformed": 0, "malformed_400": 0,
-              "malformed_other": 0}
+    counts = {"valid": 0, "valid_failed": 0, "progressive": 0, "progressive_cancelled": 0,
+              "malformed": 0, "malformed_400": 0, "malformed_other": 0}
     latencies = []
     rss = {}
     done = [0]
@@ -105,14 +105,26 @@ def main():
                 if i % 5 == 0:
                     overrides["isosurfaces"] = [{"field": "u", "value": 0.05 * (i % 7)}]
                 t0 = time.time()
+                progressive = i % 4 == 1
                 try:
-                    client.render(overrides)
-                    ok = True
+                    if progressive:
+                        # Passes that a newer request cancels are a correct answer too:
+                        # every delivered pass must be a kept frame with an image.
+                        passes = list(client.render_passes(overrides, passes=(4, 1)))
+                        ok = bool(passes) and all(
+                            client.frame_file(p["frame"], "image.png")[1:4] == b"PNG"
+                            for p in passes)
+                        cancelled = bool(passes) and not passes[-1]["final"]
+                    else:
+                        client.render(overrides)
+                        ok, cancelled = True, False
                 except (ServiceError, OSError):
-                    ok = False
+                    ok, cancelled = False, False
                 with lock:
                     counts["valid"] += 1
                     counts["valid_failed"] += 0 if ok else 1
+                    counts["progressive"] += progressive
+                    counts["progressive_cancelled"] += progressive and cancelled
                     latencies.append(time.time() - t0)
             with lock:
                 done[0] += 1

@@ -557,7 +557,9 @@ int RunServe(const ServeArgs& args) {
         }
         // Progressive: the passes coarsest first, each a frame of the same view at 1/s of
         // the width and height. A newer request, a client that left or the end of the
-        // service cancels the passes still to come and the one under way, on every rank.
+        // service cancels the passes still to come and the one under way, on every rank;
+        // the first (coarse, cheap) pass is always delivered, so a client gets a picture
+        // even when requests keep arriving.
         const std::function<bool()> superseded = [&queue, command] {
             return queue.Waiting() || command->abandoned.load() || gStop.load();
         };
@@ -565,7 +567,7 @@ int RunServe(const ServeArgs& args) {
         int lastId = 0;
         const int n = static_cast<int>(command->passes.size());
         for (int k = 0; k < n && !cancelled; ++k) {
-            if (superseded()) {
+            if (k > 0 && superseded()) {
                 cancelled = true;
                 break;
             }
@@ -577,7 +579,8 @@ int RunServe(const ServeArgs& args) {
                 overrides.push_back("camera.height=" + std::to_string(h));
             }
             try {
-                const auto [id, stats] = renderFrame(overrides, superseded);
+                const auto [id, stats] =
+                    renderFrame(overrides, k > 0 ? superseded : std::function<bool()>());
                 if (id == 0) {
                     cancelled = true;
                     break;

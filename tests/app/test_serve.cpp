@@ -258,6 +258,13 @@ struct EventStream {
     }
 };
 
+/// The events received, for failure messages.
+std::string Dump(const EventStream& stream) {
+    std::string out;
+    for (const auto& [event, data] : stream.events) out += event + " " + data.dump() + "\n";
+    return out + "(pending: " + stream.pending + ")";
+}
+
 httplib::Result PostStream(httplib::Client& client, const std::string& path,
                            const std::string& body, EventStream& stream) {
     httplib::Request req;
@@ -350,7 +357,7 @@ void ExerciseProgressive(const std::string& mesh, const std::string& tag) {
         ASSERT_TRUE(r);
         ASSERT_EQ(r->status, 200);
         EXPECT_EQ(r->get_header_value("Content-Type"), "text/event-stream");
-        ASSERT_EQ(stream.events.size(), 3u) << stream.pending;
+        ASSERT_EQ(stream.events.size(), 3u) << Dump(stream);
         const json& coarse = stream.events[0].second;
         const json& fine = stream.events[1].second;
         EXPECT_EQ(stream.events[0].first, "pass");
@@ -391,11 +398,11 @@ void ExerciseProgressive(const std::string& mesh, const std::string& tag) {
         ASSERT_TRUE(r);
         ASSERT_TRUE(newer && *newer);
         EXPECT_EQ((*newer)->status, 200);
-        ASSERT_EQ(stream.events.size(), 2u);
+        ASSERT_EQ(stream.events.size(), 2u) << Dump(stream);
         EXPECT_EQ(stream.events[0].first, "pass");
         EXPECT_EQ(stream.events[0].second["final"], false);
         EXPECT_EQ(stream.events[1].first, "end");
-        EXPECT_EQ(stream.events[1].second["cancelled"], true);
+        EXPECT_EQ(stream.events[1].second["cancelled"], true) << Dump(stream);
         // The newer frame took the next id: the cancelled pass kept none.
         EXPECT_EQ(json::parse((*newer)->body)["frame"].get<int>(),
                   stream.events[0].second["frame"].get<int>() + 1);
@@ -410,7 +417,7 @@ void ExerciseProgressive(const std::string& mesh, const std::string& tag) {
             return false;  // leave
         };
         PostStream(client, "/api/render?progressive=1&passes=64,1", slow.dump(), stream);
-        ASSERT_EQ(stream.events.size(), 1u);
+        ASSERT_EQ(stream.events.size(), 1u) << Dump(stream);
     }
     httplib::Client after("127.0.0.1", service.Port());
     after.set_read_timeout(300, 0);
