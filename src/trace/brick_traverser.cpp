@@ -9,6 +9,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -340,6 +341,29 @@ void BrickTraverser::Impl::BuildTopology() {
     // 2. Corners (merged ids) and orientation of each cell.
     std::vector<std::int32_t> corners(8 * nCells, -1);
     std::vector<std::int8_t> orient(nCells, 1);
+    // The internal node index of each corner, per (shape, order, family) present.
+    const auto slotOf = [&](std::int64_t c) {
+        return (static_cast<int>(mesh.cellShape[c]) * (kMaxOrder + 1) + mesh.cellOrder[c]) * 2 +
+               static_cast<int>(mesh.cellFamily[c]);
+    };
+    std::vector<std::array<int, 8>> cornerLocal(kNumCellShapes * (kMaxOrder + 1) * 2);
+    {
+        std::vector<char> seen(cornerLocal.size(), 0);
+        for (std::int64_t c = 0; c < nCells; ++c) {
+            const int slot = slotOf(c);
+            if (seen[slot]) continue;
+            seen[slot] = 1;
+            const CellTopology& s = Topology(mesh.cellShape[c]);
+            const int p = mesh.cellOrder[c];
+            for (int k = 0; k < s.corners; ++k) {
+                const LatticeIndex ijk = {s.lattice[k][0] * p, s.lattice[k][1] * p,
+                                          s.lattice[k][2] * p};
+                cornerLocal[slot][k] =
+                    InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], ijk);
+                HPRAY_CHECK(cornerLocal[slot][k] >= 0);
+            }
+        }
+    }
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, nCells, 4096),
         [&](const tbb::blocked_range<std::int64_t>& range) {
@@ -348,14 +372,9 @@ void BrickTraverser::Impl::BuildTopology() {
                 const CellTopology& s = Topology(mesh.cellShape[c]);
                 const int p = mesh.cellOrder[c];
                 const std::int64_t* nodes = mesh.CellNodes(c);
-                for (int k = 0; k < s.corners; ++k) {
-                    const LatticeIndex ijk = {s.lattice[k][0] * p, s.lattice[k][1] * p,
-                                              s.lattice[k][2] * p};
-                    const int local =
-                        InternalNodeIndex(mesh.cellShape[c], p, mesh.cellFamily[c], ijk);
-                    HPRAY_CHECK(local >= 0);
-                    corners[8 * c + k] = mergedOf[nodes[local]];
-                }
+                const std::array<int, 8>& local = cornerLocal[slotOf(c)];
+                for (int k = 0; k < s.corners; ++k)
+                    corners[8 * c + k] = mergedOf[nodes[local[k]]];
                 // Signed volume of the corner polyhedron (faces fanned from their first
                 // corner).
                 const double* o = &xyz[3 * std::size_t(corners[8 * c])];
@@ -437,24 +456,46 @@ void BrickTraverser::Impl::BuildTopology() {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }
         };
-        std::vector<std::int64_t> bucket(nMerged + 1, 0);
-        std::int32_t key[4];
-        for (std::int64_t c = 0; c < nCells; ++c) {
-            const CellTopology& s = Topology(mesh.cellShape[c]);
-            for (int f = 0; f < s.faces; ++f) {
-                const int n = sortedKey(c, f, key);
-                if (std::adjacent_find(key, key + n) != key + n) {
-                    nbCell[6 * c + f] = kDegenerate;
-                    continue;
+        // A parallel counting sort by smallest corner: the cells in kChunks ranges, each
+        // with its own histogram; a chunk's keys of one bucket follow the previous
+        // chunk's, so the order within a bucket is by cell, as a sequential fill gives.
+        constexpr int kChunks = 8;
+        const std::int64_t chunkCells = (nCells + kChunks - 1) / kChunks;
+        std::vector<std::vector<std::int64_t>> count(kChunks);
+        tbb::parallel_for(0, kChunks, [&](int k) {
+            std::vector<std::int64_t>& h = count[k];
+            h.assign(nMerged, 0);
+            std::int32_t key[4];
+            const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+            for (std::int64_t c = k * chunkCells; c < end; ++c) {
+                const CellTopology& s = Topology(mesh.cellShape[c]);
+                for (int f = 0; f < s.faces; ++f) {
+                    const int n = sortedKey(c, f, key);
+                    if (std::adjacent_find(key, key + n) != key + n) {
+                        nbCell[6 * c + f] = kDegenerate;
+                        continue;
+                    }
+                    ++h[key[0]];
                 }
-                ++bucket[key[0] + 1];
             }
+        });
+        // bucket[v]: where corner v's keys start; count[k][v] becomes chunk k's start.
+        std::vector<std::int64_t> bucket(nMerged + 1, 0);
+        for (std::int64_t v = 0; v < nMerged; ++v) {
+            std::int64_t at = bucket[v];
+            for (int k = 0; k < kChunks; ++k) {
+                const std::int64_t n = count[k][v];
+                count[k][v] = at;
+                at += n;
+            }
+            bucket[v + 1] = at;
         }
-        std::partial_sum(bucket.begin(), bucket.end(), bucket.begin());
         std::vector<FaceKey> keys(bucket.back());
-        {
-            std::vector<std::int64_t> fill(bucket.begin(), bucket.end() - 1);
-            for (std::int64_t c = 0; c < nCells; ++c) {
+        tbb::parallel_for(0, kChunks, [&](int k) {
+            std::vector<std::int64_t>& fill = count[k];
+            std::int32_t key[4];
+            const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+            for (std::int64_t c = k * chunkCells; c < end; ++c) {
                 const CellTopology& s = Topology(mesh.cellShape[c]);
                 for (int f = 0; f < s.faces; ++f) {
                     if (nbCell[6 * c + f] == kDegenerate) continue;
@@ -467,7 +508,9 @@ void BrickTraverser::Impl::BuildTopology() {
                     fk.face = std::int8_t(f);
                 }
             }
-        }
+        });
+        count.clear();
+        count.shrink_to_fit();
         tbb::parallel_for(
             tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
             [&](const tbb::blocked_range<std::int64_t>& range) {
