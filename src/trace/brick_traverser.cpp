@@ -270,7 +270,15 @@ struct BrickTraverser::Impl {
     }
 
     void Build();
+    // BuildTopology's phases, in order; each hands its results to the next in `t`.
+    struct TopologyBuild;
     void BuildTopology();
+    void MergeCellPoints(TopologyBuild& t);
+    void FindCellCorners(TopologyBuild& t);
+    void MatchFaces(TopologyBuild& t);
+    void NumberFaces(TopologyBuild& t);
+    void BuildFaceRecords(TopologyBuild& t);
+    void CollectBoundary(TopologyBuild& t);
     void BuildScene();
 
     const double* P(std::int32_t id) const {
@@ -298,6 +306,23 @@ struct BrickTraverser::Impl {
 // ---------------------------------------------------------------------------------------
 // Build
 
+namespace {
+constexpr const char* kSource = "mesh";
+// nbCell entries other than a neighbour's index.
+constexpr std::int32_t kNone = -1, kDegenerate = -2;
+}  // namespace
+
+/// What the phases of BuildTopology hand to each other; freed when it returns.
+struct BrickTraverser::Impl::TopologyBuild {
+    double diag = 0;                       ///< diagonal of the mesh's point bounds
+    std::vector<std::int32_t> mergedOf;    ///< point -> merged id
+    std::vector<std::int32_t> corners;     ///< 8 per cell: merged ids of its corners
+    std::vector<std::int8_t> orient;       ///< per cell: +1, or -1 for a mirrored cell
+    std::vector<std::int32_t> nbCell;      ///< 6 per cell: neighbour, kNone, kDegenerate
+    std::vector<std::int8_t> nbFace;       ///< 6 per cell: the neighbour's face
+    std::int64_t nFaces = 0;
+};
+
 void BrickTraverser::Impl::Build() {
     const double t0 = Now();
     BuildTopology();
@@ -321,26 +346,41 @@ void BrickTraverser::Impl::Build() {
 
 void BrickTraverser::Impl::BuildTopology() {
     const Mesh& mesh = *brick.mesh;
-    const std::int64_t nCells = mesh.CellCount();
-    const char* kSource = "mesh";
-    stats.cells = nCells;
+    stats.cells = mesh.CellCount();
     stats.points = mesh.PointCount();
-    const auto bounds = mesh.Bounds();
-    double diag = 0;
-    if (mesh.PointCount() > 0)
-        diag = bounds.Diagonal();
+    TopologyBuild t;
+    if (mesh.PointCount() > 0) t.diag = mesh.Bounds().Diagonal();
+    MergeCellPoints(t);
+    FindCellCorners(t);
+    MatchFaces(t);
+    NumberFaces(t);
+    BuildFaceRecords(t);
+    CollectBoundary(t);
+}
 
+// 1. Coincident points: one merged id per distinct position.
+void BrickTraverser::Impl::MergeCellPoints(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    auto& mergedOf = t.mergedOf;
+    const double diag = t.diag;
     // 1. Coincident points.
-    std::vector<std::int32_t> mergedOf;
     if (mesh.PointCount() >= std::numeric_limits<std::int32_t>::max())
         throw InputError(kSource, "", "more than 2^31 - 1 points in one brick");
     MergePoints(mesh.points, options.mergeTolerance * diag, diag, mergedOf, xyz);
-    const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
-    stats.mergedPoints = nMerged;
+    stats.mergedPoints = static_cast<std::int64_t>(xyz.size() / 3);
 
+}
+
+// 2. Each cell's corners as merged ids, and its orientation.
+void BrickTraverser::Impl::FindCellCorners(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nCells = mesh.CellCount();
+    const auto& mergedOf = t.mergedOf;
+    auto& corners = t.corners;
+    auto& orient = t.orient;
     // 2. Corners (merged ids) and orientation of each cell.
-    std::vector<std::int32_t> corners(8 * nCells, -1);
-    std::vector<std::int8_t> orient(nCells, 1);
+    corners.assign(8 * nCells, -1);
+    orient.assign(nCells, 1);
     // The internal node index of each corner, per (shape, order, family) present.
     const auto slotOf = [&](std::int64_t c) {
         return (static_cast<int>(mesh.cellShape[c]) * (kMaxOrder + 1) + mesh.cellOrder[c]) * 2 +
@@ -422,6 +462,16 @@ void BrickTraverser::Impl::BuildTopology() {
             }
         });
 
+}
+
+// 3-4. Each cell face's neighbour, by matching corner sets.
+void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nCells = mesh.CellCount();
+    const auto& corners = t.corners;
+    auto& nbCell = t.nbCell;
+    auto& nbFace = t.nbFace;
+    const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
     // 3-4. The neighbour across each cell face: the other cell with the same corner set.
     // Faces are bucketed by their smallest merged corner (a counting sort), each bucket
     // is sorted by the remaining corners, and equal neighbours in a bucket are the two
@@ -435,9 +485,8 @@ void BrickTraverser::Impl::BuildTopology() {
                 std::swap(key[q], key[q - 1]);
         return n;
     };
-    constexpr std::int32_t kNone = -1, kDegenerate = -2;
-    std::vector<std::int32_t> nbCell(6 * nCells, kNone);
-    std::vector<std::int8_t> nbFace(6 * nCells, -1);
+    nbCell.assign(6 * nCells, kNone);
+    nbFace.assign(6 * nCells, -1);
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
     {
         // A face after its smallest corner: the other corners (a triangle's fourth is -1,
@@ -544,12 +593,21 @@ void BrickTraverser::Impl::BuildTopology() {
         throw InputError(kSource, where.str(), "a face is shared by more than two cells");
     }
 
+}
+
+// 5. One id per face.
+void BrickTraverser::Impl::NumberFaces(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nCells = mesh.CellCount();
+    const auto& nbCell = t.nbCell;
+    const auto& nbFace = t.nbFace;
+    std::int64_t& nFaces = t.nFaces;
     // 5. Face ids: a face belongs to the lower-numbered of its cells.
     cellFaceOffset.assign(nCells + 1, 0);
     for (std::int64_t c = 0; c < nCells; ++c)
         cellFaceOffset[c + 1] = cellFaceOffset[c] + Topology(mesh.cellShape[c]).faces;
     cellFaces.assign(cellFaceOffset.back(), -1);
-    std::int64_t nFaces = 0;
+    nFaces = 0;
     for (std::int64_t c = 0; c < nCells; ++c) {
         const int nf = Topology(mesh.cellShape[c]).faces;
         for (int f = 0; f < nf; ++f) {
@@ -570,6 +628,18 @@ void BrickTraverser::Impl::BuildTopology() {
         }
     }
 
+}
+
+// 6. The canonical record of every face and its geometry.
+void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nCells = mesh.CellCount();
+    const auto& corners = t.corners;
+    const auto& orient = t.orient;
+    const auto& nbCell = t.nbCell;
+    const auto& nbFace = t.nbFace;
+    const std::int64_t nFaces = t.nFaces;
+    const auto& mergedOf = t.mergedOf;
     // 6. Canonical face records and their geometry.
     faces.assign(nFaces, FaceRec{});
     const auto byPosition = [this](std::int32_t a, std::int32_t b) {
@@ -903,6 +973,14 @@ void BrickTraverser::Impl::BuildTopology() {
         throw InputError(kSource, where.str(),
                          "cells overlap (they lie on the same side of their shared face)");
     }
+}
+
+// 7. Boundary faces, their boxes and the padded query box of the Embree scene.
+void BrickTraverser::Impl::CollectBoundary(TopologyBuild& t) {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t nFaces = t.nFaces;
+    const double diag = t.diag;
+    const auto bounds = mesh.Bounds();
     // Grown face by face: give back the doubling slack.
     xyz.shrink_to_fit();
     curved.shrink_to_fit();
@@ -955,6 +1033,7 @@ void BrickTraverser::Impl::BuildTopology() {
         }
     }
 }
+
 
 void BrickTraverser::Impl::Tessellation(
     std::int32_t f, std::vector<std::array<std::int32_t, 3>>& tris) const {
