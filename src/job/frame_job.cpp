@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <set>
 #include <thread>
@@ -323,6 +324,22 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     setupStats_.timing.load = Seconds(t0);
     if (whole_)
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
+    FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
+}
+
+Box FrameJob::DataBounds() const {
+    if (prepared_) return prepared_->Geometry().bounds;
+    Box box;
+    for (int d = 0; d < 3; ++d) {
+        box.lo[d] = std::numeric_limits<double>::infinity();
+        box.hi[d] = -box.lo[d];
+    }
+    for (const Box& b : partitionPlan_.boxes)
+        for (int d = 0; d < 3; ++d) {
+            box.lo[d] = std::min(box.lo[d], b.lo[d]);
+            box.hi[d] = std::max(box.hi[d], b.hi[d]);
+        }
+    return box;
 }
 
 FrameJob::~FrameJob() {
@@ -396,6 +413,7 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
         throw InputError(frameScene.data.mesh, "",
                          "a job renders the data it loaded (" + scene_.data.mesh + ")");
     Scene scene = frameScene;
+    FitCamera(scene.camera, DataBounds(), scene.clip.box);
     scene.threads = scene_.threads;
     scene.distribute = scene_.distribute;
     if (change == Change::Scene) {

@@ -70,6 +70,9 @@ class FrameJob {
 
     Split Distribution() const { return split_; }
     const Scene& GetScene() const { return scene_; }
+    /// The guaranteed bounds of the data (the whole mesh's cells, or the partition's
+    /// bricks): what an automatic camera fits (scene/camera.h: FitCamera).
+    Box DataBounds() const;
     /// The whole mesh every rank holds (nullptr for a partition directory).
     const Mesh* WholeMesh() const { return whole_ ? &*whole_ : nullptr; }
     /// The partition's manifest (nullptr for a mesh).

@@ -76,6 +76,12 @@ RenderStats StartStats(const Scene& scene) {
     stats.threads = scene.threads > 0 ? scene.threads : tbb::info::default_concurrency();
     stats.width = scene.camera.width;
     stats.height = scene.camera.height;
+    stats.cameraPosition = scene.camera.position;
+    stats.cameraLookAt = scene.camera.lookAt;
+    stats.cameraUp = scene.camera.up;
+    stats.cameraOrthographic = scene.camera.orthographic;
+    stats.cameraFovY = scene.camera.fovYDegrees;
+    stats.cameraOrthoHeight = scene.camera.orthoHeight;
     stats.isoFieldRange = {std::numeric_limits<double>::infinity(),
                            -std::numeric_limits<double>::infinity()};
     return stats;
@@ -270,9 +276,11 @@ void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats)
     if (!out.stats.empty()) WriteStats(out.stats, stats);
 }
 
-Image RenderMeshJob(const Mesh& mesh, const Scene& scene, RenderStats& stats,
+Image RenderMeshJob(const Mesh& mesh, const Scene& sceneIn, RenderStats& stats,
                     double loadSeconds) {
     const auto start = std::chrono::steady_clock::now();
+    Scene scene = sceneIn;
+    FitCamera(scene.camera, MeshGeometry::Build(mesh).bounds, scene.clip.box);
     stats = StartStats(scene);
     stats.timing.load = loadSeconds;
     stats.bricksLoaded = stats.bricksTotal = 1;

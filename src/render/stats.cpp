@@ -79,6 +79,12 @@ std::string StatsToJson(const RenderStats& s) {
     j["ranks"] = s.ranks;
     j["threads"] = s.threads;
     j["image"] = {s.width, s.height};
+    j["camera"] = {{"position", s.cameraPosition}, {"look_at", s.cameraLookAt},
+                   {"up", s.cameraUp}, {"width", s.width}, {"height", s.height}};
+    if (s.cameraOrthographic)
+        j["camera"]["ortho_height"] = s.cameraOrthoHeight;
+    else
+        j["camera"]["fov_y"] = s.cameraFovY;
     j["timing_s"] = {{"load", s.timing.load},           {"accel", s.timing.accel},
                      {"render", s.timing.render},       {"composite", s.timing.composite},
                      {"write", s.timing.write},         {"total", s.timing.total}};

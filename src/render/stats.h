@@ -77,6 +77,11 @@ struct RenderStats {
     std::string distribute;  ///< on several ranks: "space" or "image" (scene.h: Distribution)
     int threads = 1;
     int width = 0, height = 0;
+    /// The camera the frame was rendered with (an automatic one as placed), so that it
+    /// can be reused: position, look_at, up, and fov_y or ortho_height.
+    std::array<double, 3> cameraPosition{0, 0, 0}, cameraLookAt{0, 0, 0}, cameraUp{0, 1, 0};
+    bool cameraOrthographic = false;
+    double cameraFovY = 0, cameraOrthoHeight = 0;
     PhaseTimes timing;
     RenderCounters counters;
     CompositeStats composite;

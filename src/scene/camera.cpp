@@ -1,6 +1,7 @@
 // Primary ray generation for perspective and orthographic cameras.
 #include "scene/camera.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "util/check.h"
@@ -74,6 +75,89 @@ ViewOrigin ViewOriginOf(const SceneCamera& camera) {
     return ViewOrigin::Orthographic({camera.lookAt[0] - camera.position[0],
                                      camera.lookAt[1] - camera.position[1],
                                      camera.lookAt[2] - camera.position[2]});
+}
+
+void FitCamera(SceneCamera& camera, const Box& bounds, const std::optional<Box>& clip) {
+    if (!camera.autoFit) return;
+    using V = std::array<double, 3>;
+    auto dot = [](const V& a, const V& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
+    auto cross = [](const V& a, const V& b) {
+        return V{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    };
+    auto unit = [&](V a) {
+        const double n = std::sqrt(dot(a, a));
+        for (double& x : a) x /= n;
+        return a;
+    };
+    Box box = bounds;
+    if (clip) {
+        const Box cut = bounds.Intersect(*clip);
+        if (!cut.IsEmpty()) box = cut;
+    }
+    V lo = box.lo, hi = box.hi;
+    for (int d = 0; d < 3; ++d)
+        if (!(lo[d] <= hi[d]) || !std::isfinite(lo[d]) || !std::isfinite(hi[d])) lo[d] = hi[d] = 0;
+    V centre;
+    for (int d = 0; d < 3; ++d) centre[d] = 0.5 * (lo[d] + hi[d]);
+    if (camera.lookAtGiven) centre = camera.lookAt;
+    // The sphere about the centre that holds the whole box.
+    double radius = 0;
+    for (int q = 0; q < 8; ++q) {
+        V corner;
+        for (int d = 0; d < 3; ++d) corner[d] = ((q >> d) & 1 ? hi[d] : lo[d]) - centre[d];
+        radius = std::max(radius, std::sqrt(dot(corner, corner)));
+    }
+    if (!(radius > 0)) radius = 1;
+
+    V eye = {1, 1, 1};
+    V up = {0, 1, 0};
+    const std::string& v = camera.view;
+    if (v == "+x") eye = {1, 0, 0};
+    if (v == "-x") eye = {-1, 0, 0};
+    if (v == "+y") eye = {0, 1, 0}, up = {0, 0, -1};
+    if (v == "-y") eye = {0, -1, 0}, up = {0, 0, 1};
+    if (v == "+z") eye = {0, 0, 1};
+    if (v == "-z") eye = {0, 0, -1};
+    if (camera.upGiven) up = camera.up;
+    eye = unit(eye);
+    up = unit(up);
+    // Azimuth: about up (right-handed); elevation: toward up, never past the pole.
+    const double az = camera.azimuthDegrees * M_PI / 180;
+    const V side = cross(up, eye);
+    const double along = dot(eye, up);
+    V flat;  // eye's part across up
+    for (int d = 0; d < 3; ++d) flat[d] = eye[d] - along * up[d];
+    for (int d = 0; d < 3; ++d)
+        eye[d] = along * up[d] + std::cos(az) * flat[d] + std::sin(az) * side[d];
+    double elevation = std::asin(std::clamp(dot(unit(eye), up), -1.0, 1.0)) +
+                       camera.elevationDegrees * M_PI / 180;
+    elevation = std::clamp(elevation, -89.0 * M_PI / 180, 89.0 * M_PI / 180);
+    V across;
+    for (int d = 0; d < 3; ++d) across[d] = eye[d] - dot(eye, up) * up[d];
+    const double acrossLength = std::sqrt(dot(across, across));
+    if (acrossLength > 1e-12) {
+        for (int d = 0; d < 3; ++d)
+            eye[d] = std::cos(elevation) * across[d] / acrossLength + std::sin(elevation) * up[d];
+    } else {
+        // Looking along up (a given up parallel to the view): any side will do.
+        up = std::fabs(eye[1]) < 0.9 ? V{0, 1, 0} : V{1, 0, 0};
+    }
+    eye = unit(eye);
+
+    const double aspect = double(camera.width) / camera.height;
+    double distance;
+    if (camera.orthographic) {
+        camera.orthoHeight /= camera.zoom;
+        distance = 2 * radius;
+    } else {
+        const double halfY = 0.5 * camera.fovYDegrees * M_PI / 180;
+        const double halfX = std::atan(std::tan(halfY) * aspect);
+        distance = radius / std::sin(std::min(halfX, halfY)) / camera.zoom;
+    }
+    for (int d = 0; d < 3; ++d) camera.position[d] = centre[d] + distance * eye[d];
+    camera.lookAt = centre;
+    camera.up = up;
+    camera.autoFit = false;  // placed: an ordinary camera from here on
 }
 
 }  // namespace hpray

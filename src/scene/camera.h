@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 
 #include "geom/kd_tree.h"
 #include "scene/scene.h"
@@ -58,5 +59,16 @@ class Camera {
 /// What orders k-d leaves front to back for this camera: its position (perspective), or
 /// look_at - position (orthographic, the ray direction).
 ViewOrigin ViewOriginOf(const SceneCamera& camera);
+
+/// Places an automatic camera (SceneCamera::autoFit; `camera: auto`) for data whose
+/// guaranteed bounds are `bounds`, seen through `clip` when the scene has a clip box
+/// (their intersection is what is fitted): look_at is the box's centre (or the given
+/// look_at), the eye is on the side `view` names (iso: along (1, 1, 1)), turned by
+/// `azimuth` about `up` and raised by `elevation` toward it, and so far away that the
+/// sphere around the box fits the image's smaller field of view, divided by `zoom`
+/// (orthographic cameras keep that distance; their ortho_height is the given one over
+/// `zoom`). Without a given up: +y, or -z and +z for views from +y and -y. The camera is
+/// then an ordinary one (autoFit false). Does nothing to a camera that is not automatic.
+void FitCamera(SceneCamera& camera, const Box& bounds, const std::optional<Box>& clip);
 
 }  // namespace hpray

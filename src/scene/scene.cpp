@@ -63,7 +63,7 @@ const SchemaNode& Schema() {
         r.children = {
             MapOf("data", {"mesh"}),
             MapOf("camera", {"position", "look_at", "up", "fov_y", "ortho_height",
-                             "width", "height"}),
+                             "width", "height", "view", "zoom", "azimuth", "elevation"}),
             ListOf("isosurfaces", MapOf("#", {"field", "value", "color", "opacity"})),
             ListOf("slices",
                    MapOf("#", {"point", "normal", "field", "color_tf", "opacity"})),
@@ -276,6 +276,7 @@ void SceneParser::CountNodes(const YAML::Node& node, std::size_t& count) const {
 void SceneParser::CheckKeys(const YAML::Node& node, const SchemaNode& schema,
                             const std::string& path) const {
     if (node.IsNull()) return;  // an empty section: all defaults
+    if (path == "camera" && node.IsScalar() && node.Scalar() == "auto") return;
     if (schema.kind == SchemaNode::Kind::Map) {
         if (!node.IsMap())
             Fail(path, node, "expected a mapping of keys, got " + Describe(node));
@@ -591,9 +592,34 @@ void SceneParser::ReadCamera(const YAML::Node& root, Scene& scene) const {
     const YAML::Node cam = Get(root, "camera");
     SceneCamera& c = scene.camera;
     const std::string p = "camera";
+    // No position (or `camera: auto`): fitted to the data's bounds once they are known.
+    c.autoFit = !Has(cam, "position");
     if (Has(cam, "position")) c.position = Vector(Get(cam, "position"), p + ".position");
+    c.lookAtGiven = Has(cam, "look_at");
+    c.upGiven = Has(cam, "up");
     if (Has(cam, "look_at")) c.lookAt = Vector(Get(cam, "look_at"), p + ".look_at");
     if (Has(cam, "up")) c.up = Vector(Get(cam, "up"), p + ".up");
+    for (const char* key : {"view", "zoom", "azimuth", "elevation"})
+        if (Has(cam, key) && !c.autoFit)
+            Fail(p + "." + key, Get(cam, key),
+                 std::string(key) + " places an automatic camera; it cannot be combined "
+                 "with camera.position (remove one of them)");
+    if (Has(cam, "view")) {
+        const YAML::Node n = Get(cam, "view");
+        c.view = String(n, p + ".view");
+        static const std::vector<std::string> views = {"iso", "+x", "-x", "+y",
+                                                       "-y",  "+z", "-z"};
+        if (std::find(views.begin(), views.end(), c.view) == views.end())
+            Fail(p + ".view", n,
+                 "must be one of iso, +x, -x, +y, -y, +z, -z (the side the eye is on), got '" +
+                     c.view + "'");
+    }
+    if (Has(cam, "zoom")) c.zoom = Positive(Get(cam, "zoom"), p + ".zoom");
+    if (Has(cam, "azimuth"))
+        c.azimuthDegrees = Number(Get(cam, "azimuth"), p + ".azimuth");
+    if (Has(cam, "elevation"))
+        c.elevationDegrees =
+            InRange(Get(cam, "elevation"), p + ".elevation", -90.0, 90.0, true, true);
     for (const char* key : {"width", "height"}) {
         if (!Has(cam, key)) continue;
         const YAML::Node n = Get(cam, key);
@@ -612,6 +638,14 @@ void SceneParser::ReadCamera(const YAML::Node& root, Scene& scene) const {
         c.orthoHeight = Positive(Get(cam, "ortho_height"), p + ".ortho_height");
     }
 
+    if (c.autoFit) {
+        // FitCamera builds a valid frame; only a given up must be usable.
+        const double upLength =
+            std::sqrt(c.up[0] * c.up[0] + c.up[1] * c.up[1] + c.up[2] * c.up[2]);
+        if (!(upLength > 0.0) || !std::isfinite(upLength))
+            Fail(p + ".up", Get(cam, "up"), "up must be a non-zero vector");
+        return;
+    }
     // Degenerate frames: the basis of camera.h would divide by zero.
     const Vec3 d = {c.lookAt[0] - c.position[0], c.lookAt[1] - c.position[1],
                     c.lookAt[2] - c.position[2]};

@@ -35,6 +35,16 @@ struct SceneCamera {
     double orthoHeight = 0.0;   ///< world height of the view, > 0; orthographic only
     int width = 512;            ///< pixels, in [1, 32768]
     int height = 512;           ///< pixels, in [1, 32768]
+
+    /// `camera: auto`, or a camera without `position`: FitCamera sets position and
+    /// look_at (and up, unless given) from the data's bounds before rendering.
+    bool autoFit = false;
+    std::string view = "iso";  ///< the side the eye is on: iso, +x, -x, +y, -y, +z, -z
+    double zoom = 1.0;         ///< > 0; 2 halves the distance (or the ortho height)
+    double azimuthDegrees = 0.0;    ///< turns the eye about `up` through look_at
+    double elevationDegrees = 0.0;  ///< raises the eye toward `up`, in (-90, 90)
+    bool lookAtGiven = false;       ///< auto: look at this point instead of the centre
+    bool upGiven = false;
 };
 
 /// One entry of `isosurfaces:`. `value` is required.

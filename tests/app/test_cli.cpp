@@ -14,6 +14,8 @@
 #include <string>
 #include <sys/wait.h>
 
+#include "io/image.h"
+
 namespace {
 
 struct RunResult {
@@ -134,6 +136,54 @@ TEST(Cli, WarningsForSuspiciousResultsAndStrict) {
                  " --set output.stats=null");
     EXPECT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(r.out.find("warning"), std::string::npos) << r.out;
+    fs::remove_all(dir);
+}
+
+// A scene without a camera position is fitted to the data: the picture shows the data,
+// the stats give the camera it used, and rendering with that camera written out gives the
+// same image (what a user copies into a scene to keep the view).
+TEST(Cli, AutomaticCameraIsReportedAndReusable) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_auto_camera";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path scene = dir / "auto.yaml";
+    {
+        std::ofstream out(scene);
+        out << "data: {mesh: builtin:ball-p2}\n"
+               "camera: {width: 40, height: 32, view: -z, azimuth: 20, elevation: 15}\n"
+               "isosurfaces: [{field: u, value: 0.5}]\n";
+    }
+    const std::string common = " --set output.exr=null --set output.png=null";
+    RunResult r = RunHpray("render " + scene.string() + common + " --set output.stats=" +
+                           (dir / "a.json").string() + " --set output.rgba=" +
+                           (dir / "a.npy").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::ifstream in(dir / "a.json");
+    const nlohmann::json cam = nlohmann::json::parse(in)["camera"];
+    ASSERT_TRUE(cam.contains("position")) << cam;
+    // -z side: the eye is below z = -1 (the ball's box is [-1, 1]^3), looking at 0.
+    EXPECT_LT(cam["position"][2].get<double>(), -1.0) << cam;
+    for (int d = 0; d < 3; ++d) EXPECT_NEAR(cam["look_at"][d].get<double>(), 0.0, 1e-12);
+    auto vec = [](const nlohmann::json& v) {
+        return "[" + v[0].dump() + "," + v[1].dump() + "," + v[2].dump() + "]";
+    };
+    r = RunHpray("render " + scene.string() + common + " --set output.stats=null" +
+                 " --set camera.view=null --set camera.azimuth=null --set camera.elevation=null" +
+                 " --set camera.position=" + vec(cam["position"]) +
+                 " --set camera.look_at=" + vec(cam["look_at"]) + " --set camera.up=" +
+                 vec(cam["up"]) + " --set camera.fov_y=" + cam["fov_y"].dump() +
+                 " --set output.rgba=" + (dir / "b.npy").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::vector<std::size_t> shape;
+    const std::vector<double> a = hpray::ReadNpy((dir / "a.npy").string(), shape);
+    const std::vector<double> b = hpray::ReadNpy((dir / "b.npy").string(), shape);
+    ASSERT_EQ(a.size(), b.size());
+    double worst = 0, alpha = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, std::abs(a[i] - b[i]));
+    for (std::size_t i = 3; i < a.size(); i += 4) alpha = std::max(alpha, a[i]);
+    EXPECT_LE(worst, 1e-9);  // the JSON's decimal camera, read back
+    EXPECT_EQ(alpha, 1.0);   // the sphere is in the picture
     fs::remove_all(dir);
 }
 

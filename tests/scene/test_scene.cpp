@@ -808,3 +808,137 @@ TEST(SceneCamera, ViewOriginOrdersKdLeaves) {
 
 }  // namespace
 }  // namespace hpray
+
+// ---------------------------------------------------------------------------------------
+// Automatic cameras
+// ---------------------------------------------------------------------------------------
+
+namespace hpray {
+namespace {
+
+TEST(AutoCameraTest, ParsedWhenAskedOrWithoutPosition) {
+    EXPECT_TRUE(ParseScene(kMinimal, "t.yaml").camera.autoFit);
+    EXPECT_TRUE(ParseScene(std::string(kMinimal) + "camera: auto\n", "t.yaml").camera.autoFit);
+    const Scene sized = ParseScene(std::string(kMinimal) +
+                                       "camera: {width: 64, height: 48, view: -z, zoom: 2, "
+                                       "azimuth: 30, elevation: -10}\n",
+                                   "t.yaml");
+    EXPECT_TRUE(sized.camera.autoFit);
+    EXPECT_EQ(sized.camera.width, 64);
+    EXPECT_EQ(sized.camera.view, "-z");
+    EXPECT_EQ(sized.camera.zoom, 2.0);
+    EXPECT_EQ(sized.camera.azimuthDegrees, 30.0);
+    EXPECT_EQ(sized.camera.elevationDegrees, -10.0);
+    EXPECT_FALSE(ParseScene(std::string(kMinimal) + "camera: {position: [3, 2, 4]}\n", "t.yaml")
+                     .camera.autoFit);
+    const std::string bad = ErrorOf(std::string(kMinimal) + "camera: {view: top}\n");
+    EXPECT_TRUE(Contains(bad, "camera.view")) << bad;
+    const std::string both =
+        ErrorOf(std::string(kMinimal) + "camera: {position: [3, 2, 4], zoom: 2}\n");
+    EXPECT_TRUE(Contains(both, "camera.zoom")) << both;
+    EXPECT_TRUE(Contains(ErrorOf(std::string(kMinimal) + "camera: {zoom: 0}\n"), "camera.zoom"));
+    EXPECT_TRUE(Contains(ErrorOf(std::string(kMinimal) + "camera: {elevation: 95}\n"),
+                         "camera.elevation"));
+    EXPECT_TRUE(Contains(ErrorOf(std::string(kMinimal) + "camera: automatic\n"), "camera"));
+}
+
+/// Every corner of `box` seen by the camera lies inside the image (perspective: within
+/// the field of view; orthographic: within the view's width and height).
+void ExpectBoxInView(const SceneCamera& c, const Box& box, const std::string& what) {
+    const Camera camera(c);
+    const auto& f = camera.Forward();
+    const auto& r = camera.Right();
+    const auto& u = camera.TrueUp();
+    const double aspect = double(c.width) / c.height;
+    const double ty = std::tan(0.5 * c.fovYDegrees * M_PI / 180), tx = ty * aspect;
+    for (int q = 0; q < 8; ++q) {
+        double x[3], along = 0, right = 0, upward = 0;
+        for (int d = 0; d < 3; ++d) {
+            x[d] = ((q >> d) & 1 ? box.hi[d] : box.lo[d]) - c.position[d];
+            along += x[d] * f[d];
+            right += x[d] * r[d];
+            upward += x[d] * u[d];
+        }
+        ASSERT_GT(along, 0) << what;
+        if (c.orthographic) {
+            EXPECT_LE(std::abs(upward), 0.5 * c.orthoHeight * (1 + 1e-12)) << what;
+            EXPECT_LE(std::abs(right), 0.5 * c.orthoHeight * aspect * (1 + 1e-12)) << what;
+        } else {
+            EXPECT_LE(std::abs(right), tx * along * (1 + 1e-12)) << what << " corner " << q;
+            EXPECT_LE(std::abs(upward), ty * along * (1 + 1e-12)) << what << " corner " << q;
+        }
+    }
+}
+
+// The fitted view holds the whole box from every side, aspect and zoom 1, and is tight:
+// the sphere about the box touches the narrower side of the view; the views look from the
+// side they name, azimuth turns about up and elevation raises toward it.
+TEST(AutoCameraTest, FitsTheBoxFromEverySide) {
+    const Box box{{-1.0, 2.0, 0.5}, {3.0, 2.5, 4.0}};
+    const double cx = 1.0, cy = 2.25, cz = 2.25;
+    const double radius = std::sqrt(2.0 * 2.0 + 0.25 * 0.25 + 1.75 * 1.75);
+    for (const char* view : {"iso", "+x", "-x", "+y", "-y", "+z", "-z"})
+        for (const auto& [w, h] : {std::pair{64, 48}, std::pair{40, 90}}) {
+            SceneCamera c;
+            c.autoFit = true;
+            c.view = view;
+            c.width = w;
+            c.height = h;
+            FitCamera(c, box, std::nullopt);
+            EXPECT_FALSE(c.autoFit);
+            const std::string what = std::string(view) + " " + std::to_string(w) + "x" +
+                                     std::to_string(h);
+            EXPECT_EQ(c.lookAt, (std::array<double, 3>{cx, cy, cz})) << what;
+            ExpectBoxInView(c, box, what);
+            const double halfY = 0.5 * c.fovYDegrees * M_PI / 180;
+            const double half = std::min(halfY, std::atan(std::tan(halfY) * w / h));
+            const double distance = std::hypot(c.position[0] - cx, c.position[1] - cy,
+                                               c.position[2] - cz);
+            EXPECT_NEAR(distance * std::sin(half), radius, 1e-12 * radius) << what;
+        }
+    SceneCamera c;
+    c.autoFit = true;
+    c.view = "+x";
+    FitCamera(c, box, std::nullopt);
+    EXPECT_GT(c.position[0], box.hi[0]);
+    EXPECT_DOUBLE_EQ(c.position[1], cy);
+    EXPECT_DOUBLE_EQ(c.position[2], cz);
+    // From +z turned 90 degrees about +y: the eye is on the +x side.
+    SceneCamera turned;
+    turned.autoFit = true;
+    turned.view = "+z";
+    turned.azimuthDegrees = 90;
+    FitCamera(turned, box, std::nullopt);
+    EXPECT_NEAR(turned.position[0], c.position[0], 1e-12 * radius);
+    EXPECT_NEAR(turned.position[2], cz, 1e-12 * radius);
+    // Raised by 30 degrees toward up: the view direction drops by 30 degrees.
+    SceneCamera raised;
+    raised.autoFit = true;
+    raised.view = "+x";
+    raised.elevationDegrees = 30;
+    FitCamera(raised, box, std::nullopt);
+    const double dy = raised.position[1] - cy, dx = raised.position[0] - cx;
+    EXPECT_NEAR(std::atan2(dy, dx) * 180 / M_PI, 30.0, 1e-9);
+    // Zoom 2 halves the distance; an orthographic camera keeps its height over zoom.
+    SceneCamera zoomed = c;
+    zoomed.autoFit = true;
+    zoomed.zoom = 2;
+    FitCamera(zoomed, box, std::nullopt);
+    EXPECT_NEAR(zoomed.position[0] - cx, 0.5 * (c.position[0] - cx), 1e-12);
+    SceneCamera ortho;
+    ortho.autoFit = true;
+    ortho.orthographic = true;
+    ortho.orthoHeight = 9;
+    ortho.zoom = 1.5;
+    FitCamera(ortho, box, std::nullopt);
+    EXPECT_EQ(ortho.orthoHeight, 6);
+    ExpectBoxInView(ortho, box, "ortho");
+    // A clip box narrows what is fitted.
+    SceneCamera clipped;
+    clipped.autoFit = true;
+    FitCamera(clipped, box, Box{{0, 2, 1}, {1, 2.5, 2}});
+    EXPECT_EQ(clipped.lookAt, (std::array<double, 3>{0.5, 2.25, 1.5}));
+}
+
+}  // namespace
+}  // namespace hpray
