@@ -322,9 +322,28 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
                       std::to_string(whole_->PointCount()) + " points");
     }
     setupStats_.timing.load = Seconds(t0);
+    ResolveColorMaps(scene_, [this](const std::string& f) { return FieldRange(f); });
     if (whole_)
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
     FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
+}
+
+std::optional<std::array<double, 2>> FrameJob::FieldRange(const std::string& name) const {
+    if (whole_) {
+        const auto sel = SelectScalar(*whole_, name);
+        if (!sel) return std::nullopt;
+        return sel->field->Range(sel->component);
+    }
+    std::optional<std::array<double, 2>> range;
+    if (part_)
+        for (const partition::BrickInfo& b : part_->bricks) {
+            const auto it = b.ranges.find(name);
+            if (it == b.ranges.end()) continue;
+            range = range ? std::array<double, 2>{std::min((*range)[0], it->second[0]),
+                                                  std::max((*range)[1], it->second[1])}
+                          : it->second;
+        }
+    return range;
 }
 
 Box FrameJob::DataBounds() const {
@@ -436,6 +455,8 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 whole_ = ReadMesh(scene.data.mesh, readOptions_);
                 setupStats_.timing.load = Seconds(t0);
             }
+            // `range: auto` colour maps need the fields' ranges before the set-up.
+            ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); });
             if (missing || scene.accuracy.mappingTolerance != prepared_->MappingTolerance()) {
                 prepared_.reset();
                 setupStats_.accelBytes = 0;
@@ -447,6 +468,7 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 prepared_->Reconfigure(scene, setupStats_);
         }
     }
+    ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); });
     scene_ = scene;
     std::optional<FrameCancel> cancel;
     if (cancelRequest) cancel.emplace(cancelRequest, cancelComm_);

@@ -2,6 +2,7 @@
 // once, the ranks' plan; each frame renders a camera on every rank and composites it.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <memory>
 #include <optional>
@@ -73,6 +74,8 @@ class FrameJob {
     /// The guaranteed bounds of the data (the whole mesh's cells, or the partition's
     /// bricks): what an automatic camera fits (scene/camera.h: FitCamera).
     Box DataBounds() const;
+    /// [min, max] of a field over the data (nothing if the data has no such field).
+    std::optional<std::array<double, 2>> FieldRange(const std::string& name) const;
     /// The whole mesh every rank holds (nullptr for a partition directory).
     const Mesh* WholeMesh() const { return whole_ ? &*whole_ : nullptr; }
     /// The partition's manifest (nullptr for a mesh).

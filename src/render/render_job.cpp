@@ -280,7 +280,13 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& sceneIn, RenderStats& stats,
                     double loadSeconds) {
     const auto start = std::chrono::steady_clock::now();
     Scene scene = sceneIn;
-    FitCamera(scene.camera, MeshGeometry::Build(mesh).bounds, scene.clip.box);
+    if (scene.camera.autoFit)
+        FitCamera(scene.camera, MeshGeometry::Build(mesh).bounds, scene.clip.box);
+    ResolveColorMaps(scene, [&mesh](const std::string& f) {
+        const auto sel = SelectScalar(mesh, f);
+        return sel ? std::optional<std::array<double, 2>>(sel->field->Range(sel->component))
+                   : std::nullopt;
+    });
     stats = StartStats(scene);
     stats.timing.load = loadSeconds;
     stats.bricksLoaded = stats.bricksTotal = 1;

@@ -1,6 +1,8 @@
 // Scene files: YAML parsing with yaml-cpp, --set overrides, schema and range validation.
 #include "scene/scene.h"
 
+#include "scene/colormaps.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -220,6 +222,9 @@ class SceneParser {
     std::string FieldName(const YAML::Node& node, const std::string& path) const;
     std::vector<ColorControlPoint> ColorTf(const YAML::Node& node,
                                            const std::string& path, bool unitRange) const;
+    /// `{map: NAME, range: auto | [lo, hi]}`, or nothing for a list of control points.
+    std::optional<ColorMapRequest> ColorMap(const YAML::Node& node,
+                                            const std::string& path) const;
     std::vector<ExtinctionControlPoint> ExtinctionTf(const YAML::Node& node,
                                                      const std::string& path) const;
     std::string InputPath(const std::string& path) const;
@@ -538,6 +543,43 @@ std::vector<ColorControlPoint> SceneParser::ColorTf(const YAML::Node& node,
     return points;
 }
 
+std::optional<ColorMapRequest> SceneParser::ColorMap(const YAML::Node& node,
+                                                     const std::string& path) const {
+    if (!node.IsMap()) return std::nullopt;
+    ColorMapRequest r;
+    for (auto it = node.begin(); it != node.end(); ++it) {
+        const std::string key = it->first.Scalar();
+        if (key != "map" && key != "range")
+            Fail(Child(path, key), it->first,
+                 "unknown key '" + key + "'; a colour map has map and range");
+    }
+    if (!Has(node, "map")) Fail(Child(path, "map"), node, "required key is missing");
+    r.name = String(Get(node, "map"), Child(path, "map"));
+    if (!IsColorMap(r.name)) {
+        std::string names;
+        for (const std::string& n : ColorMapNames()) names += (names.empty() ? "" : ", ") + n;
+        Fail(Child(path, "map"), Get(node, "map"),
+             "unknown colour map '" + r.name + "'; " + Suggestion(r.name, ColorMapNames()) +
+                 " (maps: " + names + ")");
+    }
+    if (Has(node, "range")) {
+        const YAML::Node range = Get(node, "range");
+        if (range.IsScalar() && range.Scalar() == "auto") {
+            r.autoRange = true;
+        } else {
+            const std::vector<double> v = Numbers(range, Child(path, "range"), 2);
+            if (!(v[0] < v[1]))
+                Fail(Child(path, "range"), range,
+                     "expected auto or [lo, hi] with lo < hi, got [" + FormatNumber(v[0]) +
+                         ", " + FormatNumber(v[1]) + "]");
+            r.autoRange = false;
+            r.lo = v[0];
+            r.hi = v[1];
+        }
+    }
+    return r;
+}
+
 std::vector<ExtinctionControlPoint> SceneParser::ExtinctionTf(
     const YAML::Node& node, const std::string& path) const {
     RequireValue(node, path);
@@ -705,7 +747,12 @@ void SceneParser::ReadSlices(const YAML::Node& root, Scene& scene) const {
         if (slice.normal[0] == 0.0 && slice.normal[1] == 0.0 && slice.normal[2] == 0.0)
             Fail(p + ".normal", Get(item, "normal"), "normal must be a non-zero vector");
         if (Has(item, "field")) slice.field = FieldName(Get(item, "field"), p + ".field");
-        slice.colorTf = ColorTf(Get(item, "color_tf"), p + ".color_tf", true);
+        slice.colorMap = ColorMap(Get(item, "color_tf"), p + ".color_tf");
+        if (!slice.colorMap)
+            slice.colorTf = ColorTf(Get(item, "color_tf"), p + ".color_tf", true);
+        else if (!slice.colorMap->autoRange)
+            slice.colorTf =
+                ExpandColorMap(slice.colorMap->name, slice.colorMap->lo, slice.colorMap->hi);
         if (Has(item, "opacity"))
             slice.opacity =
                 InRange(Get(item, "opacity"), p + ".opacity", 0, 1, false, false);
@@ -739,8 +786,12 @@ void SceneParser::ReadVolume(const YAML::Node& root, Scene& scene) const {
     if (!Has(vol, "color_tf")) Fail(p + ".color_tf", vol, "required key is missing");
     if (!Has(vol, "extinction_tf"))
         Fail(p + ".extinction_tf", vol, "required key is missing");
-    v.colorTf =
-        ColorTf(Get(vol, "color_tf"), p + ".color_tf", v.glow == GlowModel::WilliamsMax);
+    v.colorMap = ColorMap(Get(vol, "color_tf"), p + ".color_tf");
+    if (!v.colorMap)
+        v.colorTf =
+            ColorTf(Get(vol, "color_tf"), p + ".color_tf", v.glow == GlowModel::WilliamsMax);
+    else if (!v.colorMap->autoRange)
+        v.colorTf = ExpandColorMap(v.colorMap->name, v.colorMap->lo, v.colorMap->hi);
     v.extinctionTf = ExtinctionTf(Get(vol, "extinction_tf"), p + ".extinction_tf");
     scene.volume = v;
 }
@@ -998,6 +1049,24 @@ std::vector<std::string> SceneKeyPaths() {
     std::vector<std::string> out;
     CollectKeyPaths(Schema(), "", out);
     return out;
+}
+
+void ResolveColorMaps(
+    Scene& scene,
+    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange) {
+    auto resolve = [&](const std::optional<ColorMapRequest>& map, const std::string& field,
+                       std::vector<ColorControlPoint>& tf) {
+        if (!map || !map->autoRange) return;
+        std::array<double, 2> r{0.0, 1.0};
+        if (const auto known = fieldRange(field)) r = *known;
+        if (!(r[1] > r[0])) {
+            const double half = 0.5 * std::max(1.0, std::fabs(r[0]));
+            r = {r[0] - half, r[0] + half};
+        }
+        tf = ExpandColorMap(map->name, r[0], r[1]);
+    };
+    if (scene.volume) resolve(scene.volume->colorMap, scene.volume->colorField, scene.volume->colorTf);
+    for (SceneSlice& s : scene.slices) resolve(s.colorMap, s.field, s.colorTf);
 }
 
 }  // namespace hpray

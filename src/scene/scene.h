@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -67,6 +68,15 @@ struct ExtinctionControlPoint {
     double extinction = 0.0;  ///< >= 0
 };
 
+/// `color_tf: {map: NAME, range: auto | [lo, hi]}`: a named colour map (scene/colormaps.h)
+/// over a range of its field; `auto` is the field's range over the data, known once the
+/// data is loaded (ResolveColorMaps).
+struct ColorMapRequest {
+    std::string name;
+    bool autoRange = true;
+    double lo = 0.0, hi = 1.0;
+};
+
 /// One entry of `slices:` a cut plane showing `field` through `color_tf`. `point`,
 /// `normal` and `color_tf` are required.
 struct SceneSlice {
@@ -76,6 +86,9 @@ struct SceneSlice {
     /// [[s, r, g, b], ...], >= 1 point, s strictly increasing, rgb in [0, 1]; piecewise
     /// linear, clamped outside the first and last scalar.
     std::vector<ColorControlPoint> colorTf;
+    /// Set when color_tf names a map; colorTf is filled from it (at parse time for an
+    /// explicit range, by ResolveColorMaps for `auto`).
+    std::optional<ColorMapRequest> colorMap;
     double opacity = 1.0;  ///< in [0, 1]
 };
 
@@ -93,6 +106,7 @@ struct SceneVolume {
     /// [[s, r, g, b], ...] (required), >= 1 point, s strictly increasing. Williams-Max:
     /// rgb in [0, 1]; Wilhelms-Van Gelder: glow per world unit, >= 0.
     std::vector<ColorControlPoint> colorTf;
+    std::optional<ColorMapRequest> colorMap;  ///< as SceneSlice::colorMap
     /// [[s, sigma], ...] (required), >= 1 point, s strictly increasing, sigma >= 0.
     std::vector<ExtinctionControlPoint> extinctionTf;
 };
@@ -205,5 +219,12 @@ std::string MergeSceneOverrides(const std::string& yamlText, const std::string& 
 /// Every key path of the schema, e.g. "camera.fov_y", "isosurfaces.#.value" (# = any
 /// index); for help texts and tests.
 std::vector<std::string> SceneKeyPaths();
+
+/// Fills the colour transfer functions that name a colour map with `range: auto` from the
+/// range of their field over the data: `fieldRange(name)` gives [min, max] or nothing
+/// (then the map spans [0, 1]). A constant field gets a unit-wide range around its value.
+void ResolveColorMaps(
+    Scene& scene,
+    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange);
 
 }  // namespace hpray

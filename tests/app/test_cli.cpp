@@ -15,6 +15,7 @@
 #include <sys/wait.h>
 
 #include "io/image.h"
+#include "scene/colormaps.h"
 
 namespace {
 
@@ -184,6 +185,37 @@ TEST(Cli, AutomaticCameraIsReportedAndReusable) {
     for (std::size_t i = 3; i < a.size(); i += 4) alpha = std::max(alpha, a[i]);
     EXPECT_LE(worst, 1e-9);  // the JSON's decimal camera, read back
     EXPECT_EQ(alpha, 1.0);   // the sphere is in the picture
+    fs::remove_all(dir);
+}
+
+// A slice coloured by a named map over the field's range found in the data: through the
+// centre of the ball (u = |x|^2 = 0 there, the bottom of u's range [0, 3]) the pixel is
+// the map's first colour, in linear RGB.
+TEST(Cli, NamedColorMapWithAutomaticRange) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_colormap";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path scene = dir / "slice.yaml";
+    {
+        std::ofstream out(scene);
+        out << "data: {mesh: builtin:ball-p2}\n"
+               "camera: {position: [0, 0, 5], look_at: [0, 0, 0], up: [0, 1, 0], "
+               "ortho_height: 2.5, width: 9, height: 9}\n"
+               "slices: [{point: [0, 0, 0], normal: [0, 0, 1], field: u, opacity: 1, "
+               "color_tf: {map: viridis, range: auto}}]\n";
+    }
+    RunResult r = RunHpray("render " + scene.string() +
+                           " --set output.exr=null --set output.png=null --set output.stats=null"
+                           " --set output.rgba=" + (dir / "a.npy").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::vector<std::size_t> shape;
+    const std::vector<double> a = hpray::ReadNpy((dir / "a.npy").string(), shape);
+    ASSERT_EQ(a.size(), 9u * 9u * 4u);
+    const std::size_t centre = 4 * (4 * 9 + 4);
+    const auto viridis = hpray::ExpandColorMap("viridis", 0.0, 3.0);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(a[centre + c], viridis[0].rgb[c], 1e-9) << c;
+    EXPECT_EQ(a[centre + 3], 1.0);
     fs::remove_all(dir);
 }
 

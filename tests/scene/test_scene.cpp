@@ -9,6 +9,7 @@
 #include <string>
 
 #include "scene/camera.h"
+#include "scene/colormaps.h"
 #include "scene/scene.h"
 #include "util/error.h"
 
@@ -938,6 +939,96 @@ TEST(AutoCameraTest, FitsTheBoxFromEverySide) {
     clipped.autoFit = true;
     FitCamera(clipped, box, Box{{0, 2, 1}, {1, 2.5, 2}});
     EXPECT_EQ(clipped.lookAt, (std::array<double, 3>{0.5, 2.25, 1.5}));
+}
+
+}  // namespace
+}  // namespace hpray
+
+// ---------------------------------------------------------------------------------------
+// Named colour maps
+// ---------------------------------------------------------------------------------------
+
+namespace hpray {
+namespace {
+
+double LinearToSrgbValue(double c) {
+    return c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1 / 2.4) - 0.055;
+}
+
+// The maps end where their published definitions do (hex values of the matplotlib and
+// Moreland tables), spread over the range asked for, in linear RGB.
+TEST(ColorMapTest, ExpandedMapsMatchTheirPublishedEnds) {
+    struct End {
+        const char* name;
+        int first[3], last[3];
+    };
+    const End ends[] = {{"viridis", {0x44, 0x01, 0x54}, {0xfd, 0xe7, 0x25}},
+                        {"inferno", {0x00, 0x00, 0x04}, {0xfc, 0xff, 0xa4}},
+                        {"plasma", {0x0d, 0x08, 0x87}, {0xf0, 0xf9, 0x21}},
+                        {"cividis", {0x00, 0x22, 0x4e}, {0xfe, 0xe8, 0x38}},
+                        {"cool-to-warm", {59, 76, 192}, {180, 4, 38}},
+                        {"grayscale", {0, 0, 0}, {255, 255, 255}}};
+    for (const End& e : ends) {
+        const auto tf = ExpandColorMap(e.name, -2.0, 6.0);
+        ASSERT_EQ(tf.size(), 33u) << e.name;
+        EXPECT_EQ(tf.front().scalar, -2.0);
+        EXPECT_EQ(tf.back().scalar, 6.0);
+        EXPECT_DOUBLE_EQ(tf[16].scalar, 2.0);
+        for (std::size_t k = 1; k < tf.size(); ++k) EXPECT_GT(tf[k].scalar, tf[k - 1].scalar);
+        for (int c = 0; c < 3; ++c) {
+            EXPECT_NEAR(LinearToSrgbValue(tf.front().rgb[c]) * 255, e.first[c], 1.0) << e.name;
+            EXPECT_NEAR(LinearToSrgbValue(tf.back().rgb[c]) * 255, e.last[c], 1.0) << e.name;
+        }
+    }
+    // Moreland's cool-to-warm passes through a light grey (221, 221, 221) at the middle;
+    // grayscale is mid-grey in sRGB (linear 0.214) there.
+    const auto cw = ExpandColorMap("cool-to-warm", 0, 1);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(LinearToSrgbValue(cw[16].rgb[c]) * 255, 221, 2.0);
+    const auto gray = ExpandColorMap("grayscale", 0, 1);
+    EXPECT_NEAR(gray[16].rgb[0], 0.2140, 2e-3);
+}
+
+TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
+    const std::string volume =
+        std::string(kMinimal) + "volume: {color_field: u, extinction_tf: [[0, 1]], ";
+    const Scene fixed =
+        ParseScene(volume + "color_tf: {map: plasma, range: [-1, 3]}}\n", "t.yaml");
+    ASSERT_TRUE(fixed.volume);
+    ASSERT_EQ(fixed.volume->colorTf.size(), 33u);
+    EXPECT_EQ(fixed.volume->colorTf.front().scalar, -1.0);
+    EXPECT_EQ(fixed.volume->colorTf.back().scalar, 3.0);
+    Scene automatic = ParseScene(volume + "color_tf: {map: viridis}}\n", "t.yaml");
+    ASSERT_TRUE(automatic.volume->colorMap);
+    EXPECT_TRUE(automatic.volume->colorTf.empty());  // the data's range is not known yet
+    ResolveColorMaps(automatic, [](const std::string& f) {
+        EXPECT_EQ(f, "u");
+        return std::optional<std::array<double, 2>>(std::array<double, 2>{-1.6, 1.04});
+    });
+    EXPECT_EQ(automatic.volume->colorTf.front().scalar, -1.6);
+    EXPECT_EQ(automatic.volume->colorTf.back().scalar, 1.04);
+    // A constant field gets a unit-wide range around its value.
+    Scene constant = ParseScene(volume + "color_tf: {map: viridis, range: auto}}\n", "t.yaml");
+    ResolveColorMaps(constant, [](const std::string&) {
+        return std::optional<std::array<double, 2>>(std::array<double, 2>{4.0, 4.0});
+    });
+    EXPECT_EQ(constant.volume->colorTf.front().scalar, 2.0);
+    EXPECT_EQ(constant.volume->colorTf.back().scalar, 6.0);
+    // Slices too.
+    const Scene slice = ParseScene(std::string(kMinimal) +
+                                       "slices: [{point: [0, 0, 0], normal: [0, 0, 1], "
+                                       "color_tf: {map: grayscale, range: [0, 1]}}]\n",
+                                   "t.yaml");
+    EXPECT_EQ(slice.slices[0].colorTf.size(), 33u);
+    // Errors name the key.
+    const std::string misspelt = ErrorOf(volume + "color_tf: {map: virdis}}\n");
+    EXPECT_TRUE(Contains(misspelt, "volume.color_tf.map")) << misspelt;
+    EXPECT_TRUE(Contains(misspelt, "viridis")) << misspelt;
+    EXPECT_TRUE(Contains(ErrorOf(volume + "color_tf: {map: viridis, range: [2, 1]}}\n"),
+                         "volume.color_tf.range"));
+    EXPECT_TRUE(Contains(ErrorOf(volume + "color_tf: {map: viridis, rnage: auto}}\n"),
+                         "volume.color_tf.rnage"));
+    EXPECT_TRUE(
+        Contains(ErrorOf(volume + "color_tf: {range: auto}}\n"), "volume.color_tf.map"));
 }
 
 }  // namespace
