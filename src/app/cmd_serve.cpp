@@ -212,15 +212,20 @@ std::vector<std::string> SplitLines(const std::string& text) {
     return lines;
 }
 
-/// Field names a scene may use: those of the data (vector fields also as "name[i]").
+/// Field names a scene may use: those of the data (vector fields also as name[i], name.i,
+/// name.x/y/z and name.magnitude, as the renderer reads them).
 std::set<std::string> DataFields(const json& info) {
     std::set<std::string> names;
     if (!info.contains("fields")) return names;
     for (const auto& [name, f] : info["fields"].items()) {
         names.insert(name);
         const int components = f.contains("components") ? f["components"].get<int>() : 1;
-        for (int c = 0; c < components; ++c)
+        for (int c = 0; c < components; ++c) {
             names.insert(name + "[" + std::to_string(c) + "]");
+            names.insert(name + "." + std::to_string(c));
+            if (c < 3) names.insert(name + "." + "xyz"[c]), names.insert(name + "." + "XYZ"[c]);
+        }
+        if (components > 1) names.insert(name + ".magnitude");
     }
     return names;
 }

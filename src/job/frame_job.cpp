@@ -391,6 +391,22 @@ void FrameJob::AddWarnings(const Scene& scene, const Image& image, RenderStats& 
             warn(text);
         }
     }
+    // A bare vector field name means its magnitude: say so, once per field.
+    for (const std::string& name : scene.FieldNames()) {
+        int components = 1;
+        if (whole_) {
+            if (const Field* f = whole_->FindField(name)) components = f->components;
+        } else if (part_) {
+            const nlohmann::json& fields = part_->manifest.value("fields", nlohmann::json());
+            if (fields.is_object() && fields.contains(name) && fields[name].is_object())
+                components = fields[name].value("components", 1);
+        }
+        if (components > 1)
+            warn("field '" + name + "' has " + std::to_string(components) +
+                 " components: its magnitude is used; name one as '" + name + "[0]' (or " +
+                 name + ".x), or write '" + name + ".magnitude' to keep the magnitude "
+                 "without this warning");
+    }
     bool drawn = false;
     for (std::size_t p = 0; p < image.PixelCount() && !drawn; ++p)
         drawn = image.a[p] > 0 || image.r[p] > 0 || image.g[p] > 0 || image.b[p] > 0 ||

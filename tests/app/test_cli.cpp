@@ -219,6 +219,35 @@ TEST(Cli, NamedColorMapWithAutomaticRange) {
     fs::remove_all(dir);
 }
 
+// A bare vector field name is its magnitude: a warning says so and how to choose; naming
+// the magnitude explicitly keeps quiet.
+TEST(Cli, VectorFieldUsedAsItsMagnitudeIsAWarning) {
+    namespace fs = std::filesystem;
+    const std::string mesh = std::string(HPRAY_SOURCE_DIR) +
+                             "/../shared/data/dealii_step44_hex_q2.vtu";
+    if (!fs::exists(mesh)) GTEST_SKIP() << "no shared data";
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_vector";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    for (const char* field : {"displacement", "displacement.magnitude"}) {
+        const fs::path scene = dir / "v.yaml";
+        {
+            std::ofstream out(scene);
+            out << "data: {mesh: " << mesh << "}\ncamera: {width: 32, height: 32}\n"
+                << "isosurfaces: [{field: " << field << ", value: 0.0004}]\n";
+        }
+        const RunResult r = RunHpray("render " + scene.string() +
+                                     " --set output.exr=null --set output.png=null"
+                                     " --set output.stats=null");
+        EXPECT_EQ(r.code, 0) << r.out;
+        const bool warned =
+            r.out.find("warning: field 'displacement' has 3 components: its magnitude is "
+                       "used") != std::string::npos;
+        EXPECT_EQ(warned, std::string(field) == "displacement") << field << "\n" << r.out;
+    }
+    fs::remove_all(dir);
+}
+
 TEST(Cli, VersionHelpAndMisspeltSubcommands) {
     RunResult r = RunHpray("--version");
     EXPECT_EQ(r.code, 0);
