@@ -322,10 +322,18 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
                       std::to_string(whole_->PointCount()) + " points");
     }
     setupStats_.timing.load = Seconds(t0);
-    ResolveColorMaps(scene_, [this](const std::string& f) { return FieldRange(f); });
+    ResolveColorMaps(scene_, [this](const std::string& f) { return FieldRange(f); },
+                     DataSize());
     if (whole_)
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
     FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
+}
+
+double FrameJob::DataSize() const {
+    // Before the preparation the mesh's own points give the size; a partition's bricks.
+    if (whole_) return whole_->Bounds().Diagonal();
+    const Box box = DataBounds();
+    return box.IsEmpty() ? 1.0 : box.Diagonal();
 }
 
 std::optional<std::array<double, 2>> FrameJob::FieldRange(const std::string& name) const {
@@ -472,7 +480,8 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 setupStats_.timing.load = Seconds(t0);
             }
             // `range: auto` colour maps need the fields' ranges before the set-up.
-            ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); });
+            ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); },
+                     DataSize());
             if (missing || scene.accuracy.mappingTolerance != prepared_->MappingTolerance()) {
                 prepared_.reset();
                 setupStats_.accelBytes = 0;
@@ -484,7 +493,8 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 prepared_->Reconfigure(scene, setupStats_);
         }
     }
-    ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); });
+    ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); },
+                     DataSize());
     scene_ = scene;
     std::optional<FrameCancel> cancel;
     if (cancelRequest) cancel.emplace(cancelRequest, cancelComm_);

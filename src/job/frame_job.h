@@ -74,6 +74,8 @@ class FrameJob {
     /// The guaranteed bounds of the data (the whole mesh's cells, or the partition's
     /// bricks): what an automatic camera fits (scene/camera.h: FitCamera).
     Box DataBounds() const;
+    /// The diagonal of the data's bounds: the scale of a default volume's extinction.
+    double DataSize() const;
     /// [min, max] of a field over the data (nothing if the data has no such field).
     std::optional<std::array<double, 2>> FieldRange(const std::string& name) const;
     /// The whole mesh every rank holds (nullptr for a partition directory).

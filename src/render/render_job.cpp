@@ -286,7 +286,7 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& sceneIn, RenderStats& stats,
         const auto sel = SelectScalar(mesh, f);
         return sel ? std::optional<std::array<double, 2>>(sel->field->Range(sel->component))
                    : std::nullopt;
-    });
+    }, mesh.Bounds().Diagonal());
     stats = StartStats(scene);
     stats.timing.load = loadSeconds;
     stats.bricksLoaded = stats.bricksTotal = 1;

@@ -783,16 +783,21 @@ void SceneParser::ReadVolume(const YAML::Node& root, Scene& scene) const {
                      "'; expected williams-max or wilhelms-van-gelder");
         }
     }
-    if (!Has(vol, "color_tf")) Fail(p + ".color_tf", vol, "required key is missing");
-    if (!Has(vol, "extinction_tf"))
-        Fail(p + ".extinction_tf", vol, "required key is missing");
-    v.colorMap = ColorMap(Get(vol, "color_tf"), p + ".color_tf");
-    if (!v.colorMap)
+    // Without transfer functions: viridis over the field's range and an extinction ramp
+    // scaled to the data's size (ResolveColorMaps), a first picture without tuning.
+    if (!Has(vol, "color_tf")) {
+        v.colorMap = ColorMapRequest{"viridis", true, 0.0, 1.0};
+    } else if ((v.colorMap = ColorMap(Get(vol, "color_tf"), p + ".color_tf"))) {
+        if (!v.colorMap->autoRange)
+            v.colorTf = ExpandColorMap(v.colorMap->name, v.colorMap->lo, v.colorMap->hi);
+    } else {
         v.colorTf =
             ColorTf(Get(vol, "color_tf"), p + ".color_tf", v.glow == GlowModel::WilliamsMax);
-    else if (!v.colorMap->autoRange)
-        v.colorTf = ExpandColorMap(v.colorMap->name, v.colorMap->lo, v.colorMap->hi);
-    v.extinctionTf = ExtinctionTf(Get(vol, "extinction_tf"), p + ".extinction_tf");
+    }
+    if (Has(vol, "extinction_tf"))
+        v.extinctionTf = ExtinctionTf(Get(vol, "extinction_tf"), p + ".extinction_tf");
+    else
+        v.defaultExtinction = true;
     scene.volume = v;
 }
 
@@ -1053,19 +1058,32 @@ std::vector<std::string> SceneKeyPaths() {
 
 void ResolveColorMaps(
     Scene& scene,
-    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange) {
-    auto resolve = [&](const std::optional<ColorMapRequest>& map, const std::string& field,
-                       std::vector<ColorControlPoint>& tf) {
-        if (!map || !map->autoRange) return;
+    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange,
+    double dataSize) {
+    auto rangeOf = [&](const std::string& field) {
         std::array<double, 2> r{0.0, 1.0};
         if (const auto known = fieldRange(field)) r = *known;
         if (!(r[1] > r[0])) {
             const double half = 0.5 * std::max(1.0, std::fabs(r[0]));
             r = {r[0] - half, r[0] + half};
         }
+        return r;
+    };
+    auto resolve = [&](const std::optional<ColorMapRequest>& map, const std::string& field,
+                       std::vector<ColorControlPoint>& tf) {
+        if (!map || !map->autoRange) return;
+        const auto r = rangeOf(field);
         tf = ExpandColorMap(map->name, r[0], r[1]);
     };
-    if (scene.volume) resolve(scene.volume->colorMap, scene.volume->colorField, scene.volume->colorTf);
+    if (scene.volume) {
+        SceneVolume& v = *scene.volume;
+        resolve(v.colorMap, v.colorField, v.colorTf);
+        if (v.defaultExtinction) {
+            const auto r = rangeOf(v.extinctionField.empty() ? v.colorField : v.extinctionField);
+            const double size = dataSize > 0 && std::isfinite(dataSize) ? dataSize : 1.0;
+            v.extinctionTf = {{r[0], 0.0}, {r[1], 4.0 / size}};
+        }
+    }
     for (SceneSlice& s : scene.slices) resolve(s.colorMap, s.field, s.colorTf);
 }
 

@@ -107,8 +107,13 @@ struct SceneVolume {
     /// rgb in [0, 1]; Wilhelms-Van Gelder: glow per world unit, >= 0.
     std::vector<ColorControlPoint> colorTf;
     std::optional<ColorMapRequest> colorMap;  ///< as SceneSlice::colorMap
-    /// [[s, sigma], ...] (required), >= 1 point, s strictly increasing, sigma >= 0.
+    /// [[s, sigma], ...], >= 1 point, s strictly increasing, sigma >= 0. Without
+    /// extinction_tf (defaultExtinction): a ramp from 0 at the field's minimum over the
+    /// data to 4 / (the data's diagonal) at its maximum, so that a ray through the data
+    /// meets an optical depth of about 1 (ResolveColorMaps). Without color_tf: viridis
+    /// over the field's range.
     std::vector<ExtinctionControlPoint> extinctionTf;
+    bool defaultExtinction = false;
 };
 
 /// `lighting:` headlight Blinn-Phong shading of isosurfaces. All >= 0.
@@ -220,11 +225,14 @@ std::string MergeSceneOverrides(const std::string& yamlText, const std::string& 
 /// index); for help texts and tests.
 std::vector<std::string> SceneKeyPaths();
 
-/// Fills the colour transfer functions that name a colour map with `range: auto` from the
-/// range of their field over the data: `fieldRange(name)` gives [min, max] or nothing
-/// (then the map spans [0, 1]). A constant field gets a unit-wide range around its value.
+/// Fills what a scene takes from its data: colour transfer functions that name a colour
+/// map with `range: auto` (over the range of their field) and the default extinction of
+/// a volume (SceneVolume::defaultExtinction, scaled by `dataSize`, the diagonal of the
+/// data's bounds). `fieldRange(name)` gives [min, max] or nothing (then [0, 1] is used);
+/// a constant field gets a range as wide as its magnitude (at least 1) around its value.
 void ResolveColorMaps(
     Scene& scene,
-    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange);
+    const std::function<std::optional<std::array<double, 2>>(const std::string&)>& fieldRange,
+    double dataSize = 1.0);
 
 }  // namespace hpray

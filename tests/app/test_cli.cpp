@@ -248,6 +248,35 @@ TEST(Cli, VectorFieldUsedAsItsMagnitudeIsAWarning) {
     fs::remove_all(dir);
 }
 
+// A volume given only its field is visible and not opaque: the default transfer functions
+// put an optical depth of about 1 through the data.
+TEST(Cli, DefaultVolumeIsNeitherInvisibleNorOpaque) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_default_volume";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const RunResult r = RunHpray(
+        "render " + std::string(HPRAY_SOURCE_DIR) + "/configs/ball_p2.yaml" +
+        " --set isosurfaces=null --set 'volume={color_field: u}'" +
+        " --set 'camera={width: 96, height: 96}'" +
+        " --set output.exr=null --set output.png=null --set output.stats=null" +
+        " --set output.rgba=" + (dir / "v.npy").string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    std::vector<std::size_t> shape;
+    const std::vector<double> a = hpray::ReadNpy((dir / "v.npy").string(), shape);
+    double most = 0, sum = 0;
+    std::size_t covered = 0;
+    for (std::size_t i = 3; i < a.size(); i += 4) {
+        most = std::max(most, a[i]);
+        if (a[i] > 0) sum += a[i], ++covered;
+    }
+    ASSERT_GT(covered, 0u);
+    EXPECT_GT(most, 0.2);
+    EXPECT_LT(most, 0.99);
+    EXPECT_GT(sum / covered, 0.05);
+    fs::remove_all(dir);
+}
+
 TEST(Cli, VersionHelpAndMisspeltSubcommands) {
     RunResult r = RunHpray("--version");
     EXPECT_EQ(r.code, 0);

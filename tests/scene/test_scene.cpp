@@ -383,8 +383,8 @@ TEST(SceneValidationTest, EachRuleNamesKeyAndLine) {
          "non-empty list", 2},
         {"volume: {color_tf: [[0, 1, 1]], extinction_tf: [[0, 1]]}\n",
          "volume.color_tf.0", "list of 4 numbers", 2},
-        {"volume: {color_tf: [[0, 1, 1, 1]]}\n", "volume.extinction_tf",
-         "required key is missing", 0},
+        {"volume: {color_tf: [[0, 1, 1, 1]], extinction_tf: []}\n", "volume.extinction_tf",
+         "expected a non-empty list", 0},
         {"accuracy: {mapping_tolerance: 0}\n", "accuracy.mapping_tolerance",
          "must be > 0", 2},
         {"accuracy: {root_tolerance: -1e-14}\n", "accuracy.root_tolerance", "must be > 0",
@@ -1013,6 +1013,24 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     });
     EXPECT_EQ(constant.volume->colorTf.front().scalar, 2.0);
     EXPECT_EQ(constant.volume->colorTf.back().scalar, 6.0);
+    // A volume with only its field: viridis over the field and an extinction ramp from 0
+    // to 4 / (the data's diagonal), an optical depth of about 1 through the data.
+    Scene bare = ParseScene(std::string(kMinimal) + "volume: {color_field: u}\n", "t.yaml");
+    ASSERT_TRUE(bare.volume);
+    EXPECT_TRUE(bare.volume->defaultExtinction);
+    ResolveColorMaps(
+        bare,
+        [](const std::string&) {
+            return std::optional<std::array<double, 2>>(std::array<double, 2>{-1.0, 3.0});
+        },
+        8.0);
+    ASSERT_EQ(bare.volume->extinctionTf.size(), 2u);
+    EXPECT_EQ(bare.volume->extinctionTf[0].scalar, -1.0);
+    EXPECT_EQ(bare.volume->extinctionTf[0].extinction, 0.0);
+    EXPECT_EQ(bare.volume->extinctionTf[1].scalar, 3.0);
+    EXPECT_EQ(bare.volume->extinctionTf[1].extinction, 0.5);
+    EXPECT_EQ(bare.volume->colorTf.size(), 33u);
+    EXPECT_EQ(bare.volume->colorTf.front().rgb, ExpandColorMap("viridis", -1, 3).front().rgb);
     // Slices too.
     const Scene slice = ParseScene(std::string(kMinimal) +
                                        "slices: [{point: [0, 0, 0], normal: [0, 0, 1], "
