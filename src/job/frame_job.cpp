@@ -189,6 +189,9 @@ void WarnIfThreadsExceedBinding(int threads) {
               "--bind-to none, or a binding that gives each rank as many cores as threads");
 }
 
+/// Seconds between progress lines of a long frame (rank 0, stderr).
+constexpr double kProgressSeconds = 5.0;
+
 }  // namespace
 
 /// The cancellation of one frame across ranks. Rank 0 asks the request function; once it
@@ -324,8 +327,10 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     setupStats_.timing.load = Seconds(t0);
     ResolveColorMaps(scene_, [this](const std::string& f) { return FieldRange(f); },
                      DataSize());
-    if (whole_)
+    if (whole_) {
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
+        if (mpi::Root()) prepared_->SetProgress(kProgressSeconds);
+    }
     FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
 }
 
@@ -488,6 +493,7 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 setupStats_.traversal = TraversalStats{};
                 prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene,
                                                             setupStats_);
+                if (mpi::Root()) prepared_->SetProgress(kProgressSeconds);
             }
             else
                 prepared_->Reconfigure(scene, setupStats_);
@@ -584,8 +590,24 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats,
         const int chunk = std::max(1, std::min(8 * scene.threads, tiles / (16 * P)));
         dealer = std::make_unique<TileDealer>(tiles, chunk);
         int begin = 0, end = 0;
-        while (!(cancel && (*cancel)()) && dealer->Next(begin, end))
+        // Progress from the dealer's counter: the tiles handed out to all ranks.
+        double nextReport = kProgressSeconds;
+        const auto dealt = std::chrono::steady_clock::now();
+        while (!(cancel && (*cancel)()) && dealer->Next(begin, end)) {
             prepared_->RenderTiles(scene, cam, begin, end, accumulated, stats);
+            const double elapsed = Seconds(dealt);
+            if (mpi::Root() && elapsed >= nextReport) {
+                nextReport = elapsed + kProgressSeconds;
+                const double share = double(end) / tiles;
+                char text[160];
+                std::snprintf(text, sizeof text,
+                              "rendering %dx%d on %d ranks: %.0f%% of the tiles dealt after "
+                              "%.1f s, about %.0f s left",
+                              cam.Width(), cam.Height(), P, 100 * share, elapsed,
+                              elapsed * (1 - share) / share);
+                log::Info(text);
+            }
+        }
         loaded = mpi::Root() ? 1 : 0;
         stats.bricksTotal = 1;
         rankTree = RegularKdTree(P, prepared_->Geometry().bounds);

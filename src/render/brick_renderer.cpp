@@ -6,12 +6,15 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <mutex>
 
 #include "render/ray_field.h"
 #include "util/check.h"
+#include "util/log.h"
 #include "util/error.h"
 
 namespace hpray {
@@ -510,6 +513,26 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
     };
     tbb::enumerable_thread_specific<ThreadState> states;
     const int tilesX = (W + kRenderTile - 1) / kRenderTile;
+    // Progress: tiles done, and the next time a line is due (any thread may print it).
+    using Clock = std::chrono::steady_clock;
+    const auto started = Clock::now();
+    std::atomic<int> tilesDone{0};
+    std::atomic<double> nextReport{setup.progressSeconds};
+    auto report = [&] {
+        const int done = ++tilesDone;
+        if (!(setup.progressSeconds > 0)) return;
+        const double elapsed = std::chrono::duration<double>(Clock::now() - started).count();
+        double due = nextReport.load();
+        if (elapsed < due ||
+            !nextReport.compare_exchange_strong(due, elapsed + setup.progressSeconds))
+            return;
+        const double share = double(done) / std::max(1, end - begin);
+        char text[160];
+        std::snprintf(text, sizeof text,
+                      "rendering %dx%d: %.0f%% of the tiles after %.1f s, about %.0f s left",
+                      W, H, 100 * share, elapsed, elapsed * (1 - share) / share);
+        log::Info(text);
+    };
     tbb::parallel_for(begin, end, [&](int tile) {
         if (setup.cancelled && setup.cancelled()) return;
         ThreadState& st = states.local();
@@ -529,6 +552,7 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
                                         costSamples ? &st.costSamples : nullptr);
                 StorePixel(image, static_cast<std::size_t>(j) * W + i, s);
             }
+        report();
     });
     for (const ThreadState& st : states) {
         counters.Merge(st.counters);

@@ -81,6 +81,9 @@ struct BrickSetup {
     /// thread); once it answers true, the remaining tiles are skipped and left empty. The
     /// image is then incomplete and must be discarded by whoever asked.
     std::function<bool()> cancelled;
+    /// Progress on long renders: when > 0, a line (log::Info) every this many seconds
+    /// with the share of tiles done and an estimate of the time left.
+    double progressSeconds = 0;
 };
 
 /// Builds the setup of a brick for a scene: resolves the isosurface, slice and volume

@@ -95,6 +95,7 @@ struct PreparedBrick::Impl {
     BrickSetup setup;
     std::optional<FieldCache> fields;  ///< per-field data kept across Reconfigure
     std::function<bool()> cancel;
+    double progressSeconds = 0;
 };
 
 PreparedBrick::PreparedBrick(const Mesh& mesh, const std::optional<Box>& box,
@@ -165,6 +166,8 @@ void PreparedBrick::SetCancel(std::function<bool()> cancelled) {
     impl_->cancel = std::move(cancelled);
 }
 
+void PreparedBrick::SetProgress(double seconds) { impl_->progressSeconds = seconds; }
+
 const MeshGeometry& PreparedBrick::Geometry() const { return impl_->geometry; }
 
 void PreparedBrick::Render(const Scene& scene, const Camera& camera,
@@ -187,6 +190,8 @@ void PreparedBrick::Render(const Scene& scene, const Camera& camera,
     }
     const TraceCounters before = impl_->traverser->Counters();
     setup.cancelled = impl_->cancel;
+    // Pre-passes that measure cost are short and not the frame the user waits for.
+    setup.progressSeconds = costSamples ? 0.0 : impl_->progressSeconds;
     RenderBrick(setup, camera, scene.threads, image, stats.counters, costSamples, front);
     AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     setup.clipBox = sceneClip;
@@ -198,6 +203,7 @@ void PreparedBrick::RenderTiles(const Scene& scene, const Camera& camera, int be
     const auto t0 = std::chrono::steady_clock::now();
     const TraceCounters before = impl_->traverser->Counters();
     impl_->setup.cancelled = impl_->cancel;
+    impl_->setup.progressSeconds = 0;  // a chunk of a frame: the job reports its progress
     RenderBrickTiles(impl_->setup, camera, scene.threads, begin, end, image, stats.counters);
     AddTraceCounters(before, impl_->traverser->Counters(), stats.traversal);
     stats.timing.render += Seconds(t0);

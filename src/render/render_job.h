@@ -73,6 +73,9 @@ class PreparedBrick {
     /// Cooperative cancellation of the following renders (BrickSetup::cancelled): asked
     /// before each tile; an empty function (the default) renders every tile.
     void SetCancel(std::function<bool()> cancelled);
+    /// Progress lines every `seconds` during the following renders (0: none; see
+    /// BrickSetup::progressSeconds).
+    void SetProgress(double seconds);
 
     const MeshGeometry& Geometry() const;
 

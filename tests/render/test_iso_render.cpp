@@ -579,3 +579,32 @@ TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// A long render says how far it is: with a progress interval, lines with the share of
+// tiles done and the time left go to the log; without one, nothing.
+TEST(RenderProgress, LinesWithShareAndTimeLeft) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    const Scene scene = MakeScene(kBallScene);
+    BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    Image image;
+    RenderCounters counters;
+    ::testing::internal::CaptureStderr();
+    RenderBrick(setup, Camera(scene.camera), 1, image, counters);
+    EXPECT_EQ(::testing::internal::GetCapturedStderr().find("of the tiles"), std::string::npos);
+    setup.progressSeconds = 1e-9;  // every tile
+    ::testing::internal::CaptureStderr();
+    RenderBrick(setup, Camera(scene.camera), 1, image, counters);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_NE(log.find("rendering 72x64: "), std::string::npos) << log;
+    EXPECT_NE(log.find("% of the tiles after "), std::string::npos) << log;
+    EXPECT_NE(log.find("100% of the tiles"), std::string::npos) << log;
+    EXPECT_NE(log.find("s left"), std::string::npos) << log;
+}
+
+}  // namespace
+}  // namespace hpray
