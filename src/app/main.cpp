@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "app/commands.h"
+#include "scene/scene.h"
 #include "util/error.h"
 #include "util/log.h"
 #include "util/mpi.h"
@@ -47,6 +48,16 @@ int main(int argc, char** argv) {
     renderCmd->add_option("--set", render.overrides, "override a scene key: key.path=value");
     renderCmd->add_flag("--strict", render.strict,
                         "treat every warning as an error (exit 2, no outputs)");
+    {
+        // The scene keys, so that --set can be written without the docs at hand.
+        std::string keys;
+        for (const std::string& path : SceneKeyPaths())
+            if (path.find('.') != std::string::npos || path == "background" ||
+                path == "threads" || path == "distribute")
+                keys += "  " + path + "\n";
+        renderCmd->footer("\nScene keys (docs/scene.md gives their types, defaults and "
+                          "meaning; # is a list index):\n" + keys);
+    }
 
     app::ServeArgs serve;
     auto* serveCmd = cli.add_subcommand(

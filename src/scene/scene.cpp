@@ -80,7 +80,6 @@ const SchemaNode& Schema() {
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
             Leaf("threads"),
             Leaf("distribute"),
-            MapOf("edges", {"color", "width", "opacity"}),
         };
         return r;
     }();
@@ -922,17 +921,6 @@ void SceneParser::ReadExtras(const YAML::Node& root, Scene& scene) const {
             Fail("distribute", Get(root, "distribute"),
                  "must be auto, space or image, got '" + d + "'");
         }
-    }
-    if (Has(root, "edges")) {
-        const YAML::Node e = Get(root, "edges");
-        SceneEdges edges;
-        if (Has(e, "color")) edges.color = Color(Get(e, "color"), "edges.color");
-        if (Has(e, "width"))
-            edges.width = InRange(Get(e, "width"), "edges.width", 0, 64, true, false);
-        if (Has(e, "opacity"))
-            edges.opacity =
-                InRange(Get(e, "opacity"), "edges.opacity", 0, 1, false, false);
-        scene.edges = edges;
     }
 }
 

@@ -157,15 +157,6 @@ struct SceneOutput {
     std::string rgba;   ///< float64 .npy (H, W, 4): premultiplied R, G, B, A
 };
 
-/// `edges:` (optional section, an extension) overlay of the cell edges on isosurfaces and
-/// slices, drawn where a surface point lies within `width` pixels of a cell face
-/// boundary.
-struct SceneEdges {
-    std::array<double, 3> color{0.0, 0.0, 0.0};  ///< linear RGB in [0, 1]
-    double width = 1.0;                          ///< pixels, in (0, 64]
-    double opacity = 1.0;                        ///< in [0, 1]
-};
-
 /// How several MPI ranks share a job (top-level key `distribute`).
 enum class Distribution {
     /// `auto` (default): `image` for a mesh given directly, `space` for a partition.
@@ -179,8 +170,8 @@ enum class Distribution {
 };
 
 /// A whole scene. Top-level keys besides the stable ones (docs/contracts.md): `threads`
-/// (worker threads per rank, 0 = all hardware threads; default 0), `distribute` (see
-/// Distribution) and `edges` (see SceneEdges).
+/// (worker threads per rank, 0 = all hardware threads; default 0) and `distribute` (see
+/// Distribution).
 struct Scene {
     std::string sourcePath;  ///< the scene file as given (for messages); empty if parsed
     SceneData data;
@@ -195,7 +186,6 @@ struct Scene {
     SceneOutput output;
     int threads = 0;                  ///< >= 0; 0 = all hardware threads
     Distribution distribute = Distribution::Auto;
-    std::optional<SceneEdges> edges;  ///< default off
 
     /// Names of the fields the scene uses (isosurfaces, slices, volume), each once, in
     /// first-use order: the only fields a renderer needs to load.

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <set>
 #include <string>
 
 #include "scene/camera.h"
@@ -107,7 +108,6 @@ TEST(SceneTest, DefaultsOfAMinimalScene) {
     EXPECT_TRUE(s.output.rgba.empty());
     EXPECT_EQ(s.threads, 0);
     EXPECT_EQ(s.distribute, Distribution::Auto);
-    EXPECT_FALSE(s.edges.has_value());
     EXPECT_TRUE(s.FieldNames().empty());
 }
 
@@ -117,8 +117,7 @@ TEST(SceneTest, ItemDefaults) {
                                    "slices: [{point: [0, 0, 0], normal: [1, 0, 0], "
                                    "color_tf: [[0, 1, 1, 1]]}]\n"
                                    "volume: {color_field: v, color_tf: [[0, 1, 0, 0]], "
-                                   "extinction_tf: [[0, 1]]}\n"
-                                   "edges: {}\n",
+                                   "extinction_tf: [[0, 1]]}\n",
                                "t.yaml");
     ASSERT_EQ(s.isosurfaces.size(), 1u);
     EXPECT_EQ(s.isosurfaces[0].field, "u");
@@ -132,10 +131,6 @@ TEST(SceneTest, ItemDefaults) {
     EXPECT_EQ(s.volume->colorField, "v");
     EXPECT_EQ(s.volume->extinctionField, "v");  // defaults to color_field
     EXPECT_EQ(s.volume->glow, GlowModel::WilliamsMax);
-    ASSERT_TRUE(s.edges.has_value());
-    EXPECT_EQ(s.edges->color, (Vec3{0, 0, 0}));
-    EXPECT_EQ(s.edges->width, 1.0);
-    EXPECT_EQ(s.edges->opacity, 1.0);
     EXPECT_EQ(s.FieldNames(), (std::vector<std::string>{"u", "v"}));
 }
 
@@ -210,7 +205,6 @@ accuracy: {projection_order: 12}
 clip: {near: 0.5, far: 10, box: [[0, 0, 0], [1, 2, 3]]}
 threads: 3
 distribute: space
-edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
 )",
                                "t.yaml");
     EXPECT_TRUE(s.camera.orthographic);
@@ -229,8 +223,8 @@ edges: {color: [0.2, 0.2, 0.2], width: 1.5, opacity: 0.5}
     EXPECT_EQ(s.clip.box->hi, (Vec3{1, 2, 3}));
     EXPECT_EQ(s.threads, 3);
     EXPECT_EQ(s.distribute, Distribution::Space);
-    ASSERT_TRUE(s.edges.has_value());
-    EXPECT_EQ(s.edges->width, 1.5);
+    // `edges` drew nothing and is no longer accepted.
+    EXPECT_TRUE(Contains(ErrorOf(std::string(kMinimal) + "edges: {}\n"), "unknown key 'edges'"));
 }
 
 TEST(SceneTest, KeyPathsCoverTheDesignSchema) {
@@ -399,7 +393,6 @@ TEST(SceneValidationTest, EachRuleNamesKeyAndLine) {
         {"clip: {box: [[0, 0, 0], [1, 0, 1]]}\n", "clip.box", "below the second", 2},
         {"threads: -1\n", "threads", "[0, 4096]", 2},
         {"distribute: pixels\n", "distribute", "auto, space or image", 2},
-        {"edges: {width: 0}\n", "edges.width", "(0, 64]", 2},
         // degenerate cameras
         {"camera: {position: [1, 2, 3], look_at: [1, 2, 3]}\n", "camera.look_at",
          "coincides with position", 2},
@@ -1047,6 +1040,31 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
                          "volume.color_tf.rnage"));
     EXPECT_TRUE(
         Contains(ErrorOf(volume + "color_tf: {range: auto}}\n"), "volume.color_tf.map"));
+}
+
+}  // namespace
+}  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// docs/scene.md documents every key the parser accepts, and nothing else: each key path
+// of the schema appears as a table row "| `path` |", and every such row is a key path.
+TEST(SceneDocsTest, EveryKeyIsDocumented) {
+    std::ifstream in(std::string(HPRAY_SOURCE_DIR) + "/docs/scene.md");
+    ASSERT_TRUE(in) << "docs/scene.md is missing";
+    std::set<std::string> documented;
+    for (std::string line; std::getline(in, line);) {
+        if (line.rfind("| `", 0) != 0) continue;
+        const std::size_t end = line.find('`', 3);
+        documented.insert(line.substr(3, end - 3));
+    }
+    std::set<std::string> schema;
+    for (const std::string& path : SceneKeyPaths()) schema.insert(path);
+    for (const std::string& path : schema)
+        EXPECT_TRUE(documented.count(path)) << path << " is not in docs/scene.md";
+    for (const std::string& path : documented)
+        EXPECT_TRUE(schema.count(path)) << path << " in docs/scene.md is not a scene key";
 }
 
 }  // namespace
