@@ -47,9 +47,13 @@ class Client:
         req.add_header("Authorization", "Bearer " + self.token)
         if data is not None:
             req.add_header("Content-Type", "application/json")
+        with self._open(req) as answer:
+            return answer.read()
+
+    def _open(self, req):
+        """urlopen, with an answer other than 200 raised as ServiceError."""
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as answer:
-                return answer.read()
+            return urllib.request.urlopen(req, timeout=self.timeout)
         except urllib.error.HTTPError as e:
             text = e.read().decode(errors="replace")
             try:
@@ -88,16 +92,7 @@ class Client:
                                      method="POST")
         req.add_header("Authorization", "Bearer " + self.token)
         req.add_header("Content-Type", "application/json")
-        try:
-            answer = urllib.request.urlopen(req, timeout=self.timeout)
-        except urllib.error.HTTPError as e:
-            text = e.read().decode(errors="replace")
-            try:
-                text = json.loads(text).get("error", text)
-            except ValueError:
-                pass
-            raise ServiceError(e.code, text) from None
-        with answer:
+        with self._open(req) as answer:
             event = None
             for raw in answer:
                 line = raw.decode().rstrip("\n")

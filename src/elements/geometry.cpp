@@ -146,6 +146,28 @@ double Invert3x3(const double m[9], double inverse[9]) {
     return det;
 }
 
+namespace {
+/// The rest of MakeCellGeometry once `linear`, `origin` and `size` are set: the largest
+/// distance of a node from the affine map, invertibility and the affine flag.
+void FinishCellGeometry(const BasisTable& basis, const double* nodeXyz,
+                        double affineTolerance, CellGeometry& g) {
+    double dev = 0.0;
+    for (int m = 0; m < basis.nodeCount; ++m) {
+        double x[3];
+        MatVec(g.linear.data(), basis.refNodes[m].data(), x);
+        double e2 = 0.0;
+        for (int d = 0; d < 3; ++d) {
+            const double e = x[d] + g.origin[d] - nodeXyz[3 * m + d];
+            e2 += e * e;
+        }
+        dev = std::max(dev, std::sqrt(e2));
+    }
+    g.affineDeviation = dev;
+    g.linearInvertible = Invert3x3(g.linear.data(), g.inverseLinear.data()) != 0.0;
+    g.affine = g.linearInvertible && dev <= affineTolerance * g.size;
+}
+}  // namespace
+
 CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
                               double affineTolerance) {
     CellGeometry g;
@@ -172,18 +194,7 @@ CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
         g.size = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
                            (hi[2] - lo[2]) * (hi[2] - lo[2]));
         // Corner m maps to origin + column m - 1: exact up to the rounding of x - p0.
-        double dev = 0.0;
-        for (int m = 1; m < 4; ++m) {
-            double e2 = 0.0;
-            for (int d = 0; d < 3; ++d) {
-                const double e = (g.origin[d] + g.linear[3 * d + (m - 1)]) - nodeXyz[3 * m + d];
-                e2 += e * e;
-            }
-            dev = std::max(dev, std::sqrt(e2));
-        }
-        g.affineDeviation = dev;
-        g.linearInvertible = Invert3x3(g.linear.data(), g.inverseLinear.data()) != 0.0;
-        g.affine = g.linearInvertible && dev <= affineTolerance * g.size;
+        FinishCellGeometry(basis, nodeXyz, affineTolerance, g);
         return g;
     }
     // Least-squares affine fit about the centroids: x - xBar = A (r - rBar).
@@ -230,20 +241,7 @@ CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
     double ar[3];
     MatVec(g.linear.data(), rBar, ar);
     for (int d = 0; d < 3; ++d) g.origin[d] = xBar[d] - ar[d];
-    double dev = 0.0;
-    for (int m = 0; m < n; ++m) {
-        double x[3];
-        MatVec(g.linear.data(), basis.refNodes[m].data(), x);
-        double e2 = 0.0;
-        for (int d = 0; d < 3; ++d) {
-            const double e = x[d] + g.origin[d] - nodeXyz[3 * m + d];
-            e2 += e * e;
-        }
-        dev = std::max(dev, std::sqrt(e2));
-    }
-    g.affineDeviation = dev;
-    g.linearInvertible = Invert3x3(g.linear.data(), g.inverseLinear.data()) != 0.0;
-    g.affine = g.linearInvertible && dev <= affineTolerance * g.size;
+    FinishCellGeometry(basis, nodeXyz, affineTolerance, g);
     return g;
 }
 
