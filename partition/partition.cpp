@@ -553,6 +553,15 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     log::Info("partition: scanned " + std::to_string(scan.cells) + " cells, " +
               std::to_string(scan.points) + " points");
 
+    auto phase = [&start](const char* what) {
+        const double t =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        char line[96];
+        std::snprintf(line, sizeof line, "partition: %s done at %.2f s", what, t);
+        log::Debug(line);
+    };
+    phase("scan");
+
     // 2. The k-d tree over the centroids.
     const std::string centroidsPath = scan.CentroidsPath();
     const double rootDiagonal = Diagonal(scan.root);
@@ -579,6 +588,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         std::size_t(1) << 20);
     const KdTree tree = BuildKdTree(scan.root, options.bricks, pass, collectLimit);
     const std::vector<Box> leafBoxes = tree.LeafBoxes();
+    phase("tree");
 
     // 3. Distribute cells to brick spills (owner + ghost copies).
     const int nBricks = options.bricks;
@@ -633,6 +643,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         fs::remove(scan.CellsPath(), ec);
         fs::remove(centroidsPath, ec);
     }
+
+    phase("distribution");
 
     // 4. Check every brick fits the memory limit before writing anything.
     const std::size_t pointBytes = sizeof(double) * scan.pointStride;
@@ -770,6 +782,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             }
         }
     }
+
+    phase("bricks");
 
     // 6. Index, then the manifest last.
     const std::string index = (fs::path(dir) / kIndex).string();
