@@ -52,26 +52,27 @@ constexpr const char* kTestExitEnv = "HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a spilled cell; followed by nodeCount int64 global point indices and the
-/// cell field values (doubles). `vtkType` is the VTK type the input cell was read as
-/// (0 = unknown), for the brick writer to keep. The node count fits 16 bits (at most
-/// (kMaxOrder + 1)^3 nodes), which leaves room for the type without growing the record.
+/// Fixed part of a cell in the scan's cell spill; followed by nodeCount int64 global
+/// point indices and the cell field values (doubles). The centroid and cost parts of the
+/// cell are in the centroid spill, at the same position. `vtkType` is the VTK type the
+/// input cell was read as (0 = unknown), for the brick writer to keep. The node count
+/// fits 16 bits (at most (kMaxOrder + 1)^3 nodes).
 struct CellRecord {
-    std::uint8_t shape = 0, order = 1, family = 0, ghost = 0, vtkType = 0;
-    std::uint16_t nodeCount = 0;
+    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0;
+    std::uint16_t nodeCount = 0, unused = 0;
     double lo[3], hi[3];
-    double centroid[3];
-    /// The cost model's parts (cost_model.h): setup seconds, and seconds per segment
-    /// times the hull surface area; the cost follows once the root box is known.
-    double setupCost = 0;
-    double segmentArea = 0;
-    double Cost(double rootDiagonal) const {
-        return CellRenderSeconds({setupCost, segmentArea}, 1.0, rootDiagonal);
-    }
 };
-static_assert(sizeof(CellRecord) == 96, "spill record layout");
+static_assert(sizeof(CellRecord) == 56, "spill record layout");
 static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
               "CellRecord::nodeCount holds the node count of any cell");
+
+/// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
+/// and field values that follow it as in CellRecord.
+struct BrickCellRecord {
+    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, ghost = 0, unused = 0;
+    std::uint16_t nodeCount = 0;
+};
+static_assert(sizeof(BrickCellRecord) == 8, "spill record layout");
 
 /// A centroid and its cost parts, as spilled before the root box is known.
 struct CentroidRecord {
@@ -222,7 +223,7 @@ class ScanSink : public MeshSink {
         // type, so the pieces agree with the arrays bricks.pvtu declares.
         higherOrderDegrees |=
             VtkTypeNeedsDegrees(VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
-        double sum[3] = {0, 0, 0};
+        double sum[3] = {0, 0, 0}, centroid[3];
         for (int d = 0; d < 3; ++d) {
             r.lo[d] = std::numeric_limits<double>::infinity();
             r.hi[d] = -r.lo[d];
@@ -235,7 +236,7 @@ class ScanSink : public MeshSink {
                 r.hi[d] = std::max(r.hi[d], v);
             }
         for (int d = 0; d < 3; ++d)
-            r.centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
+            centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
         if (order > 1 || family != CellFamily::Lagrange) {
             // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
             const Box g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
@@ -245,8 +246,6 @@ class ScanSink : public MeshSink {
             }
         }
         const CellCostInput cost = CellCostFromNodes(shape, order, family, xyz_.data());
-        r.setupCost = cost.parts.setup;
-        r.segmentArea = cost.parts.perSegment * cost.area;
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::min(root.lo[d], r.lo[d]);
             root.hi[d] = std::max(root.hi[d], r.hi[d]);
@@ -254,8 +253,8 @@ class ScanSink : public MeshSink {
         cells_->Write(&r, sizeof r);
         cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
         cells_->Write(values, sizeof(double) * cellValues);
-        const CentroidRecord w{{r.centroid[0], r.centroid[1], r.centroid[2]},
-                               r.setupCost, r.segmentArea};
+        const CentroidRecord w{{centroid[0], centroid[1], centroid[2]},
+                               cost.parts.setup, cost.parts.perSegment * cost.area};
         centroids_->Write(&w, sizeof w);
         ++cells;
     }
@@ -603,33 +602,42 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             writers.push_back(std::make_unique<SpillWriter>(
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
         SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
+        SpillReader centroids(centroidsPath, std::size_t(1) << 20);
         CellRecord r;
+        CentroidRecord c;
         std::vector<int> hits;
-        std::vector<char> rest;
         while (reader.Read(&r, sizeof r)) {
             const std::size_t restBytes = sizeof(std::int64_t) * r.nodeCount + recordTail;
-            rest.resize(restBytes);
-            if (!reader.Read(rest.data(), restBytes))
+            const char* rest = reader.Take(restBytes);
+            if (!rest || !centroids.Read(&c, sizeof c))
                 throw InternalError("cell spill ends inside a record");
-            const int owner = OwnerBrick(tree, r.centroid);
+            const int owner = OwnerBrick(tree, c.x);
             hits.clear();
             tree.TouchedLeaves(Box{{r.lo[0], r.lo[1], r.lo[2]}, {r.hi[0], r.hi[1], r.hi[2]}},
                                hits);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
+            const double cost =
+                CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
+            BrickCellRecord h;
+            h.shape = r.shape;
+            h.order = r.order;
+            h.family = r.family;
+            h.vtkType = r.vtkType;
+            h.nodeCount = r.nodeCount;
             for (int b : hits) {
                 if (b < first || b >= last) continue;
-                r.ghost = b == owner ? 0 : 1;
+                h.ghost = b == owner ? 0 : 1;
                 SpillWriter& w = *writers[b - first];
-                w.Write(&r, sizeof r);
-                w.Write(rest.data(), restBytes);
+                w.Write(&h, sizeof h);
+                w.Write(rest, restBytes);
                 BrickTally& t = tally[b];
                 ++t.cells;
                 t.nodes += r.nodeCount;
-                if (r.ghost) {
+                if (h.ghost) {
                     ++t.ghosts;
-                    t.ghostCost += r.Cost(rootDiagonal);
+                    t.ghostCost += cost;
                 } else {
-                    t.cost += r.Cost(rootDiagonal);
+                    t.cost += cost;
                 }
             }
         }
@@ -693,7 +701,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 const std::string path =
                     spill.Path() + "/brick-" + std::to_string(b) + ".bin";
                 SpillReader reader(path, std::size_t(1) << 20);
-                CellRecord r;
+                BrickCellRecord r;
                 std::vector<std::int64_t> nodes;
                 std::vector<double> values(scan.cellValues);
                 while (reader.Read(&r, sizeof r)) {
