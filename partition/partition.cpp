@@ -285,6 +285,52 @@ class ScanSink : public MeshSink {
     std::vector<double> xyz_;
 };
 
+/// Replaces every global point id in `connectivity` by its rank among the sorted unique
+/// ids, which it stores in `ids`. When a bitmap over the ids' span (with a running count
+/// per 64-bit word) fits `bitmapBytes`, ranks come from the bitmap in linear time;
+/// otherwise from a sorted copy of the ids. Both give the same numbering.
+void RenumberPoints(std::vector<std::int64_t>& connectivity, std::vector<std::int64_t>& ids,
+                    std::size_t bitmapBytes) {
+    ids.clear();
+    if (connectivity.empty()) return;
+    const auto [lowest, highest] =
+        std::minmax_element(connectivity.begin(), connectivity.end());
+    const std::int64_t base = *lowest;
+    const std::uint64_t words = (static_cast<std::uint64_t>(*highest - base) >> 6) + 1;
+    if (words <= bitmapBytes / 16) {
+        std::vector<std::uint64_t> bits(words, 0);
+        for (const std::int64_t p : connectivity) {
+            const std::uint64_t o = static_cast<std::uint64_t>(p - base);
+            bits[o >> 6] |= std::uint64_t(1) << (o & 63);
+        }
+        std::vector<std::uint64_t> before(words);  // ids set in the words before
+        std::uint64_t count = 0;
+        for (std::uint64_t w = 0; w < words; ++w) {
+            before[w] = count;
+            count += static_cast<std::uint64_t>(__builtin_popcountll(bits[w]));
+        }
+        ids.resize(count);
+        std::size_t k = 0;
+        for (std::uint64_t w = 0; w < words; ++w)
+            for (std::uint64_t word = bits[w]; word != 0; word &= word - 1)
+                ids[k++] = base + static_cast<std::int64_t>(64 * w) +
+                           __builtin_ctzll(word);
+        for (std::int64_t& p : connectivity) {
+            const std::uint64_t o = static_cast<std::uint64_t>(p - base);
+            const std::uint64_t below = bits[o >> 6] & ((std::uint64_t(1) << (o & 63)) - 1);
+            p = static_cast<std::int64_t>(before[o >> 6] +
+                                          static_cast<std::uint64_t>(__builtin_popcountll(below)));
+        }
+        return;
+    }
+    ids = connectivity;
+    std::sort(ids.begin(), ids.end());
+    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+    ids.shrink_to_fit();
+    for (std::int64_t& p : connectivity)
+        p = std::lower_bound(ids.begin(), ids.end(), p) - ids.begin();
+}
+
 /// Per-brick tallies of the distribution pass.
 struct BrickTally {
     std::int64_t cells = 0, ghosts = 0, nodes = 0;
@@ -720,12 +766,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 fs::remove(path, ec);
             }
             // Renumber points: sorted unique global ids become local 0..n-1.
-            std::vector<std::int64_t> ids(mesh.connectivity);
-            std::sort(ids.begin(), ids.end());
-            ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-            ids.shrink_to_fit();
-            for (std::int64_t& p : mesh.connectivity)
-                p = std::lower_bound(ids.begin(), ids.end(), p) - ids.begin();
+            std::vector<std::int64_t> ids;
+            RenumberPoints(mesh.connectivity, ids, budget / 16);
             const std::size_t nPoints = ids.size();
             if (brickBytes(t, static_cast<std::int64_t>(nPoints)) > budget)
                 throw tooLarge(b, brickBytes(t, static_cast<std::int64_t>(nPoints)));
