@@ -7,7 +7,11 @@
 #include <cmath>
 #include <limits>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "util/check.h"
+#include "util/log.h"
 
 namespace hpray::partition {
 namespace {
@@ -46,6 +50,18 @@ struct Search {
     }
 };
 
+/// What a pass does with one point: the index of its node's search (-1: none or done)
+/// and the histogram bin (>= 0) or one of the actions below.
+struct Route {
+    int search = -1;
+    int action = 0;
+};
+constexpr int kSkip = -1;     ///< not on the tie plane
+constexpr int kTie = -2;      ///< on the tie plane: collect (y, z, cost)
+constexpr int kBelow = -3;    ///< x < a
+constexpr int kAbove = -4;    ///< x >= b
+constexpr int kCollect = -5;  ///< in [a, b), collected for the exact split
+
 /// Chooses the best split among candidates: low cost at s is `lowCost`.
 struct Best {
     double split = 0;
@@ -81,6 +97,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
         ends[0][d] = std::nextafter(root.hi[d], std::numeric_limits<double>::infinity());
 
     std::vector<int> level{0};
+    std::vector<Route> route;
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -117,42 +134,69 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     s.collected.clear();
                 }
             }
-            if (!pending) break;
+            if (!pending) {
+                log::Debug("partition: tree level of " + std::to_string(searches.size()) +
+                           " splits in " + std::to_string(round) + " passes");
+                break;
+            }
             HPRAY_CHECK_LT(round, kMaxRounds + 2);
             pass([&](const WeightedPoint* pts, std::size_t count) {
+                // Where each point goes, in parallel: its search (or none) and what the
+                // search does with it; then the sums in the points' order, so the
+                // result does not depend on the number of threads.
+                route.resize(count);
+                tbb::parallel_for(
+                    tbb::blocked_range<std::size_t>(0, count, 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                            const WeightedPoint& p = pts[i];
+                            int n = 0;
+                            while (nodes[n].axis >= 0)
+                                n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
+                            const int si = searchOf[n];
+                            Route& r = route[i];
+                            r.search = -1;
+                            if (si < 0) continue;
+                            const Search& s = searches[si];
+                            if (s.done) continue;
+                            r.search = si;
+                            const double x = p.x[s.axis];
+                            if (s.collectTie) {
+                                r.action = x == s.tieValue ? kTie : kSkip;
+                            } else if (x < s.a) {
+                                r.action = kBelow;
+                            } else if (x >= s.b) {
+                                r.action = kAbove;
+                            } else if (s.collect) {
+                                r.action = kCollect;
+                            } else {
+                                int k = static_cast<int>((x - s.a) / (s.b - s.a) * kBins);
+                                k = std::clamp(k, 0, kBins - 1);
+                                while (k > 0 && x < s.Edge(k)) --k;
+                                while (k < kBins - 1 && x >= s.Edge(k + 1)) ++k;
+                                r.action = k;
+                            }
+                        }
+                    });
                 for (std::size_t i = 0; i < count; ++i) {
+                    const Route& r = route[i];
+                    if (r.search < 0 || r.action == kSkip) continue;
                     const WeightedPoint& p = pts[i];
-                    int n = 0;
-                    while (nodes[n].axis >= 0)
-                        n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
-                    const int si = searchOf[n];
-                    if (si < 0) continue;
-                    Search& s = searches[si];
-                    if (s.done) continue;
-                    const double x = p.x[s.axis];
-                    if (s.collectTie) {
-                        if (x == s.tieValue)
-                            s.tieCollected.push_back(
-                                {p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3], p.cost});
+                    Search& s = searches[r.search];
+                    if (r.action == kTie) {
+                        s.tieCollected.push_back(
+                            {p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3], p.cost});
                         continue;
                     }
                     if (s.first) s.total += p.cost;
-                    if (x < s.a) {
-                        if (s.first)
-                            s.below += p.cost;  // cannot happen: a is the box's lo
-                        continue;
+                    if (r.action >= 0) {
+                        s.binCost[r.action] += p.cost;
+                        ++s.binCount[r.action];
+                    } else if (r.action == kBelow) {
+                        if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+                    } else if (r.action == kCollect) {
+                        s.collected.emplace_back(p.x[s.axis], p.cost);
                     }
-                    if (x >= s.b) continue;
-                    if (s.collect) {
-                        s.collected.emplace_back(x, p.cost);
-                        continue;
-                    }
-                    int k = static_cast<int>((x - s.a) / (s.b - s.a) * kBins);
-                    k = std::clamp(k, 0, kBins - 1);
-                    while (k > 0 && x < s.Edge(k)) --k;
-                    while (k < kBins - 1 && x >= s.Edge(k + 1)) ++k;
-                    s.binCost[k] += p.cost;
-                    ++s.binCount[k];
                 }
             });
             for (Search& s : searches) {

@@ -26,6 +26,9 @@
 #include <map>
 #include <sstream>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "cost_model.h"
 #include "elements/basis.h"
 #include "elements/bounds.h"
@@ -613,20 +616,28 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const CentroidPass pass =
         [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
             SpillReader reader(centroidsPath, std::size_t(1) << 20);
-            constexpr std::size_t kBlock = 4096;
+            constexpr std::size_t kBlock = 16384;
             std::vector<WeightedPoint> block(kBlock);
-            std::size_t n = 0;
-            CentroidRecord c;
-            while (reader.Read(&c, sizeof c)) {
-                WeightedPoint& w = block[n];
-                std::copy(c.x, c.x + 3, w.x);
-                w.cost = CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
-                if (++n == kBlock) {
-                    visit(block.data(), n);
-                    n = 0;
-                }
+            for (std::int64_t left = scan.cells; left > 0;) {
+                const std::size_t n =
+                    static_cast<std::size_t>(std::min<std::int64_t>(left, kBlock));
+                const char* records = reader.Take(n * sizeof(CentroidRecord));
+                if (!records) throw InternalError("centroid spill ends early");
+                left -= static_cast<std::int64_t>(n);
+                tbb::parallel_for(
+                    tbb::blocked_range<std::size_t>(0, n, 2048),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                            CentroidRecord c;
+                            std::memcpy(&c, records + i * sizeof c, sizeof c);
+                            WeightedPoint& w = block[i];
+                            std::copy(c.x, c.x + 3, w.x);
+                            w.cost = CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0,
+                                                       rootDiagonal);
+                        }
+                    });
+                visit(block.data(), n);
             }
-            if (n > 0) visit(block.data(), n);
         };
     const std::size_t collectLimit = std::clamp<std::size_t>(
         budget / 8 / (2 * sizeof(double)) / static_cast<std::size_t>(options.bricks), 256,
