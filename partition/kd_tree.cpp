@@ -42,11 +42,26 @@ struct Search {
     int rounds = 0;
     std::vector<double> binCost;
     std::vector<std::int64_t> binCount;
+    std::vector<double> binLo, binHi;  ///< least and greatest coordinate in each bin
     std::vector<std::pair<double, double>> collected;  ///< (x, cost)
 
     double Edge(int k) const {
         if (k == kBins) return b;
         return a + (b - a) * (static_cast<double>(k) / kBins);
+    }
+    /// The histogram bin of coordinate x in [a, b): Edge(k) <= x < Edge(k + 1).
+    int Bin(double x) const {
+        int k = static_cast<int>((x - a) / (b - a) * kBins);
+        k = std::clamp(k, 0, kBins - 1);
+        while (k > 0 && x < Edge(k)) --k;
+        while (k < kBins - 1 && x >= Edge(k + 1)) ++k;
+        return k;
+    }
+    void ResetHistogram() {
+        binCost.assign(kBins, 0.0);
+        binCount.assign(kBins, 0);
+        binLo.assign(kBins, std::numeric_limits<double>::infinity());
+        binHi.assign(kBins, -std::numeric_limits<double>::infinity());
     }
 };
 
@@ -128,8 +143,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 if (s.collectTie) {
                     s.tieCollected.clear();
                 } else if (!s.collect) {
-                    s.binCost.assign(kBins, 0.0);
-                    s.binCount.assign(kBins, 0);
+                    s.ResetHistogram();
                 } else {
                     s.collected.clear();
                 }
@@ -170,11 +184,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                             } else if (s.collect) {
                                 r.action = kCollect;
                             } else {
-                                int k = static_cast<int>((x - s.a) / (s.b - s.a) * kBins);
-                                k = std::clamp(k, 0, kBins - 1);
-                                while (k > 0 && x < s.Edge(k)) --k;
-                                while (k < kBins - 1 && x >= s.Edge(k + 1)) ++k;
-                                r.action = k;
+                                r.action = s.Bin(x);
                             }
                         }
                     });
@@ -190,8 +200,11 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     }
                     if (s.first) s.total += p.cost;
                     if (r.action >= 0) {
+                        const double x = p.x[s.axis];
                         s.binCost[r.action] += p.cost;
                         ++s.binCount[r.action];
+                        s.binLo[r.action] = std::min(s.binLo[r.action], x);
+                        s.binHi[r.action] = std::max(s.binHi[r.action], x);
                     } else if (r.action == kBelow) {
                         if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
                     } else if (r.action == kCollect) {
@@ -285,30 +298,47 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     finish(best.split);
                     continue;
                 }
-                // Histogram: the bin where the cumulative cost crosses the target.
-                double cum = s.below;
-                int k = 0;
-                for (; k < kBins - 1; ++k) {
-                    if (cum + s.binCost[k] >= s.target) break;
-                    cum += s.binCost[k];
-                }
-                const double e0 = s.Edge(k), e1 = s.Edge(k + 1);
-                ++s.rounds;
-                if (s.binCount[k] <= static_cast<std::int64_t>(collectLimit)) {
+                // Histogram: the bin where the cumulative cost crosses the target. When
+                // that bin's centroids share one coordinate, every narrower interval
+                // around it has the same histogram (one bin holding the same sum of the
+                // same costs in the same order), so those rounds are decided here without
+                // passes over the centroids.
+                while (true) {
+                    double cum = s.below;
+                    int k = 0;
+                    for (; k < kBins - 1; ++k) {
+                        if (cum + s.binCost[k] >= s.target) break;
+                        cum += s.binCost[k];
+                    }
+                    const double e0 = s.Edge(k), e1 = s.Edge(k + 1);
+                    ++s.rounds;
+                    if (s.binCount[k] <= static_cast<std::int64_t>(collectLimit)) {
+                        s.a = e0;
+                        s.b = e1;
+                        s.below = cum;
+                        s.collect = true;
+                        break;
+                    }
+                    if ((e0 == s.a && e1 == s.b) || s.rounds >= kMaxRounds) {
+                        // The interval no longer narrows (many equal coordinates): best
+                        // edge.
+                        Best best;
+                        best.Offer(e0, cum, s.target);
+                        best.Offer(e1, cum + s.binCost[k], s.target);
+                        finish(best.split);
+                        break;
+                    }
                     s.a = e0;
                     s.b = e1;
                     s.below = cum;
-                    s.collect = true;
-                } else if ((e0 == s.a && e1 == s.b) || s.rounds >= kMaxRounds) {
-                    // The interval no longer narrows (many equal coordinates): best edge.
-                    Best best;
-                    best.Offer(e0, cum, s.target);
-                    best.Offer(e1, cum + s.binCost[k], s.target);
-                    finish(best.split);
-                } else {
-                    s.a = e0;
-                    s.b = e1;
-                    s.below = cum;
+                    if (!(s.binLo[k] == s.binHi[k])) break;  // the next pass tells
+                    const double v = s.binLo[k], cost = s.binCost[k];
+                    const std::int64_t count = s.binCount[k];
+                    s.ResetHistogram();
+                    const int kv = s.Bin(v);
+                    s.binCost[kv] = cost;
+                    s.binCount[kv] = count;
+                    s.binLo[kv] = s.binHi[kv] = v;
                 }
             }
         }
