@@ -7,6 +7,9 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <deque>
+#include <functional>
+#include <thread>
 
 #include "util/check.h"
 #include "util/error.h"
@@ -16,6 +19,67 @@ namespace {
 
 [[noreturn]] void IoFail(const std::string& path, const char* what) {
     throw InputError(path, "", std::string(what) + ": " + std::strerror(errno));
+}
+
+}  // namespace
+
+namespace {
+
+/// One thread that runs submitted jobs in order, started on first use and joined at
+/// exit.
+class BackgroundQueue {
+  public:
+    static BackgroundQueue& Get() {
+        static BackgroundQueue queue;
+        return queue;
+    }
+    void Submit(std::function<void()> job) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (!thread_.joinable()) thread_ = std::thread([this] { Run(); });
+            jobs_.push_back(std::move(job));
+        }
+        wake_.notify_one();
+    }
+    ~BackgroundQueue() {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            stop_ = true;
+        }
+        wake_.notify_one();
+        if (thread_.joinable()) thread_.join();
+    }
+
+  private:
+    void Run() {
+        std::unique_lock<std::mutex> lock(mutex_);
+        while (true) {
+            wake_.wait(lock, [this] { return stop_ || !jobs_.empty(); });
+            if (jobs_.empty()) return;
+            std::function<void()> job = std::move(jobs_.front());
+            jobs_.pop_front();
+            lock.unlock();
+            job();
+            lock.lock();
+        }
+    }
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    std::deque<std::function<void()>> jobs_;
+    std::thread thread_;
+    bool stop_ = false;
+};
+
+/// Writes all of [p, p + left) to fd; 0 or the errno of the failure.
+int WriteAll(int fd, const char* p, std::size_t left) {
+    while (left > 0) {
+        const ssize_t n = ::write(fd, p, left);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) return n < 0 ? errno : EIO;
+        p += n;
+        left -= static_cast<std::size_t>(n);
+    }
+    return 0;
 }
 
 }  // namespace
@@ -33,12 +97,16 @@ SpillWriter::~SpillWriter() {
     } catch (...) {
         // Destructors must not throw; Close() reports errors when called explicitly.
     }
+    // A failed Close() may leave the background thread writing inFlight_.
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return !busy_; });
+    if (fd_ >= 0) ::close(fd_);
 }
 
 void SpillWriter::Write(const void* data, std::size_t bytes) {
     const char* p = static_cast<const char*>(data);
     while (bytes > 0) {
-        if (buffer_.size() == capacity_) Flush();
+        if (buffer_.size() == capacity_) Ship();
         const std::size_t n = std::min(bytes, capacity_ - buffer_.size());
         buffer_.insert(buffer_.end(), p, p + n);
         p += n;
@@ -46,19 +114,41 @@ void SpillWriter::Write(const void* data, std::size_t bytes) {
     }
 }
 
-void SpillWriter::Flush() {
-    HPRAY_CHECK(fd_ >= 0);
-    const char* p = buffer_.data();
-    std::size_t left = buffer_.size();
-    while (left > 0) {
-        const ssize_t n = ::write(fd_, p, left);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) IoFail(path_, "cannot write the spill file");
-        p += n;
-        left -= static_cast<std::size_t>(n);
+void SpillWriter::Wait() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return !busy_; });
+    if (error_ != 0) {
+        errno = error_;
+        IoFail(path_, "cannot write the spill file");
     }
+}
+
+void SpillWriter::Ship() {
+    HPRAY_CHECK(fd_ >= 0);
+    Wait();
+    if (buffer_.empty()) return;
     written_ += buffer_.size();
+    std::swap(buffer_, inFlight_);
     buffer_.clear();
+    buffer_.reserve(capacity_);
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        busy_ = true;
+    }
+    BackgroundQueue::Get().Submit([this] {
+        const int error = WriteAll(fd_, inFlight_.data(), inFlight_.size());
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (error != 0) error_ = error;
+            busy_ = false;
+        }
+        done_.notify_all();
+    });
+}
+
+void SpillWriter::Flush() {
+    Ship();
+    Wait();
 }
 
 void SpillWriter::Close() {
@@ -67,6 +157,7 @@ void SpillWriter::Close() {
     ::close(fd_);
     fd_ = -1;
     std::vector<char>().swap(buffer_);
+    std::vector<char>().swap(inFlight_);
 }
 
 SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes)

@@ -4,15 +4,21 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <condition_variable>
 #include <list>
+#include <mutex>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
 namespace hpray::partition {
 
-/// Appends bytes to a file through a buffer of `bufferBytes`. Closed (flushed) by Close()
-/// or the destructor. Throws InputError(path) on write errors (disk full).
+/// Appends bytes to a file through a buffer of `bufferBytes`. A full buffer is written by
+/// a background thread (shared by all writers, in submission order) while the caller
+/// fills a second buffer of the same size, so at most two buffers per writer are held.
+/// Flush() returns once everything written so far is in the file; Close() (or the
+/// destructor) flushes and closes. Throws InputError(path) on write errors (disk full),
+/// from the Write, Flush or Close after the failed write.
 class SpillWriter {
   public:
     SpillWriter(const std::string& path, std::size_t bufferBytes);
@@ -27,11 +33,22 @@ class SpillWriter {
     const std::string& Path() const { return path_; }
 
   private:
+    /// Hands the filled buffer to the background thread (after the previous one is
+    /// written) and continues in the other buffer.
+    void Ship();
+    /// Waits until the background thread has written the buffer it was handed; throws
+    /// on a write error.
+    void Wait();
+
     std::string path_;
     int fd_ = -1;
-    std::vector<char> buffer_;
+    std::vector<char> buffer_, inFlight_;
     std::size_t capacity_ = 0;
     std::uint64_t written_ = 0;
+    std::mutex mutex_;
+    std::condition_variable done_;
+    bool busy_ = false;  ///< inFlight_ is being written
+    int error_ = 0;      ///< errno of a failed background write
 };
 
 /// Reads a file sequentially through a buffer of `bufferBytes`.
