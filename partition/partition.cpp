@@ -56,15 +56,17 @@ constexpr const char* kTestExitEnv = "HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a cell in the scan's cell spill; followed by nodeCount int64 global
-/// point indices and the cell field values (doubles). The centroid and cost parts of the
+/// Fixed part of a cell in the scan's cell spill; followed by nodeCount global point
+/// indices (int32 when every one fits, int64 when `wide`) and the cell field values
+/// (doubles). The centroid and cost parts of the
 /// cell are in the centroid spill, at the same position. `vtkType` is the VTK type the
 /// input cell was read as (0 = unknown), for the brick writer to keep. The node count
 /// fits 16 bits (at most (kMaxOrder + 1)^3 nodes).
 struct CellRecord {
     std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0;
-    std::uint16_t nodeCount = 0, unused = 0;
+    std::uint16_t nodeCount = 0, wide = 0;
     double lo[3], hi[3];
+    std::size_t NodeBytes() const { return (wide ? 8u : 4u) * std::size_t(nodeCount); }
 };
 static_assert(sizeof(CellRecord) == 56, "spill record layout");
 static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
@@ -73,8 +75,9 @@ static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
 /// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
 /// and field values that follow it as in CellRecord.
 struct BrickCellRecord {
-    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, ghost = 0, unused = 0;
+    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, ghost = 0, wide = 0;
     std::uint16_t nodeCount = 0;
+    std::size_t NodeBytes() const { return (wide ? 8u : 4u) * std::size_t(nodeCount); }
 };
 static_assert(sizeof(BrickCellRecord) == 8, "spill record layout");
 
@@ -223,6 +226,8 @@ class ScanSink : public MeshSink {
         r.vtkType = vtkType;
         HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
         r.nodeCount = static_cast<std::uint16_t>(nodeCount);
+        for (int k = 0; k < nodeCount; ++k)
+            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) r.wide = 1;
         // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
         // type, so the pieces agree with the arrays bricks.pvtu declares.
         higherOrderDegrees |=
@@ -255,7 +260,14 @@ class ScanSink : public MeshSink {
             root.hi[d] = std::max(root.hi[d], r.hi[d]);
         }
         cells_->Write(&r, sizeof r);
-        cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+        if (r.wide) {
+            cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+        } else {
+            nodes32_.resize(static_cast<std::size_t>(nodeCount));
+            for (int k = 0; k < nodeCount; ++k)
+                nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
+            cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
+        }
         cells_->Write(values, sizeof(double) * cellValues);
         const CentroidRecord w{{centroid[0], centroid[1], centroid[2]},
                                cost.parts.setup, cost.parts.perSegment * cost.area};
@@ -287,6 +299,7 @@ class ScanSink : public MeshSink {
     std::unique_ptr<SpillWriter> points_, cells_, centroids_;
     std::unique_ptr<RecordCache> cache_;
     std::vector<double> xyz_;
+    std::vector<std::int32_t> nodes32_;
 };
 
 /// Replaces every global point id in `connectivity` by its rank among the sorted unique
@@ -665,7 +678,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         CentroidRecord c;
         std::vector<int> hits;
         while (reader.Read(&r, sizeof r)) {
-            const std::size_t restBytes = sizeof(std::int64_t) * r.nodeCount + recordTail;
+            const std::size_t restBytes = r.NodeBytes() + recordTail;
             const char* rest = reader.Take(restBytes);
             if (!rest || !centroids.Read(&c, sizeof c))
                 throw InternalError("cell spill ends inside a record");
@@ -682,6 +695,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             h.family = r.family;
             h.vtkType = r.vtkType;
             h.nodeCount = r.nodeCount;
+            h.wide = static_cast<std::uint8_t>(r.wide);
             for (int b : hits) {
                 if (b < first || b >= last) continue;
                 h.ghost = b == owner ? 0 : 1;
@@ -764,9 +778,18 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 std::vector<double> values(scan.cellValues);
                 while (reader.Read(&r, sizeof r)) {
                     nodes.resize(r.nodeCount);
-                    if (!reader.Read(nodes.data(), sizeof(std::int64_t) * r.nodeCount) ||
-                        !reader.Read(values.data(), recordTail))
+                    const char* stored = reader.Take(r.NodeBytes());
+                    if (!stored || !reader.Read(values.data(), recordTail))
                         throw InternalError("brick spill ends inside a record");
+                    if (r.wide) {
+                        std::memcpy(nodes.data(), stored, r.NodeBytes());
+                    } else {
+                        for (int k = 0; k < r.nodeCount; ++k) {
+                            std::int32_t id;
+                            std::memcpy(&id, stored + sizeof id * k, sizeof id);
+                            nodes[k] = id;
+                        }
+                    }
                     mesh.AddCell(static_cast<CellShape>(r.shape), r.order,
                                  static_cast<CellFamily>(r.family), nodes.data(),
                                  r.nodeCount);
