@@ -29,7 +29,6 @@ struct Search {
     double a = 0, b = 0;      ///< current interval [a, b) of the axis coordinate
     double below = 0;         ///< cost of the node's cells with x < a
     bool collect = false;     ///< next pass collects the centroids in [a, b)
-    bool collectTie = false;  ///< next pass collects the centroids with x == tieValue
     double tieValue = 0;
     double tieBelow = 0;  ///< cost of the node's cells with x < tieValue
     double planeSplit = 0, planeError = 0;  ///< best plane, kept while trying a tie-break
@@ -43,7 +42,8 @@ struct Search {
     std::vector<double> binCost;
     std::vector<std::int64_t> binCount;
     std::vector<double> binLo, binHi;  ///< least and greatest coordinate in each bin
-    std::vector<std::pair<double, double>> collected;  ///< (x, cost)
+    /// (x, cost, y, z) of the centroids in [a, b), y and z for a tie-break
+    std::vector<std::array<double, 4>> collected;
 
     double Edge(int k) const {
         if (k == kBins) return b;
@@ -71,8 +71,6 @@ struct Route {
     int search = -1;
     int action = 0;
 };
-constexpr int kSkip = -1;     ///< not on the tie plane
-constexpr int kTie = -2;      ///< on the tie plane: collect (y, z, cost)
 constexpr int kBelow = -3;    ///< x < a
 constexpr int kAbove = -4;    ///< x >= b
 constexpr int kCollect = -5;  ///< in [a, b), collected for the exact split
@@ -140,9 +138,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
             for (Search& s : searches) {
                 if (s.done) continue;
                 pending = true;
-                if (s.collectTie) {
-                    s.tieCollected.clear();
-                } else if (!s.collect) {
+                if (!s.collect) {
                     s.ResetHistogram();
                 } else {
                     s.collected.clear();
@@ -175,9 +171,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                             if (s.done) continue;
                             r.search = si;
                             const double x = p.x[s.axis];
-                            if (s.collectTie) {
-                                r.action = x == s.tieValue ? kTie : kSkip;
-                            } else if (x < s.a) {
+                            if (x < s.a) {
                                 r.action = kBelow;
                             } else if (x >= s.b) {
                                 r.action = kAbove;
@@ -190,14 +184,9 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     });
                 for (std::size_t i = 0; i < count; ++i) {
                     const Route& r = route[i];
-                    if (r.search < 0 || r.action == kSkip) continue;
+                    if (r.search < 0) continue;
                     const WeightedPoint& p = pts[i];
                     Search& s = searches[r.search];
-                    if (r.action == kTie) {
-                        s.tieCollected.push_back(
-                            {p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3], p.cost});
-                        continue;
-                    }
                     if (s.first) s.total += p.cost;
                     if (r.action >= 0) {
                         const double x = p.x[s.axis];
@@ -208,7 +197,8 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     } else if (r.action == kBelow) {
                         if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
                     } else if (r.action == kCollect) {
-                        s.collected.emplace_back(p.x[s.axis], p.cost);
+                        s.collected.push_back({p.x[s.axis], p.cost, p.x[(s.axis + 1) % 3],
+                                               p.x[(s.axis + 2) % 3]});
                     }
                 }
             });
@@ -220,16 +210,8 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     s.split = std::clamp(split, lo, hi);
                     s.done = true;
                 };
-                if (s.first) {
-                    s.first = false;
-                    s.target = s.total * s.lowLeaves / s.leaves;
-                    if (!(s.total > 0)) {  // no cells: halve the box
-                        finish(lo + 0.5 * (hi - lo));
-                        continue;
-                    }
-                }
-                if (s.collectTie) {
-                    // Divide the centroids on the plane x == tieValue by (y, z).
+                // Divides the centroids on the plane x == tieValue by (y, z).
+                auto decideTie = [&]() {
                     std::sort(s.tieCollected.begin(), s.tieCollected.end());
                     Best best;
                     double cum = s.tieBelow;
@@ -256,45 +238,64 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                         finish(s.planeSplit);
                     }
                     std::vector<std::array<double, 3>>().swap(s.tieCollected);
-                    continue;
+                };
+                if (s.first) {
+                    s.first = false;
+                    s.target = s.total * s.lowLeaves / s.leaves;
+                    if (!(s.total > 0)) {  // no cells: halve the box
+                        finish(lo + 0.5 * (hi - lo));
+                        continue;
+                    }
                 }
                 if (s.collect) {
                     // Exact: candidates between consecutive distinct coordinates.
+                    // Sorted by (x, cost, y, z): the sums below see the costs in the order
+                    // of sorted (x, cost) pairs.
                     std::sort(s.collected.begin(), s.collected.end());
                     Best best;
+                    std::size_t groupBegin = 0, groupEnd = 0;
                     best.Offer(s.a, s.below, s.target);
                     double cum = s.below;
                     bool straddle = false;
                     std::int64_t groupCount = 0;
                     for (std::size_t i = 0; i < s.collected.size(); ++i) {
                         const double before = cum;
-                        const double x = s.collected[i].first;
+                        const double x = s.collected[i][0];
                         std::size_t j = i;
-                        while (j < s.collected.size() && s.collected[j].first == x)
-                            cum += s.collected[j++].second;
+                        while (j < s.collected.size() && s.collected[j][0] == x)
+                            cum += s.collected[j++][1];
                         // A group of equal coordinates straddling the target.
                         if (j - i > 1 && before < s.target && cum > s.target) {
                             straddle = true;
                             s.tieValue = x;
                             s.tieBelow = before;
                             groupCount = static_cast<std::int64_t>(j - i);
+                            groupBegin = i;
+                            groupEnd = j;
                         }
                         const double next =
-                            j < s.collected.size() ? s.collected[j].first : s.b;
+                            j < s.collected.size() ? s.collected[j][0] : s.b;
                         double mid = x + 0.5 * (next - x);
                         if (!(mid > x && mid <= next)) mid = next;
                         best.Offer(mid, cum, s.target);
                         i = j - 1;
                     }
-                    std::vector<std::pair<double, double>>().swap(s.collected);
                     s.collect = false;
                     if (straddle && best.error > 1e-9 * s.total &&
                         groupCount <= static_cast<std::int64_t>(collectLimit)) {
                         s.planeSplit = best.split;
                         s.planeError = best.error;
-                        s.collectTie = true;
+                        // The centroids on the plane x == tieValue are the group just
+                        // collected: (y, z, cost) of each.
+                        s.tieCollected.clear();
+                        for (std::size_t i = groupBegin; i < groupEnd; ++i)
+                            s.tieCollected.push_back(
+                                {s.collected[i][2], s.collected[i][3], s.collected[i][1]});
+                        std::vector<std::array<double, 4>>().swap(s.collected);
+                        decideTie();
                         continue;
                     }
+                    std::vector<std::array<double, 4>>().swap(s.collected);
                     finish(best.split);
                     continue;
                 }

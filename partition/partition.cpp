@@ -4,8 +4,9 @@
 //
 // Memory: with B = the memory limit, the point cache of the scan holds B/4, stream
 // buffers and spill buffers a few MiB (the distribution's brick spill buffers B/8, twice:
-// spill writers fill one buffer while a background thread writes the other), the tree builder collects at most B/8 of
-// centroids per level, and one brick is assembled at a time; a brick that would need
+// spill writers fill one buffer while a background thread writes the other), the tree builder collects at most B/4 of
+// centroids per level (a coordinate, the cost and the other two coordinates of each,
+// the latter for a tie-break without another pass), and one brick is assembled at a time; a brick that would need
 // more than B is an input error (ask for more bricks). A gmsh input's tag -> index maps
 // take at most B/8 each (gmsh_stream.h), in the scan only. Everything else lives in
 // DIR/.spill-PID-N/ (removed at the end, and by the next run if this one dies).
