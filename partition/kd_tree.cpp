@@ -156,7 +156,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 // result does not depend on the number of threads.
                 route.resize(count);
                 tbb::parallel_for(
-                    tbb::blocked_range<std::size_t>(0, count, 1024),
+                    tbb::blocked_range<std::size_t>(0, count, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                         for (std::size_t i = range.begin(); i < range.end(); ++i) {
                             const WeightedPoint& p = pts[i];

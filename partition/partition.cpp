@@ -630,8 +630,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const double rootDiagonal = Diagonal(scan.root);
     const CentroidPass pass =
         [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
-            SpillReader reader(centroidsPath, std::size_t(1) << 20);
-            constexpr std::size_t kBlock = 16384;
+            SpillReader reader(centroidsPath, std::size_t(4) << 20);
+            constexpr std::size_t kBlock = 65536;
             std::vector<WeightedPoint> block(kBlock);
             for (std::int64_t left = scan.cells; left > 0;) {
                 const std::size_t n =
@@ -640,7 +640,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 if (!records) throw InternalError("centroid spill ends early");
                 left -= static_cast<std::int64_t>(n);
                 tbb::parallel_for(
-                    tbb::blocked_range<std::size_t>(0, n, 2048),
+                    tbb::blocked_range<std::size_t>(0, n, 8192),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                         for (std::size_t i = range.begin(); i < range.end(); ++i) {
                             CentroidRecord c;
