@@ -40,6 +40,7 @@
 #include "io/vtk_cells.h"
 #include "io/vtu_writer.h"
 #include "kd_tree.h"
+#include "renumber.h"
 #include "spill.h"
 #include "util/check.h"
 #include "util/error.h"
@@ -55,6 +56,8 @@ constexpr const char* kIndex = "bricks.pvtu";
 constexpr const char* kLock = ".hpray-partition.lock";
 /// Test-only: the process _exits after writing this many bricks (simulates a crash).
 constexpr const char* kTestExitEnv = "HPRAY_PARTITION_TEST_EXIT_AFTER_BRICKS";
+/// Test-only: spill every cell's node ids as int64 (as for ids beyond int32).
+constexpr const char* kTestWideIdsEnv = "HPRAY_PARTITION_TEST_WIDE_IDS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
@@ -178,7 +181,10 @@ void RemovePreviousRun(const std::string& dir, const std::string& keepSpill) {
 class ScanSink : public MeshSink {
   public:
     ScanSink(const std::string& spill, std::size_t memoryLimit)
-        : spill_(spill), memoryLimit_(memoryLimit) {}
+        : spill_(spill), memoryLimit_(memoryLimit) {
+        const char* wide = std::getenv(kTestWideIdsEnv);
+        allWide_ = wide && std::string(wide) == "1";
+    }
 
     void Fields(const std::vector<StreamField>& pf,
                 const std::vector<StreamField>& cf) override {
@@ -228,6 +234,7 @@ class ScanSink : public MeshSink {
         r.vtkType = vtkType;
         HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
         r.nodeCount = static_cast<std::uint16_t>(nodeCount);
+        r.wide = allWide_ ? 1 : 0;
         for (int k = 0; k < nodeCount; ++k)
             if (nodes[k] > std::numeric_limits<std::int32_t>::max()) r.wide = 1;
         // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
@@ -302,53 +309,8 @@ class ScanSink : public MeshSink {
     std::unique_ptr<RecordCache> cache_;
     std::vector<double> xyz_;
     std::vector<std::int32_t> nodes32_;
+    bool allWide_ = false;
 };
-
-/// Replaces every global point id in `connectivity` by its rank among the sorted unique
-/// ids, which it stores in `ids`. When a bitmap over the ids' span (with a running count
-/// per 64-bit word) fits `bitmapBytes`, ranks come from the bitmap in linear time;
-/// otherwise from a sorted copy of the ids. Both give the same numbering.
-void RenumberPoints(std::vector<std::int64_t>& connectivity, std::vector<std::int64_t>& ids,
-                    std::size_t bitmapBytes) {
-    ids.clear();
-    if (connectivity.empty()) return;
-    const auto [lowest, highest] =
-        std::minmax_element(connectivity.begin(), connectivity.end());
-    const std::int64_t base = *lowest;
-    const std::uint64_t words = (static_cast<std::uint64_t>(*highest - base) >> 6) + 1;
-    if (words <= bitmapBytes / 16) {
-        std::vector<std::uint64_t> bits(words, 0);
-        for (const std::int64_t p : connectivity) {
-            const std::uint64_t o = static_cast<std::uint64_t>(p - base);
-            bits[o >> 6] |= std::uint64_t(1) << (o & 63);
-        }
-        std::vector<std::uint64_t> before(words);  // ids set in the words before
-        std::uint64_t count = 0;
-        for (std::uint64_t w = 0; w < words; ++w) {
-            before[w] = count;
-            count += static_cast<std::uint64_t>(__builtin_popcountll(bits[w]));
-        }
-        ids.resize(count);
-        std::size_t k = 0;
-        for (std::uint64_t w = 0; w < words; ++w)
-            for (std::uint64_t word = bits[w]; word != 0; word &= word - 1)
-                ids[k++] = base + static_cast<std::int64_t>(64 * w) +
-                           __builtin_ctzll(word);
-        for (std::int64_t& p : connectivity) {
-            const std::uint64_t o = static_cast<std::uint64_t>(p - base);
-            const std::uint64_t below = bits[o >> 6] & ((std::uint64_t(1) << (o & 63)) - 1);
-            p = static_cast<std::int64_t>(before[o >> 6] +
-                                          static_cast<std::uint64_t>(__builtin_popcountll(below)));
-        }
-        return;
-    }
-    ids = connectivity;
-    std::sort(ids.begin(), ids.end());
-    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-    ids.shrink_to_fit();
-    for (std::int64_t& p : connectivity)
-        p = std::lower_bound(ids.begin(), ids.end(), p) - ids.begin();
-}
 
 /// Per-brick tallies of the distribution pass.
 struct BrickTally {
