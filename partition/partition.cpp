@@ -841,6 +841,8 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 ::_exit(75);  // test hook: die like a killed process, spills left behind
             }
         }
+        log::Debug("partition: point cache of the bricks: " +
+                   std::to_string(pointsCache.Misses()) + " blocks read");
     }
 
     for (int b = 0; b < nBricks; ++b) bricksJson[b]["sha256"] = checksums[b].get();
