@@ -593,15 +593,16 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const double rootDiagonal = Diagonal(scan.root);
     const CentroidPass pass =
         [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
-            SpillReader reader(centroidsPath, std::size_t(4) << 20);
+            SpillMap file(centroidsPath);
             constexpr std::size_t kBlock = 65536;
             std::vector<WeightedPoint> block(kBlock);
-            for (std::int64_t left = scan.cells; left > 0;) {
+            for (std::int64_t done = 0; done < scan.cells;) {
                 const std::size_t n =
-                    static_cast<std::size_t>(std::min<std::int64_t>(left, kBlock));
-                const char* records = reader.Take(n * sizeof(CentroidRecord));
-                if (!records) throw InternalError("centroid spill ends early");
-                left -= static_cast<std::int64_t>(n);
+                    static_cast<std::size_t>(std::min<std::int64_t>(scan.cells - done, kBlock));
+                const char* records =
+                    file.Map(static_cast<std::uint64_t>(done) * sizeof(CentroidRecord),
+                             n * sizeof(CentroidRecord));
+                done += static_cast<std::int64_t>(n);
                 tbb::parallel_for(
                     tbb::blocked_range<std::size_t>(0, n, 8192),
                     [&](const tbb::blocked_range<std::size_t>& range) {

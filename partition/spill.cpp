@@ -2,6 +2,7 @@
 #include "spill.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -200,6 +201,35 @@ bool SpillReader::Read(void* dst, std::size_t bytes) {
     if (!p) return false;
     std::memcpy(dst, p, bytes);
     return true;
+}
+
+SpillMap::SpillMap(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) IoFail(path, "cannot open the spill file");
+}
+
+SpillMap::~SpillMap() {
+    Unmap();
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void SpillMap::Unmap() {
+    if (base_) ::munmap(base_, length_);
+    base_ = nullptr;
+    length_ = 0;
+}
+
+const char* SpillMap::Map(std::uint64_t offset, std::size_t bytes) {
+    Unmap();
+    static const std::uint64_t page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+    const std::uint64_t start = offset - offset % page;
+    const std::size_t length = static_cast<std::size_t>(offset - start) + bytes;
+    void* base = ::mmap(nullptr, length, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd_,
+                        static_cast<off_t>(start));
+    if (base == MAP_FAILED) IoFail(path_, "cannot map the spill file");
+    base_ = base;
+    length_ = length;
+    return static_cast<const char*>(base) + (offset - start);
 }
 
 RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheBytes)

@@ -74,6 +74,28 @@ class SpillReader {
     bool eof_ = false;
 };
 
+/// Read-only windows of a file mapped into memory (no copy out of the page cache), one at
+/// a time: mapping a window unmaps the previous one, so at most one window is resident
+/// through this object.
+class SpillMap {
+  public:
+    explicit SpillMap(const std::string& path);
+    ~SpillMap();
+    SpillMap(const SpillMap&) = delete;
+    SpillMap& operator=(const SpillMap&) = delete;
+
+    /// The bytes [offset, offset + bytes) of the file, valid until the next Map or the
+    /// destructor. Throws InputError(path) when they cannot be mapped.
+    const char* Map(std::uint64_t offset, std::size_t bytes);
+
+  private:
+    void Unmap();
+    std::string path_;
+    int fd_ = -1;
+    void* base_ = nullptr;
+    std::size_t length_ = 0;
+};
+
 /// Random access to records of `stride` doubles stored back to back in a file, through an
 /// LRU cache of blocks holding at most about `cacheBytes`.
 class RecordCache {
