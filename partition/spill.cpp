@@ -249,8 +249,8 @@ RecordCache::~RecordCache() {
 }
 
 void RecordCache::Invalidate() {
-    blocks_.clear();
-    lru_.clear();
+    slots_.clear();
+    slotOf_.clear();
     last_ = nullptr;
     lastBlock_ = -1;
 }
@@ -258,40 +258,53 @@ void RecordCache::Invalidate() {
 const double* RecordCache::Get(std::int64_t index) {
     const std::int64_t b = index / recordsPerBlock_;
     const std::int64_t within = index - b * recordsPerBlock_;
-    if (b == lastBlock_ && last_) return last_->data.data() + within * stride_;
-    auto it = blocks_.find(b);
-    if (it == blocks_.end()) {
+    if (b == lastBlock_ && last_) return last_ + within * stride_;
+    if (static_cast<std::size_t>(b) >= slotOf_.size())
+        slotOf_.resize(static_cast<std::size_t>(b) + 1, -1);
+    std::int32_t s = slotOf_[b];
+    if (s < 0) {
         ++misses_;
-        if (blocks_.size() >= maxBlocks_) {
-            const std::int64_t victim = lru_.back();
-            lru_.pop_back();
-            blocks_.erase(victim);
+        if (slots_.size() < maxBlocks_) {
+            s = static_cast<std::int32_t>(slots_.size());
+            slots_.emplace_back();
+            slots_.back().data.resize(static_cast<std::size_t>(recordsPerBlock_) * stride_);
+        } else {
+            // Evict the least recently used block.
+            s = 0;
+            for (std::size_t i = 1; i < slots_.size(); ++i)
+                if (slots_[i].lastUse < slots_[s].lastUse) s = static_cast<std::int32_t>(i);
+            slotOf_[slots_[s].block] = -1;
         }
-        Block block;
-        block.data.resize(static_cast<std::size_t>(recordsPerBlock_) * stride_);
-        const std::size_t want = block.data.size() * sizeof(double);
+        Slot& slot = slots_[s];
+        slot.block = b;
+        slotOf_[b] = s;
+        const std::size_t want = slot.data.size() * sizeof(double);
         const off_t offset = static_cast<off_t>(b * recordsPerBlock_ * stride_ * 8);
         std::size_t got = 0;
         while (got < want) {
             const ssize_t n =
-                ::pread(fd_, reinterpret_cast<char*>(block.data.data()) + got, want - got,
+                ::pread(fd_, reinterpret_cast<char*>(slot.data.data()) + got, want - got,
                         offset + static_cast<off_t>(got));
             if (n < 0 && errno == EINTR) continue;
-            if (n < 0) IoFail(path_, "cannot read the spill file");
+            if (n < 0) {
+                slotOf_[b] = -1;
+                slot.block = -1;
+                IoFail(path_, "cannot read the spill file");
+            }
             if (n == 0) break;
             got += static_cast<std::size_t>(n);
         }
-        HPRAY_CHECK_MSG(got >= static_cast<std::size_t>(within + 1) * stride_ * 8,
-                        "record " << index << " is beyond the end of " << path_);
-        lru_.push_front(b);
-        block.lru = lru_.begin();
-        it = blocks_.emplace(b, std::move(block)).first;
-    } else {
-        lru_.splice(lru_.begin(), lru_, it->second.lru);
+        if (got < static_cast<std::size_t>(within + 1) * stride_ * 8) {
+            slotOf_[b] = -1;
+            slot.block = -1;
+            HPRAY_CHECK_MSG(false, "record " << index << " is beyond the end of " << path_);
+        }
     }
+    Slot& slot = slots_[s];
+    slot.lastUse = ++clock_;
     lastBlock_ = b;
-    last_ = &it->second;
-    return it->second.data.data() + within * stride_;
+    last_ = slot.data.data();
+    return last_ + within * stride_;
 }
 
 }  // namespace hpray::partition

@@ -5,10 +5,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <condition_variable>
-#include <list>
 #include <mutex>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 namespace hpray::partition {
@@ -97,7 +95,8 @@ class SpillMap {
 };
 
 /// Random access to records of `stride` doubles stored back to back in a file, through an
-/// LRU cache of blocks holding at most about `cacheBytes`.
+/// LRU cache of blocks holding at most about `cacheBytes` (a slot per cached block, found
+/// through a table indexed by block number).
 class RecordCache {
   public:
     RecordCache(const std::string& path, int stride, std::size_t cacheBytes);
@@ -112,19 +111,21 @@ class RecordCache {
     std::int64_t Misses() const { return misses_; }
 
   private:
-    struct Block {
+    struct Slot {
+        std::int64_t block = -1;  ///< block held, -1: free
+        std::uint64_t lastUse = 0;
         std::vector<double> data;
-        std::list<std::int64_t>::iterator lru;
     };
     std::string path_;
     int fd_ = -1;
     int stride_ = 0;
     std::int64_t recordsPerBlock_ = 0;
     std::size_t maxBlocks_ = 0;
-    std::unordered_map<std::int64_t, Block> blocks_;
-    std::list<std::int64_t> lru_;  ///< most recent first
+    std::vector<Slot> slots_;
+    std::vector<std::int32_t> slotOf_;  ///< per block: its slot, -1 when not cached
+    std::uint64_t clock_ = 0;
     std::int64_t lastBlock_ = -1;
-    const Block* last_ = nullptr;
+    const double* last_ = nullptr;
     std::int64_t misses_ = 0;
 };
 
