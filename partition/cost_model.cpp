@@ -53,13 +53,18 @@ double HullSurfaceArea(CellShape shape, const double* v) {
 double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
                            const double* nodeXyz) {
     // Internal indices of the corners (mesh/cell.h Topology), cached per (shape, order,
-    // family).
+    // family); each thread also remembers the last kind it asked for (cells of one kind
+    // tend to follow each other), which skips the lock.
     static std::mutex mutex;
     static std::map<std::tuple<int, int, int>, std::vector<int>> cache;
-    const std::vector<int>* corners = nullptr;
-    {
+    const std::tuple<int, int, int> key{static_cast<int>(shape), order,
+                                        static_cast<int>(family)};
+    thread_local std::tuple<int, int, int> lastKey{-1, -1, -1};
+    thread_local const std::vector<int>* lastCorners = nullptr;
+    const std::vector<int>* corners = lastKey == key ? lastCorners : nullptr;
+    if (!corners) {
         std::lock_guard<std::mutex> lock(mutex);
-        auto& entry = cache[{static_cast<int>(shape), order, static_cast<int>(family)}];
+        auto& entry = cache[key];
         if (entry.empty()) {
             const CellTopology& t = Topology(shape);
             for (int k = 0; k < t.corners; ++k) {
@@ -70,7 +75,9 @@ double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
                 entry.push_back(index);
             }
         }
-        corners = &entry;
+        corners = &entry;  // map entries stay where they are
+        lastKey = key;
+        lastCorners = corners;
     }
     double v[8 * 3];
     for (std::size_t k = 0; k < corners->size(); ++k)
@@ -84,8 +91,16 @@ CellCostInput CellCostFromNodes(CellShape shape, int order, CellFamily family,
     const bool curved =
         !(shape == CellShape::Tet && order == 1 && family == CellFamily::Lagrange) &&
         !MakeCellGeometry(GetBasis(shape, order, family), nodeXyz).affine;
-    return {CellCostModel(shape, order, family, curved),
-            CellHullSurfaceArea(shape, order, family, nodeXyz)};
+    // The model's parts depend on the kind only: remembered for the last kind per thread.
+    const std::tuple<int, int, int, bool> key{static_cast<int>(shape), order,
+                                              static_cast<int>(family), curved};
+    thread_local std::tuple<int, int, int, bool> lastKey{-1, -1, -1, false};
+    thread_local CellCostParts lastParts;
+    if (key != lastKey) {
+        lastParts = CellCostModel(shape, order, family, curved);
+        lastKey = key;
+    }
+    return {lastParts, CellHullSurfaceArea(shape, order, family, nodeXyz)};
 }
 
 }  // namespace hpray::partition

@@ -7,7 +7,11 @@
 #include <cmath>
 #include <limits>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "util/check.h"
+#include "util/log.h"
 
 namespace hpray::partition {
 namespace {
@@ -25,7 +29,6 @@ struct Search {
     double a = 0, b = 0;      ///< current interval [a, b) of the axis coordinate
     double below = 0;         ///< cost of the node's cells with x < a
     bool collect = false;     ///< next pass collects the centroids in [a, b)
-    bool collectTie = false;  ///< next pass collects the centroids with x == tieValue
     double tieValue = 0;
     double tieBelow = 0;  ///< cost of the node's cells with x < tieValue
     double planeSplit = 0, planeError = 0;  ///< best plane, kept while trying a tie-break
@@ -38,13 +41,39 @@ struct Search {
     int rounds = 0;
     std::vector<double> binCost;
     std::vector<std::int64_t> binCount;
-    std::vector<std::pair<double, double>> collected;  ///< (x, cost)
+    std::vector<double> binLo, binHi;  ///< least and greatest coordinate in each bin
+    /// (x, cost, y, z) of the centroids in [a, b), y and z for a tie-break
+    std::vector<std::array<double, 4>> collected;
 
     double Edge(int k) const {
         if (k == kBins) return b;
         return a + (b - a) * (static_cast<double>(k) / kBins);
     }
+    /// The histogram bin of coordinate x in [a, b): Edge(k) <= x < Edge(k + 1).
+    int Bin(double x) const {
+        int k = static_cast<int>((x - a) / (b - a) * kBins);
+        k = std::clamp(k, 0, kBins - 1);
+        while (k > 0 && x < Edge(k)) --k;
+        while (k < kBins - 1 && x >= Edge(k + 1)) ++k;
+        return k;
+    }
+    void ResetHistogram() {
+        binCost.assign(kBins, 0.0);
+        binCount.assign(kBins, 0);
+        binLo.assign(kBins, std::numeric_limits<double>::infinity());
+        binHi.assign(kBins, -std::numeric_limits<double>::infinity());
+    }
 };
+
+/// What a pass does with one point: the index of its node's search (-1: none or done)
+/// and the histogram bin (>= 0) or one of the actions below.
+struct Route {
+    int search = -1;
+    int action = 0;
+};
+constexpr int kBelow = -3;    ///< x < a
+constexpr int kAbove = -4;    ///< x >= b
+constexpr int kCollect = -5;  ///< in [a, b), collected for the exact split
 
 /// Chooses the best split among candidates: low cost at s is `lowCost`.
 struct Best {
@@ -81,6 +110,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
         ends[0][d] = std::nextafter(root.hi[d], std::numeric_limits<double>::infinity());
 
     std::vector<int> level{0};
+    std::vector<Route> route;
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -108,51 +138,68 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
             for (Search& s : searches) {
                 if (s.done) continue;
                 pending = true;
-                if (s.collectTie) {
-                    s.tieCollected.clear();
-                } else if (!s.collect) {
-                    s.binCost.assign(kBins, 0.0);
-                    s.binCount.assign(kBins, 0);
+                if (!s.collect) {
+                    s.ResetHistogram();
                 } else {
                     s.collected.clear();
                 }
             }
-            if (!pending) break;
+            if (!pending) {
+                log::Debug("partition: tree level of " + std::to_string(searches.size()) +
+                           " splits in " + std::to_string(round) + " passes");
+                break;
+            }
             HPRAY_CHECK_LT(round, kMaxRounds + 2);
             pass([&](const WeightedPoint* pts, std::size_t count) {
+                // Where each point goes, in parallel: its search (or none) and what the
+                // search does with it; then the sums in the points' order, so the
+                // result does not depend on the number of threads.
+                route.resize(count);
+                tbb::parallel_for(
+                    tbb::blocked_range<std::size_t>(0, count, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                        for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                            const WeightedPoint& p = pts[i];
+                            int n = 0;
+                            while (nodes[n].axis >= 0)
+                                n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
+                            const int si = searchOf[n];
+                            Route& r = route[i];
+                            r.search = -1;
+                            if (si < 0) continue;
+                            const Search& s = searches[si];
+                            if (s.done) continue;
+                            r.search = si;
+                            const double x = p.x[s.axis];
+                            if (x < s.a) {
+                                r.action = kBelow;
+                            } else if (x >= s.b) {
+                                r.action = kAbove;
+                            } else if (s.collect) {
+                                r.action = kCollect;
+                            } else {
+                                r.action = s.Bin(x);
+                            }
+                        }
+                    });
                 for (std::size_t i = 0; i < count; ++i) {
+                    const Route& r = route[i];
+                    if (r.search < 0) continue;
                     const WeightedPoint& p = pts[i];
-                    int n = 0;
-                    while (nodes[n].axis >= 0)
-                        n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
-                    const int si = searchOf[n];
-                    if (si < 0) continue;
-                    Search& s = searches[si];
-                    if (s.done) continue;
-                    const double x = p.x[s.axis];
-                    if (s.collectTie) {
-                        if (x == s.tieValue)
-                            s.tieCollected.push_back(
-                                {p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3], p.cost});
-                        continue;
-                    }
+                    Search& s = searches[r.search];
                     if (s.first) s.total += p.cost;
-                    if (x < s.a) {
-                        if (s.first)
-                            s.below += p.cost;  // cannot happen: a is the box's lo
-                        continue;
+                    if (r.action >= 0) {
+                        const double x = p.x[s.axis];
+                        s.binCost[r.action] += p.cost;
+                        ++s.binCount[r.action];
+                        s.binLo[r.action] = std::min(s.binLo[r.action], x);
+                        s.binHi[r.action] = std::max(s.binHi[r.action], x);
+                    } else if (r.action == kBelow) {
+                        if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+                    } else if (r.action == kCollect) {
+                        s.collected.push_back({p.x[s.axis], p.cost, p.x[(s.axis + 1) % 3],
+                                               p.x[(s.axis + 2) % 3]});
                     }
-                    if (x >= s.b) continue;
-                    if (s.collect) {
-                        s.collected.emplace_back(x, p.cost);
-                        continue;
-                    }
-                    int k = static_cast<int>((x - s.a) / (s.b - s.a) * kBins);
-                    k = std::clamp(k, 0, kBins - 1);
-                    while (k > 0 && x < s.Edge(k)) --k;
-                    while (k < kBins - 1 && x >= s.Edge(k + 1)) ++k;
-                    s.binCost[k] += p.cost;
-                    ++s.binCount[k];
                 }
             });
             for (Search& s : searches) {
@@ -163,16 +210,8 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     s.split = std::clamp(split, lo, hi);
                     s.done = true;
                 };
-                if (s.first) {
-                    s.first = false;
-                    s.target = s.total * s.lowLeaves / s.leaves;
-                    if (!(s.total > 0)) {  // no cells: halve the box
-                        finish(lo + 0.5 * (hi - lo));
-                        continue;
-                    }
-                }
-                if (s.collectTie) {
-                    // Divide the centroids on the plane x == tieValue by (y, z).
+                // Divides the centroids on the plane x == tieValue by (y, z).
+                auto decideTie = [&]() {
                     std::sort(s.tieCollected.begin(), s.tieCollected.end());
                     Best best;
                     double cum = s.tieBelow;
@@ -199,72 +238,108 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                         finish(s.planeSplit);
                     }
                     std::vector<std::array<double, 3>>().swap(s.tieCollected);
-                    continue;
+                };
+                if (s.first) {
+                    s.first = false;
+                    s.target = s.total * s.lowLeaves / s.leaves;
+                    if (!(s.total > 0)) {  // no cells: halve the box
+                        finish(lo + 0.5 * (hi - lo));
+                        continue;
+                    }
                 }
                 if (s.collect) {
                     // Exact: candidates between consecutive distinct coordinates.
+                    // Sorted by (x, cost, y, z): the sums below see the costs in the order
+                    // of sorted (x, cost) pairs.
                     std::sort(s.collected.begin(), s.collected.end());
                     Best best;
+                    std::size_t groupBegin = 0, groupEnd = 0;
                     best.Offer(s.a, s.below, s.target);
                     double cum = s.below;
                     bool straddle = false;
                     std::int64_t groupCount = 0;
                     for (std::size_t i = 0; i < s.collected.size(); ++i) {
                         const double before = cum;
-                        const double x = s.collected[i].first;
+                        const double x = s.collected[i][0];
                         std::size_t j = i;
-                        while (j < s.collected.size() && s.collected[j].first == x)
-                            cum += s.collected[j++].second;
+                        while (j < s.collected.size() && s.collected[j][0] == x)
+                            cum += s.collected[j++][1];
                         // A group of equal coordinates straddling the target.
                         if (j - i > 1 && before < s.target && cum > s.target) {
                             straddle = true;
                             s.tieValue = x;
                             s.tieBelow = before;
                             groupCount = static_cast<std::int64_t>(j - i);
+                            groupBegin = i;
+                            groupEnd = j;
                         }
                         const double next =
-                            j < s.collected.size() ? s.collected[j].first : s.b;
+                            j < s.collected.size() ? s.collected[j][0] : s.b;
                         double mid = x + 0.5 * (next - x);
                         if (!(mid > x && mid <= next)) mid = next;
                         best.Offer(mid, cum, s.target);
                         i = j - 1;
                     }
-                    std::vector<std::pair<double, double>>().swap(s.collected);
                     s.collect = false;
                     if (straddle && best.error > 1e-9 * s.total &&
                         groupCount <= static_cast<std::int64_t>(collectLimit)) {
                         s.planeSplit = best.split;
                         s.planeError = best.error;
-                        s.collectTie = true;
+                        // The centroids on the plane x == tieValue are the group just
+                        // collected: (y, z, cost) of each.
+                        s.tieCollected.clear();
+                        for (std::size_t i = groupBegin; i < groupEnd; ++i)
+                            s.tieCollected.push_back(
+                                {s.collected[i][2], s.collected[i][3], s.collected[i][1]});
+                        std::vector<std::array<double, 4>>().swap(s.collected);
+                        decideTie();
                         continue;
                     }
+                    std::vector<std::array<double, 4>>().swap(s.collected);
                     finish(best.split);
                     continue;
                 }
-                // Histogram: the bin where the cumulative cost crosses the target.
-                double cum = s.below;
-                int k = 0;
-                for (; k < kBins - 1; ++k) {
-                    if (cum + s.binCost[k] >= s.target) break;
-                    cum += s.binCost[k];
-                }
-                const double e0 = s.Edge(k), e1 = s.Edge(k + 1);
-                ++s.rounds;
-                if (s.binCount[k] <= static_cast<std::int64_t>(collectLimit)) {
+                // Histogram: the bin where the cumulative cost crosses the target. When
+                // that bin's centroids share one coordinate, every narrower interval
+                // around it has the same histogram (one bin holding the same sum of the
+                // same costs in the same order), so those rounds are decided here without
+                // passes over the centroids.
+                while (true) {
+                    double cum = s.below;
+                    int k = 0;
+                    for (; k < kBins - 1; ++k) {
+                        if (cum + s.binCost[k] >= s.target) break;
+                        cum += s.binCost[k];
+                    }
+                    const double e0 = s.Edge(k), e1 = s.Edge(k + 1);
+                    ++s.rounds;
+                    if (s.binCount[k] <= static_cast<std::int64_t>(collectLimit)) {
+                        s.a = e0;
+                        s.b = e1;
+                        s.below = cum;
+                        s.collect = true;
+                        break;
+                    }
+                    if ((e0 == s.a && e1 == s.b) || s.rounds >= kMaxRounds) {
+                        // The interval no longer narrows (many equal coordinates): best
+                        // edge.
+                        Best best;
+                        best.Offer(e0, cum, s.target);
+                        best.Offer(e1, cum + s.binCost[k], s.target);
+                        finish(best.split);
+                        break;
+                    }
                     s.a = e0;
                     s.b = e1;
                     s.below = cum;
-                    s.collect = true;
-                } else if ((e0 == s.a && e1 == s.b) || s.rounds >= kMaxRounds) {
-                    // The interval no longer narrows (many equal coordinates): best edge.
-                    Best best;
-                    best.Offer(e0, cum, s.target);
-                    best.Offer(e1, cum + s.binCost[k], s.target);
-                    finish(best.split);
-                } else {
-                    s.a = e0;
-                    s.b = e1;
-                    s.below = cum;
+                    if (!(s.binLo[k] == s.binHi[k])) break;  // the next pass tells
+                    const double v = s.binLo[k], cost = s.binCost[k];
+                    const std::int64_t count = s.binCount[k];
+                    s.ResetHistogram();
+                    const int kv = s.Bin(v);
+                    s.binCost[kv] = cost;
+                    s.binCount[kv] = count;
+                    s.binLo[kv] = s.binHi[kv] = v;
                 }
             }
         }

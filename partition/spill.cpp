@@ -2,11 +2,15 @@
 #include "spill.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <deque>
+#include <functional>
+#include <thread>
 
 #include "util/check.h"
 #include "util/error.h"
@@ -16,6 +20,67 @@ namespace {
 
 [[noreturn]] void IoFail(const std::string& path, const char* what) {
     throw InputError(path, "", std::string(what) + ": " + std::strerror(errno));
+}
+
+}  // namespace
+
+namespace {
+
+/// One thread that runs submitted jobs in order, started on first use and joined at
+/// exit.
+class BackgroundQueue {
+  public:
+    static BackgroundQueue& Get() {
+        static BackgroundQueue queue;
+        return queue;
+    }
+    void Submit(std::function<void()> job) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (!thread_.joinable()) thread_ = std::thread([this] { Run(); });
+            jobs_.push_back(std::move(job));
+        }
+        wake_.notify_one();
+    }
+    ~BackgroundQueue() {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            stop_ = true;
+        }
+        wake_.notify_one();
+        if (thread_.joinable()) thread_.join();
+    }
+
+  private:
+    void Run() {
+        std::unique_lock<std::mutex> lock(mutex_);
+        while (true) {
+            wake_.wait(lock, [this] { return stop_ || !jobs_.empty(); });
+            if (jobs_.empty()) return;
+            std::function<void()> job = std::move(jobs_.front());
+            jobs_.pop_front();
+            lock.unlock();
+            job();
+            lock.lock();
+        }
+    }
+    std::mutex mutex_;
+    std::condition_variable wake_;
+    std::deque<std::function<void()>> jobs_;
+    std::thread thread_;
+    bool stop_ = false;
+};
+
+/// Writes all of [p, p + left) to fd; 0 or the errno of the failure.
+int WriteAll(int fd, const char* p, std::size_t left) {
+    while (left > 0) {
+        const ssize_t n = ::write(fd, p, left);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) return n < 0 ? errno : EIO;
+        p += n;
+        left -= static_cast<std::size_t>(n);
+    }
+    return 0;
 }
 
 }  // namespace
@@ -33,12 +98,16 @@ SpillWriter::~SpillWriter() {
     } catch (...) {
         // Destructors must not throw; Close() reports errors when called explicitly.
     }
+    // A failed Close() may leave the background thread writing inFlight_.
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return !busy_; });
+    if (fd_ >= 0) ::close(fd_);
 }
 
 void SpillWriter::Write(const void* data, std::size_t bytes) {
     const char* p = static_cast<const char*>(data);
     while (bytes > 0) {
-        if (buffer_.size() == capacity_) Flush();
+        if (buffer_.size() == capacity_) Ship();
         const std::size_t n = std::min(bytes, capacity_ - buffer_.size());
         buffer_.insert(buffer_.end(), p, p + n);
         p += n;
@@ -46,19 +115,41 @@ void SpillWriter::Write(const void* data, std::size_t bytes) {
     }
 }
 
-void SpillWriter::Flush() {
-    HPRAY_CHECK(fd_ >= 0);
-    const char* p = buffer_.data();
-    std::size_t left = buffer_.size();
-    while (left > 0) {
-        const ssize_t n = ::write(fd_, p, left);
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) IoFail(path_, "cannot write the spill file");
-        p += n;
-        left -= static_cast<std::size_t>(n);
+void SpillWriter::Wait() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return !busy_; });
+    if (error_ != 0) {
+        errno = error_;
+        IoFail(path_, "cannot write the spill file");
     }
+}
+
+void SpillWriter::Ship() {
+    HPRAY_CHECK(fd_ >= 0);
+    Wait();
+    if (buffer_.empty()) return;
     written_ += buffer_.size();
+    std::swap(buffer_, inFlight_);
     buffer_.clear();
+    buffer_.reserve(capacity_);
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        busy_ = true;
+    }
+    BackgroundQueue::Get().Submit([this] {
+        const int error = WriteAll(fd_, inFlight_.data(), inFlight_.size());
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            if (error != 0) error_ = error;
+            busy_ = false;
+        }
+        done_.notify_all();
+    });
+}
+
+void SpillWriter::Flush() {
+    Ship();
+    Wait();
 }
 
 void SpillWriter::Close() {
@@ -67,6 +158,7 @@ void SpillWriter::Close() {
     ::close(fd_);
     fd_ = -1;
     std::vector<char>().swap(buffer_);
+    std::vector<char>().swap(inFlight_);
 }
 
 SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes)
@@ -111,6 +203,35 @@ bool SpillReader::Read(void* dst, std::size_t bytes) {
     return true;
 }
 
+SpillMap::SpillMap(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) IoFail(path, "cannot open the spill file");
+}
+
+SpillMap::~SpillMap() {
+    Unmap();
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void SpillMap::Unmap() {
+    if (base_) ::munmap(base_, length_);
+    base_ = nullptr;
+    length_ = 0;
+}
+
+const char* SpillMap::Map(std::uint64_t offset, std::size_t bytes) {
+    Unmap();
+    static const std::uint64_t page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+    const std::uint64_t start = offset - offset % page;
+    const std::size_t length = static_cast<std::size_t>(offset - start) + bytes;
+    void* base = ::mmap(nullptr, length, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd_,
+                        static_cast<off_t>(start));
+    if (base == MAP_FAILED) IoFail(path_, "cannot map the spill file");
+    base_ = base;
+    length_ = length;
+    return static_cast<const char*>(base) + (offset - start);
+}
+
 RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheBytes)
     : path_(path), stride_(stride) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
@@ -128,8 +249,8 @@ RecordCache::~RecordCache() {
 }
 
 void RecordCache::Invalidate() {
-    blocks_.clear();
-    lru_.clear();
+    slots_.clear();
+    slotOf_.clear();
     last_ = nullptr;
     lastBlock_ = -1;
 }
@@ -137,40 +258,53 @@ void RecordCache::Invalidate() {
 const double* RecordCache::Get(std::int64_t index) {
     const std::int64_t b = index / recordsPerBlock_;
     const std::int64_t within = index - b * recordsPerBlock_;
-    if (b == lastBlock_ && last_) return last_->data.data() + within * stride_;
-    auto it = blocks_.find(b);
-    if (it == blocks_.end()) {
+    if (b == lastBlock_ && last_) return last_ + within * stride_;
+    if (static_cast<std::size_t>(b) >= slotOf_.size())
+        slotOf_.resize(static_cast<std::size_t>(b) + 1, -1);
+    std::int32_t s = slotOf_[b];
+    if (s < 0) {
         ++misses_;
-        if (blocks_.size() >= maxBlocks_) {
-            const std::int64_t victim = lru_.back();
-            lru_.pop_back();
-            blocks_.erase(victim);
+        if (slots_.size() < maxBlocks_) {
+            s = static_cast<std::int32_t>(slots_.size());
+            slots_.emplace_back();
+            slots_.back().data.resize(static_cast<std::size_t>(recordsPerBlock_) * stride_);
+        } else {
+            // Evict the least recently used block.
+            s = 0;
+            for (std::size_t i = 1; i < slots_.size(); ++i)
+                if (slots_[i].lastUse < slots_[s].lastUse) s = static_cast<std::int32_t>(i);
+            slotOf_[slots_[s].block] = -1;
         }
-        Block block;
-        block.data.resize(static_cast<std::size_t>(recordsPerBlock_) * stride_);
-        const std::size_t want = block.data.size() * sizeof(double);
+        Slot& slot = slots_[s];
+        slot.block = b;
+        slotOf_[b] = s;
+        const std::size_t want = slot.data.size() * sizeof(double);
         const off_t offset = static_cast<off_t>(b * recordsPerBlock_ * stride_ * 8);
         std::size_t got = 0;
         while (got < want) {
             const ssize_t n =
-                ::pread(fd_, reinterpret_cast<char*>(block.data.data()) + got, want - got,
+                ::pread(fd_, reinterpret_cast<char*>(slot.data.data()) + got, want - got,
                         offset + static_cast<off_t>(got));
             if (n < 0 && errno == EINTR) continue;
-            if (n < 0) IoFail(path_, "cannot read the spill file");
+            if (n < 0) {
+                slotOf_[b] = -1;
+                slot.block = -1;
+                IoFail(path_, "cannot read the spill file");
+            }
             if (n == 0) break;
             got += static_cast<std::size_t>(n);
         }
-        HPRAY_CHECK_MSG(got >= static_cast<std::size_t>(within + 1) * stride_ * 8,
-                        "record " << index << " is beyond the end of " << path_);
-        lru_.push_front(b);
-        block.lru = lru_.begin();
-        it = blocks_.emplace(b, std::move(block)).first;
-    } else {
-        lru_.splice(lru_.begin(), lru_, it->second.lru);
+        if (got < static_cast<std::size_t>(within + 1) * stride_ * 8) {
+            slotOf_[b] = -1;
+            slot.block = -1;
+            HPRAY_CHECK_MSG(false, "record " << index << " is beyond the end of " << path_);
+        }
     }
+    Slot& slot = slots_[s];
+    slot.lastUse = ++clock_;
     lastBlock_ = b;
-    last_ = &it->second;
-    return it->second.data.data() + within * stride_;
+    last_ = slot.data.data();
+    return last_ + within * stride_;
 }
 
 }  // namespace hpray::partition

@@ -4,15 +4,19 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <list>
+#include <condition_variable>
+#include <mutex>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 namespace hpray::partition {
 
-/// Appends bytes to a file through a buffer of `bufferBytes`. Closed (flushed) by Close()
-/// or the destructor. Throws InputError(path) on write errors (disk full).
+/// Appends bytes to a file through a buffer of `bufferBytes`. A full buffer is written by
+/// a background thread (shared by all writers, in submission order) while the caller
+/// fills a second buffer of the same size, so at most two buffers per writer are held.
+/// Flush() returns once everything written so far is in the file; Close() (or the
+/// destructor) flushes and closes. Throws InputError(path) on write errors (disk full),
+/// from the Write, Flush or Close after the failed write.
 class SpillWriter {
   public:
     SpillWriter(const std::string& path, std::size_t bufferBytes);
@@ -27,11 +31,22 @@ class SpillWriter {
     const std::string& Path() const { return path_; }
 
   private:
+    /// Hands the filled buffer to the background thread (after the previous one is
+    /// written) and continues in the other buffer.
+    void Ship();
+    /// Waits until the background thread has written the buffer it was handed; throws
+    /// on a write error.
+    void Wait();
+
     std::string path_;
     int fd_ = -1;
-    std::vector<char> buffer_;
+    std::vector<char> buffer_, inFlight_;
     std::size_t capacity_ = 0;
     std::uint64_t written_ = 0;
+    std::mutex mutex_;
+    std::condition_variable done_;
+    bool busy_ = false;  ///< inFlight_ is being written
+    int error_ = 0;      ///< errno of a failed background write
 };
 
 /// Reads a file sequentially through a buffer of `bufferBytes`.
@@ -57,8 +72,31 @@ class SpillReader {
     bool eof_ = false;
 };
 
+/// Read-only windows of a file mapped into memory (no copy out of the page cache), one at
+/// a time: mapping a window unmaps the previous one, so at most one window is resident
+/// through this object.
+class SpillMap {
+  public:
+    explicit SpillMap(const std::string& path);
+    ~SpillMap();
+    SpillMap(const SpillMap&) = delete;
+    SpillMap& operator=(const SpillMap&) = delete;
+
+    /// The bytes [offset, offset + bytes) of the file, valid until the next Map or the
+    /// destructor. Throws InputError(path) when they cannot be mapped.
+    const char* Map(std::uint64_t offset, std::size_t bytes);
+
+  private:
+    void Unmap();
+    std::string path_;
+    int fd_ = -1;
+    void* base_ = nullptr;
+    std::size_t length_ = 0;
+};
+
 /// Random access to records of `stride` doubles stored back to back in a file, through an
-/// LRU cache of blocks holding at most about `cacheBytes`.
+/// LRU cache of blocks holding at most about `cacheBytes` (a slot per cached block, found
+/// through a table indexed by block number).
 class RecordCache {
   public:
     RecordCache(const std::string& path, int stride, std::size_t cacheBytes);
@@ -73,19 +111,21 @@ class RecordCache {
     std::int64_t Misses() const { return misses_; }
 
   private:
-    struct Block {
+    struct Slot {
+        std::int64_t block = -1;  ///< block held, -1: free
+        std::uint64_t lastUse = 0;
         std::vector<double> data;
-        std::list<std::int64_t>::iterator lru;
     };
     std::string path_;
     int fd_ = -1;
     int stride_ = 0;
     std::int64_t recordsPerBlock_ = 0;
     std::size_t maxBlocks_ = 0;
-    std::unordered_map<std::int64_t, Block> blocks_;
-    std::list<std::int64_t> lru_;  ///< most recent first
+    std::vector<Slot> slots_;
+    std::vector<std::int32_t> slotOf_;  ///< per block: its slot, -1 when not cached
+    std::uint64_t clock_ = 0;
     std::int64_t lastBlock_ = -1;
-    const Block* last_ = nullptr;
+    const double* last_ = nullptr;
     std::int64_t misses_ = 0;
 };
 

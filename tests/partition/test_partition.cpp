@@ -9,6 +9,7 @@
 #include <map>
 #include <random>
 #include <set>
+#include <tbb/global_control.h>
 
 #include "cost_model.h"
 #include "io/mesh_io.h"
@@ -18,6 +19,7 @@
 #include "mesh/builtin.h"
 #include "partition.h"
 #include "partition_test_util.h"
+#include "renumber.h"
 #include "util/error.h"
 #include "vtu_stream.h"
 
@@ -530,6 +532,99 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
             EXPECT_EQ(static_cast<int>(nodes.nodes.size()), 2 * n - 1);
         }
     }
+}
+
+TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
+    // Centroids on a coarse lattice (equal coordinates, tie-breaks, bins of one
+    // coordinate) and scattered ones, in blocks large enough to be routed by several
+    // tasks: the sums are taken in the points' order, so the tree is the same.
+    std::vector<partition::WeightedPoint> pts;
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(0.0, 40.0);
+    for (int i = 0; i < 200000; ++i) {
+        if (i % 3 == 0)
+            pts.push_back({{u(rng), u(rng), u(rng)}, 0.5 + (rng() % 7)});
+        else
+            pts.push_back({{static_cast<double>(rng() % 41), static_cast<double>(rng() % 7),
+                            static_cast<double>(rng() % 5)},
+                           1.0 + (rng() % 3) * 0.1});
+    }
+    const partition::CentroidPass pass = [&](const auto& visit) {
+        for (std::size_t i = 0; i < pts.size(); i += 65536)
+            visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
+    };
+    Box root;
+    root.lo = {0, 0, 0};
+    root.hi = {40, 40, 40};
+    for (int n : {2, 7, 32, 64}) {
+        for (std::size_t limit : {std::size_t(64), std::size_t(4096), std::size_t(1) << 20}) {
+            KdTree one;
+            {
+                tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+                one = partition::BuildKdTree(root, n, pass, limit);
+            }
+            const KdTree many = partition::BuildKdTree(root, n, pass, limit);
+            ASSERT_EQ(one.nodes.size(), many.nodes.size());
+            for (std::size_t k = 0; k < one.nodes.size(); ++k) {
+                const KdNode &a = one.nodes[k], &b = many.nodes[k];
+                EXPECT_EQ(a.axis, b.axis) << n << " " << limit << " node " << k;
+                EXPECT_EQ(a.split, b.split) << n << " " << limit << " node " << k;
+                EXPECT_EQ(a.tieBreak, b.tieBreak) << n << " " << limit << " node " << k;
+                EXPECT_EQ(a.tie, b.tie) << n << " " << limit << " node " << k;
+                EXPECT_EQ(a.leaf, b.leaf) << n << " " << limit << " node " << k;
+            }
+        }
+    }
+}
+
+TEST(Partition, PointRenumberingByBitmapEqualsSorting) {
+    std::mt19937_64 rng(5);
+    for (const std::int64_t span : {std::int64_t(1), std::int64_t(63), std::int64_t(64),
+                                    std::int64_t(1000), std::int64_t(1) << 40}) {
+        for (const std::int64_t base : {std::int64_t(0), std::int64_t(12345)}) {
+            std::vector<std::int64_t> conn;
+            for (int i = 0; i < 5000; ++i)
+                conn.push_back(base + static_cast<std::int64_t>(
+                                          rng() % static_cast<std::uint64_t>(span)));
+            std::vector<std::int64_t> bitmapConn = conn, sortConn = conn, bitmapIds,
+                                      sortIds;
+            partition::RenumberPoints(bitmapConn, bitmapIds, std::size_t(1) << 20);
+            partition::RenumberPoints(sortConn, sortIds, 0);
+            EXPECT_EQ(bitmapIds, sortIds) << span << " " << base;
+            EXPECT_EQ(bitmapConn, sortConn) << span << " " << base;
+            for (std::size_t i = 0; i < conn.size(); ++i)
+                ASSERT_EQ(sortIds[sortConn[i]], conn[i]);
+            EXPECT_TRUE(std::is_sorted(sortIds.begin(), sortIds.end()));
+        }
+    }
+    std::vector<std::int64_t> empty, ids{7};
+    partition::RenumberPoints(empty, ids, 1 << 20);
+    EXPECT_TRUE(ids.empty());
+}
+
+TEST(Partition, WideNodeIdsInSpillsGiveTheSameBricks) {
+    // Node ids are spilled as int32 when they fit, as int64 otherwise; forcing int64
+    // gives the same files.
+    const std::string path = kData + "/mfem_escher_tet_p3.vtu";
+    ScratchDir dir("partition_wide_ids");
+    std::vector<std::string> sums[2];
+    for (int wide = 0; wide < 2; ++wide) {
+        if (wide)
+            ::setenv("HPRAY_PARTITION_TEST_WIDE_IDS", "1", 1);
+        partition::PartitionOptions o;
+        o.bricks = 9;
+        o.outDir = dir / ("p" + std::to_string(wide));
+        try {
+            partition::PartitionMesh(path, o);
+        } catch (...) {
+            ::unsetenv("HPRAY_PARTITION_TEST_WIDE_IDS");
+            throw;
+        }
+        ::unsetenv("HPRAY_PARTITION_TEST_WIDE_IDS");
+        for (const auto& b : partition::ReadPartition(o.outDir).bricks)
+            sums[wide].push_back(b.sha256);
+    }
+    EXPECT_EQ(sums[0], sums[1]);
 }
 
 /// True when boxes a and b are separated by an axis plane with `eye` on a's side (or on
