@@ -247,6 +247,12 @@ Mesh MakeBuiltin(const std::string& spec) {
         RejectUnusedParams(s);
         mesh = CubeTets(n, 2, -1.0, 1.0,
                         [](double x, double y, double z) { return x * x + y * y + z * z; });
+        // A second field, v = x (exact in the quadratic space), to colour by.
+        Field v;
+        v.name = "v";
+        v.values.resize(mesh.PointCount());
+        for (std::int64_t p = 0; p < mesh.PointCount(); ++p) v.values[p] = mesh.points[3 * p];
+        mesh.pointFields.push_back(std::move(v));
     } else if (s.name.rfind("cube-tets-", 0) == 0) {
         const std::string digits = s.name.substr(std::string("cube-tets-").size());
         if (digits.empty() || digits.size() > 4 ||

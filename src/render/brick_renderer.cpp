@@ -49,7 +49,16 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
             index = static_cast<int>(s.fields.size());
             s.fields.push_back(*sel);
         }
-        s.isos.push_back({index, iso.value, iso.color, iso.opacity});
+        BrickSetup::Iso entry{index, iso.value, iso.color, iso.opacity, std::nullopt, {}};
+        if (!iso.colorField.empty()) {
+            const auto by = SelectScalar(mesh, iso.colorField);
+            if (!by)
+                throw InputError(source, "isosurfaces." + std::to_string(k) + ".color_field",
+                                 "the mesh has no field '" + iso.colorField + "'");
+            entry.colorField = *by;
+            entry.colorTf = MakeColorTf(iso.colorTf);
+        }
+        s.isos.push_back(std::move(entry));
     }
     // Per field: the nodal values gathered once per cell (shared with the ray loop), and
     // the guaranteed per-cell ranges.
@@ -113,7 +122,7 @@ class RayIntegrator {
         double residual;
         int slice = -1;  ///< slice index, or -1 for an isosurface
     };
-    void Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
+    void Shade(const BrickSetup& setup, const Ray& ray, std::int64_t cell, const Event& e,
                SegmentField& field, Pixel& out, double& transmittance,
                RenderCounters& counters);
     void ShadeSlice(const BrickSetup& setup, const Ray& ray, const Segment& seg,
@@ -153,10 +162,19 @@ void RayIntegrator::ShadeSlice(const BrickSetup& setup, const Ray& ray,
     composite.transmittance = T * (1 - alpha);
 }
 
-void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& e,
-                          SegmentField& field, Pixel& out, double& transmittance,
-                          RenderCounters& counters) {
+void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, std::int64_t cell,
+                          const Event& e, SegmentField& field, Pixel& out,
+                          double& transmittance, RenderCounters& counters) {
     const BrickSetup::Iso& iso = setup.isos[e.iso];
+    std::array<double, 3> color = iso.color;
+    if (iso.colorField) {
+        // The colouring field's true value at the hit, in the cell that holds it.
+        sliceField_.Begin(*setup.mesh, *setup.geometry, *iso.colorField, cell, ray,
+                          setup.inversion);
+        const double value = sliceField_(e.t);
+        sliceField_.AddCountersTo(counters);
+        iso.colorTf.Eval(value, color.data());
+    }
     double value, g[3];
     field.ValueGradient(e.t, value, g);
     const double gn = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
@@ -178,7 +196,7 @@ void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, const Event& 
     const double alpha = iso.opacity;
     for (int c = 0; c < 3; ++c) {
         const double radiance = std::min(
-            1.0, iso.color[c] * (L.ambient + L.diffuse * std::max(0.0, nl)) + spec);
+            1.0, color[c] * (L.ambient + L.diffuse * std::max(0.0, nl)) + spec);
         out.rgba[c] += transmittance * alpha * radiance;
     }
     out.rgba[3] += transmittance * alpha;
@@ -454,7 +472,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                 }
                 lastHit_[e.iso] = e.t;
                 const double before[3] = {out.rgba[0], out.rgba[1], out.rgba[2]};
-                Shade(setup, ray, e, field_, out, transmittance, counters);
+                Shade(setup, ray, seg.cell, e, field_, out, transmittance, counters);
                 if (composite.depthError > 0)
                     for (int c = 0; c < 3; ++c)
                         composite.error[c] +=

@@ -46,6 +46,9 @@ struct BrickSetup {
         double value = 0;
         std::array<double, 3> color{};
         double opacity = 1;
+        /// Colour by this field's true value at the hit through colorTf, when set.
+        std::optional<ScalarSelector> colorField;
+        PiecewiseLinearTf colorTf;
     };
     std::vector<Iso> isos;
     SceneLighting lighting;

@@ -66,7 +66,8 @@ const SchemaNode& Schema() {
             MapOf("data", {"mesh"}),
             MapOf("camera", {"position", "look_at", "up", "fov_y", "ortho_height",
                              "width", "height", "view", "zoom", "azimuth", "elevation"}),
-            ListOf("isosurfaces", MapOf("#", {"field", "value", "color", "opacity"})),
+            ListOf("isosurfaces", MapOf("#", {"field", "value", "color", "opacity",
+                                              "color_field", "color_tf"})),
             ListOf("slices",
                    MapOf("#", {"point", "normal", "field", "color_tf", "opacity"})),
             MapOf("volume", {"color_field", "extinction_field", "glow", "color_tf",
@@ -726,6 +727,25 @@ void SceneParser::ReadIsosurfaces(const YAML::Node& root, Scene& scene) const {
         if (Has(item, "opacity"))
             iso.opacity =
                 InRange(Get(item, "opacity"), p + ".opacity", 0, 1, false, false);
+        if (Has(item, "color_tf") && !Has(item, "color_field"))
+            Fail(p + ".color_tf", Get(item, "color_tf"),
+                 "colours by the value of color_field, which is missing");
+        if (Has(item, "color_field")) {
+            if (Has(item, "color"))
+                Fail(p + ".color", Get(item, "color"),
+                     "give either color (one colour) or color_field (colour by a field), "
+                     "not both");
+            iso.colorField = FieldName(Get(item, "color_field"), p + ".color_field");
+            if (!Has(item, "color_tf")) {
+                iso.colorMap = ColorMapRequest{"viridis", true, 0.0, 1.0};
+            } else if ((iso.colorMap = ColorMap(Get(item, "color_tf"), p + ".color_tf"))) {
+                if (!iso.colorMap->autoRange)
+                    iso.colorTf =
+                        ExpandColorMap(iso.colorMap->name, iso.colorMap->lo, iso.colorMap->hi);
+            } else {
+                iso.colorTf = ColorTf(Get(item, "color_tf"), p + ".color_tf", true);
+            }
+        }
         scene.isosurfaces.push_back(iso);
     }
 }
@@ -957,7 +977,10 @@ std::vector<std::string> Scene::FieldNames() const {
         if (std::find(names.begin(), names.end(), name) == names.end())
             names.push_back(name);
     };
-    for (const SceneIsosurface& iso : isosurfaces) add(iso.field);
+    for (const SceneIsosurface& iso : isosurfaces) {
+        add(iso.field);
+        if (!iso.colorField.empty()) add(iso.colorField);
+    }
     for (const SceneSlice& slice : slices) add(slice.field);
     if (volume) {
         add(volume->colorField);
@@ -1073,6 +1096,8 @@ void ResolveColorMaps(
         }
     }
     for (SceneSlice& s : scene.slices) resolve(s.colorMap, s.field, s.colorTf);
+    for (SceneIsosurface& iso : scene.isosurfaces)
+        resolve(iso.colorMap, iso.colorField, iso.colorTf);
 }
 
 }  // namespace hpray

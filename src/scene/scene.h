@@ -48,13 +48,6 @@ struct SceneCamera {
     bool upGiven = false;
 };
 
-/// One entry of `isosurfaces:`. `value` is required.
-struct SceneIsosurface {
-    std::string field = "u";  ///< point field name (builtins name it u)
-    double value = 0.0;       ///< the isovalue C, finite
-    std::array<double, 3> color{0.9, 0.5, 0.2};  ///< linear RGB in [0, 1]
-    double opacity = 1.0;                        ///< in [0, 1]
-};
 
 /// A control point of a colour transfer function: scalar -> linear RGB.
 struct ColorControlPoint {
@@ -75,6 +68,20 @@ struct ColorMapRequest {
     std::string name;
     bool autoRange = true;
     double lo = 0.0, hi = 1.0;
+};
+
+/// One entry of `isosurfaces:`. `value` is required.
+struct SceneIsosurface {
+    std::string field = "u";  ///< point field name (builtins name it u)
+    double value = 0.0;       ///< the isovalue C, finite
+    std::array<double, 3> color{0.9, 0.5, 0.2};  ///< linear RGB in [0, 1]
+    double opacity = 1.0;                        ///< in [0, 1]
+    /// `color_field`: colour the surface by this field's value at each hit (evaluated on
+    /// the true field there) through `color_tf` (default: viridis over its range) instead
+    /// of `color`. Empty: `color`.
+    std::string colorField;
+    std::vector<ColorControlPoint> colorTf;
+    std::optional<ColorMapRequest> colorMap;
 };
 
 /// One entry of `slices:` a cut plane showing `field` through `color_tf`. `point`,

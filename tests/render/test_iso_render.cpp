@@ -608,3 +608,45 @@ TEST(RenderProgress, LinesWithShareAndTimeLeft) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// An isosurface coloured by another field: the sphere u = 0.25 of ball-p2 coloured by
+// v = x through a grey ramp over [-1, 1], unlit (ambient 1), so each hit pixel's colour is
+// (x + 1) / 2 at the true hit point, found from the ray and the hit's t.
+TEST(IsoRender, ColouredByAnotherFieldAtTheHit) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    const Scene scene = MakeScene(R"(
+data: {mesh: "builtin:ball-p2"}
+camera: {position: [0.3, 0.4, 4], look_at: [0, 0, 0], up: [0, 1, 0], fov_y: 20,
+         width: 48, height: 40}
+isosurfaces:
+  - {field: u, value: 0.25, color_field: v, color_tf: [[-1, 0, 0, 0], [1, 1, 1, 1]]}
+lighting: {ambient: 1, diffuse: 0, specular: 0}
+)");
+    Image image;
+    RenderStats stats;
+    RenderOneBrick(mesh, std::nullopt, scene, image, stats);
+    const Camera camera(scene.camera);
+    int hits = 0;
+    for (int j = 0; j < camera.Height(); ++j)
+        for (int i = 0; i < camera.Width(); ++i) {
+            const std::size_t p = std::size_t(j) * camera.Width() + i;
+            if (!std::isfinite(image.z[p])) continue;
+            ++hits;
+            const CameraRay ray = camera.PixelRay(i, j);
+            const double x = ray.origin[0] + image.z[p] * ray.direction[0];
+            for (double c : {image.r[p], image.g[p], image.b[p]})
+                EXPECT_NEAR(c, 0.5 * (x + 1), 1e-9) << i << "," << j;
+        }
+    EXPECT_GT(hits, 200);
+    // The colour varies over the sphere (x spans about [-0.5, 0.5] on it).
+    double lo = 1, hi = 0;
+    for (std::size_t p = 0; p < image.PixelCount(); ++p)
+        if (std::isfinite(image.z[p])) lo = std::min(lo, image.r[p]), hi = std::max(hi, image.r[p]);
+    EXPECT_GT(hi - lo, 0.35);
+}
+
+}  // namespace
+}  // namespace hpray
