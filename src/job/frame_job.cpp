@@ -605,9 +605,10 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats,
                               "%.1f s, about %.0f s left",
                               cam.Width(), cam.Height(), P, 100 * share, elapsed,
                               elapsed * (1 - share) / share);
-                log::Info(text);
+                log::Progress(text);
             }
         }
+        log::EndProgress();
         loaded = mpi::Root() ? 1 : 0;
         stats.bricksTotal = 1;
         rankTree = RegularKdTree(P, prepared_->Geometry().bounds);

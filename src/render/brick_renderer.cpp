@@ -535,21 +535,28 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
     using Clock = std::chrono::steady_clock;
     const auto started = Clock::now();
     std::atomic<int> tilesDone{0};
+    // On a terminal the line is rewritten twice a second; otherwise a line every interval.
+    const double interval = setup.progressSeconds > 0 && log::ProgressOnTerminal()
+                                ? std::min(0.5, setup.progressSeconds)
+                                : setup.progressSeconds;
     std::atomic<double> nextReport{setup.progressSeconds};
+    std::atomic<bool> reported{false};
     auto report = [&] {
         const int done = ++tilesDone;
         if (!(setup.progressSeconds > 0)) return;
         const double elapsed = std::chrono::duration<double>(Clock::now() - started).count();
         double due = nextReport.load();
-        if (elapsed < due ||
-            !nextReport.compare_exchange_strong(due, elapsed + setup.progressSeconds))
+        if (elapsed < due || !nextReport.compare_exchange_strong(due, elapsed + interval))
             return;
         const double share = double(done) / std::max(1, end - begin);
-        char text[160];
+        char text[200];
         std::snprintf(text, sizeof text,
-                      "rendering %dx%d: %.0f%% of the tiles after %.1f s, about %.0f s left",
-                      W, H, 100 * share, elapsed, elapsed * (1 - share) / share);
-        log::Info(text);
+                      "rendering %dx%d: %.0f%% of the tiles after %.1f s (%.0f tiles/s), "
+                      "about %.0f s left",
+                      W, H, 100 * share, elapsed, done / elapsed,
+                      elapsed * (1 - share) / share);
+        log::Progress(text);
+        reported = true;
     };
     tbb::parallel_for(begin, end, [&](int tile) {
         if (setup.cancelled && setup.cancelled()) return;
@@ -572,6 +579,7 @@ void RenderTiles(const BrickSetup& setup, const Camera& camera, int threads, int
             }
         report();
     });
+    if (reported) log::EndProgress();
     for (const ThreadState& st : states) {
         counters.Merge(st.counters);
         if (costSamples)

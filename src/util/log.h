@@ -16,6 +16,13 @@ void SetRank(int rank);
 
 /// Progress: printed by rank 0 only, to stderr.
 void Info(const std::string& message);
+/// Progress of long work (rank 0, Info level): on a terminal one line rewritten in place
+/// (any other message, or EndProgress, ends it); otherwise a line like Info.
+void Progress(const std::string& message);
+/// Ends a progress line left open on the terminal.
+void EndProgress();
+/// Whether stderr is a terminal (progress is then worth updating often).
+bool ProgressOnTerminal();
 /// Printed by every rank, to stderr.
 void Warn(const std::string& message);
 void Error(const std::string& message);
