@@ -363,12 +363,10 @@ void BrickTraverser::Impl::MergeCellPoints(TopologyBuild& t) {
     const Mesh& mesh = *brick.mesh;
     auto& mergedOf = t.mergedOf;
     const double diag = t.diag;
-    // 1. Coincident points.
     if (mesh.PointCount() >= std::numeric_limits<std::int32_t>::max())
         throw InputError(kSource, "", "more than 2^31 - 1 points in one brick");
     MergePoints(mesh.points, options.mergeTolerance * diag, diag, mergedOf, xyz);
     stats.mergedPoints = static_cast<std::int64_t>(xyz.size() / 3);
-
 }
 
 // 2. Each cell's corners as merged ids, and its orientation.
@@ -378,7 +376,6 @@ void BrickTraverser::Impl::FindCellCorners(TopologyBuild& t) {
     const auto& mergedOf = t.mergedOf;
     auto& corners = t.corners;
     auto& orient = t.orient;
-    // 2. Corners (merged ids) and orientation of each cell.
     corners.assign(8 * nCells, -1);
     orient.assign(nCells, 1);
     // The internal node index of each corner, per (shape, order, family) present.
@@ -461,7 +458,6 @@ void BrickTraverser::Impl::FindCellCorners(TopologyBuild& t) {
                 }
             }
         });
-
 }
 
 // 3-4. Each cell face's neighbour, by matching corner sets.
@@ -472,7 +468,6 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     auto& nbCell = t.nbCell;
     auto& nbFace = t.nbFace;
     const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
-    // 3-4. The neighbour across each cell face: the other cell with the same corner set.
     // Faces are bucketed by their smallest merged corner (a counting sort), each bucket
     // is sorted by the remaining corners, and equal neighbours in a bucket are the two
     // sides of one face: linear in the faces, parallel over buckets, no per-face heap.
@@ -592,17 +587,15 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
         where << "cell " << badCell.load();
         throw InputError(kSource, where.str(), "a face is shared by more than two cells");
     }
-
 }
 
-// 5. One id per face.
+// 5. One id per face: a face belongs to the lower-numbered of its cells.
 void BrickTraverser::Impl::NumberFaces(TopologyBuild& t) {
     const Mesh& mesh = *brick.mesh;
     const std::int64_t nCells = mesh.CellCount();
     const auto& nbCell = t.nbCell;
     const auto& nbFace = t.nbFace;
     std::int64_t& nFaces = t.nFaces;
-    // 5. Face ids: a face belongs to the lower-numbered of its cells.
     cellFaceOffset.assign(nCells + 1, 0);
     for (std::int64_t c = 0; c < nCells; ++c)
         cellFaceOffset[c + 1] = cellFaceOffset[c] + Topology(mesh.cellShape[c]).faces;
@@ -627,7 +620,6 @@ void BrickTraverser::Impl::NumberFaces(TopologyBuild& t) {
                     cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
         }
     }
-
 }
 
 // 6. The canonical record of every face and its geometry.
@@ -640,7 +632,6 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
     const auto& nbFace = t.nbFace;
     const std::int64_t nFaces = t.nFaces;
     const auto& mergedOf = t.mergedOf;
-    // 6. Canonical face records and their geometry.
     faces.assign(nFaces, FaceRec{});
     const auto byPosition = [this](std::int32_t a, std::int32_t b) {
         const double* x = P(a);

@@ -450,14 +450,20 @@ TEST_F(Serve, BuiltinFramesEqualRenderAndBadRequestsAreAnswered) {
     Exercise("builtin:ball-p2", "builtin");
 }
 
-TEST_F(Serve, PartitionFramesEqualRenderAndBadRequestsAreAnswered) {
+/// Partitions builtin:ball-p2 into 4 bricks under kDir / `name`; returns the directory.
+std::string PartitionBall(const std::string& name) {
+    const std::string dir = (kDir / name).string();
     std::string out;
-    ASSERT_EQ(RunCommand(std::string(HPRAY_BINARY) + " partition builtin:ball-p2 --bricks 4 --out " +
-                             (kDir / "part4").string(),
+    EXPECT_EQ(RunCommand(std::string(HPRAY_BINARY) +
+                             " partition builtin:ball-p2 --bricks 4 --out " + dir,
                          &out),
               0)
         << out;
-    Exercise((kDir / "part4").string(), "partition");
+    return dir;
+}
+
+TEST_F(Serve, PartitionFramesEqualRenderAndBadRequestsAreAnswered) {
+    Exercise(PartitionBall("part4"), "partition");
 }
 
 TEST_F(Serve, ProgressivePassesAreFramesAndNewerRequestsCancelThemOnEveryRank) {
@@ -465,13 +471,7 @@ TEST_F(Serve, ProgressivePassesAreFramesAndNewerRequestsCancelThemOnEveryRank) {
 }
 
 TEST_F(Serve, ProgressiveCancelOnAPartition) {
-    std::string out;
-    ASSERT_EQ(RunCommand(std::string(HPRAY_BINARY) + " partition builtin:ball-p2 --bricks 4 --out " +
-                             (kDir / "part4p").string(),
-                         &out),
-              0)
-        << out;
-    ExerciseProgressive((kDir / "part4p").string(), "progressive_partition");
+    ExerciseProgressive(PartitionBall("part4p"), "progressive_partition");
 }
 
 // A rank that dies (SIGKILL, as on a node failure) ends the whole job within 10 s with a
