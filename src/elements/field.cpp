@@ -11,7 +11,7 @@ double FieldValue(const CellGeometry& cell, const CellScalar& field, const doubl
                   EvalWorkspace& ws) {
     if (!field.nodal) return field.constant;
     if (cell.basis->kind == BasisKind::HexLagrange)
-        return HexFieldValue(cell.basis->order, field.nodal, ref);
+        return HexKernelsFor(cell.basis->order).value(field.nodal, ref);
     if (cell.basis->shape == CellShape::Tet && cell.basis->order == 1) {
         // Barycentric: corner m sits at reference point e_m (corner 0 at the origin).
         const double* v = field.nodal;
@@ -38,7 +38,7 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     double f = 0.0, g[3] = {0.0, 0.0, 0.0};
     const bool tensor = cell.basis->kind == BasisKind::HexLagrange;
     if (tensor) {
-        f = HexFieldValueGradient(cell.basis->order, field.nodal, ref, g);
+        f = HexKernelsFor(cell.basis->order).valueGradient(field.nodal, ref, g);
     } else {
         const double* v = ws.values.data();
         EvalBasis(*cell.basis, ref, ws.values.data(), ws.dRef.data());
@@ -56,7 +56,7 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
         std::copy(cell.inverseLinear.begin(), cell.inverseLinear.end(), inv);
     } else if (tensor) {
         double world[3];
-        HexMapValueJacobian(cell.basis->order, cell.nodes, ref, world, jac);
+        WorldFromRef(cell, ref, ws, world, jac);
         if (Invert3x3(jac, inv) == 0.0) return false;
     } else {
         // The basis derivatives are still in ws.dRef: contract them with the nodes.

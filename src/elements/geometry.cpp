@@ -175,6 +175,11 @@ CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
     g.nodes = nodeXyz;
     g.lineDegree = basis.lineDegree;
     g.lineDenominatorPower = basis.lineDenominatorPower;
+    if (basis.kind == BasisKind::HexLagrange) {
+        g.hexMap = &HexKernelsFor(basis.order);
+        g.mapOrder = basis.order;
+        g.mapNodes = nodeXyz;
+    }
     const int n = basis.nodeCount;
     if (basis.shape == CellShape::Tet && basis.order == 1) {
         // The linear tetrahedron (reference corners 0, e1, e2, e3): the map through its
@@ -253,8 +258,8 @@ void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& 
         if (jacobian) std::copy(cell.linear.begin(), cell.linear.end(), jacobian);
         return;
     }
-    if (cell.basis->kind == BasisKind::HexLagrange) {
-        HexMapValueJacobian(cell.basis->order, cell.nodes, ref, world, jacobian);
+    if (cell.hexMap) {
+        cell.hexMap->map(cell.mapNodes, ref, world, jacobian);
         return;
     }
     const int n = cell.basis->nodeCount;
@@ -283,6 +288,39 @@ void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& 
         }
     }
     std::copy(j, j + 9, jacobian);
+}
+
+int ReducedHexMapOrder(const BasisTable& basis, const double* nodeXyz, double tolerance,
+                       int maxOrder, std::vector<double>& reduced) {
+    if (basis.kind != BasisKind::HexLagrange) return 0;
+    const int p = basis.order;
+    for (int q = 1; q < p && q <= maxOrder; ++q) {
+        // The order-q nodes: the order-p map at the order-q lattice.
+        const int m = q + 1;
+        reduced.resize(3 * m * m * m);
+        for (int k = 0; k < m; ++k)
+            for (int j = 0; j < m; ++j)
+                for (int i = 0; i < m; ++i) {
+                    const double ref[3] = {double(i) / q, double(j) / q, double(k) / q};
+                    HexMapValueJacobian(p, nodeXyz, ref, &reduced[3 * (i + m * (j + m * k))],
+                                        nullptr);
+                }
+        // Does the order-q map reproduce every order-p node?
+        bool same = true;
+        for (int node = 0; node < basis.nodeCount && same; ++node) {
+            double x[3];
+            HexMapValueJacobian(q, reduced.data(), basis.refNodes[node].data(), x, nullptr);
+            double e2 = 0;
+            for (int d = 0; d < 3; ++d) {
+                const double e = x[d] - nodeXyz[3 * node + d];
+                e2 += e * e;
+            }
+            same = std::sqrt(e2) <= tolerance;
+        }
+        if (same) return q;
+    }
+    reduced.clear();
+    return 0;
 }
 
 InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],

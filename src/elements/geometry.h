@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "elements/basis.h"
+#include "elements/hex_kernels.h"
 
 namespace hpray {
 
@@ -42,12 +43,32 @@ struct CellGeometry {
     /// when `affine`.
     int lineDegree = 0;
     int lineDenominatorPower = 0;
+    /// Lagrange hexahedra: the kernels that evaluate the map, of order mapOrder, from the
+    /// (mapOrder + 1)^3 nodes mapNodes (borrowed, internal hex order). That is the basis
+    /// order and `nodes`, unless the map is exactly of a lower order q (a trilinear cell
+    /// stored with order-8 nodes, say; MeshGeometry finds these): then q and its nodes.
+    /// Null for other cells.
+    const HexKernels* hexMap = nullptr;
+    int mapOrder = 0;
+    const double* mapNodes = nullptr;
 };
+
+/// The lowest order q < p (q <= maxOrder) whose tensor Lagrange interpolant reproduces every
+/// node of a Lagrange hexahedron of order p within `tolerance` (world units), with its
+/// (q + 1)^3 nodes (internal order) in `reduced`; 0 if there is none. Two maps of order <= p
+/// that agree on the (p + 1)^3 lattice are the same polynomial, so the reduced map is the
+/// cell's map up to that tolerance everywhere.
+int ReducedHexMapOrder(const BasisTable& basis, const double* nodeXyz, double tolerance,
+                       int maxOrder, std::vector<double>& reduced);
+
+/// Relative tolerance (against CellGeometry::size) under which two maps are the same: the
+/// affine test and the reduced-order test.
+inline constexpr double kAffineTolerance = 1e-13;
 
 /// Classifies a cell: affine fit, affine flag (relative tolerance against `size`).
 /// `nodeXyz`: 3 * basis.nodeCount world coordinates in internal order (borrowed).
 CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
-                              double affineTolerance = 1e-13);
+                              double affineTolerance = kAffineTolerance);
 
 /// World point of reference point `ref` and, if `jacobian` is not null, d world / d ref.
 void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& ws,

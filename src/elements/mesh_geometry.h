@@ -50,6 +50,7 @@ class MeshGeometry {
     Box bounds;  ///< union of the cells' boxes
     std::int64_t affineCells = 0;
     std::int64_t derivedCells = 0;  ///< linear tetrahedra, derived on request
+    std::int64_t reducedMapCells = 0;  ///< curved hexahedra mapped at a lower order
 
     /// Bytes held per the whole mesh.
     std::size_t Bytes() const;
@@ -61,6 +62,8 @@ class MeshGeometry {
     std::vector<double> nodeXyz_;      ///< x y z per node of each stored cell
     std::vector<CellGeometry> cells_;  ///< stored cells
     std::vector<Box> boxes_;           ///< stored cells' boxes
+    /// Stored cells' reduced map nodes (CellGeometry::mapNodes), empty where none.
+    std::vector<std::vector<double>> mapNodes_;
     /// Cell -> index in cells_, -1 for derived cells; empty when every cell is stored
     /// (allStored_: index = cell) or none is.
     std::vector<std::int64_t> stored_;

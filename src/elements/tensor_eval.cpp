@@ -196,50 +196,96 @@ constexpr Kernel kExactKernels[kMaxOrder + 1] = {
 
 }  // namespace
 
-void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
-                             const double dref[3], const double* t, int count, double* out,
-                             double* scratch) {
-    const int n = p + 1;
-    const int padded = (count + 3) / 4 * 4;
-    // L_d(i, s) stored sample-fastest (i * padded + s); padding samples repeat the last one.
-    double* L[3] = {scratch, scratch + n * padded, scratch + 2 * n * padded};
-    double* result = scratch + 3 * n * padded;
-    // The Silvester factors of x and 1 - x for all samples at once (vectorised over s):
-    // L_d(i, s) = A_i(s) B_{p-i}(s), built in place: B in `L_d`, A in a rolling row.
-    double* a = result;             // A_m(s), one row, reused as m grows
-    double* tmp = result + padded;  // x(s)
-    for (int d = 0; d < 3; ++d) {
-        double* Ld = L[d];
-        for (int s = 0; s < padded; ++s) tmp[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
-        // B_m(s) = prod_{q<m} (p (1 - x) - q) / (q + 1), stored in row m of Ld for now.
-        for (int s = 0; s < padded; ++s) Ld[s] = 1;
-        for (int m = 0; m < p; ++m) {
-            const double inv = kInverse[m];
-            const double* prev = Ld + m * padded;
-            double* next = Ld + (m + 1) * padded;
-            for (int s = 0; s < padded; ++s) next[s] = prev[s] * ((p * (1 - tmp[s]) - m) * inv);
-        }
-        // Reverse the rows so row i holds B_{p-i}, then multiply by A_i row by row.
-        for (int i = 0; i < (p + 1) / 2; ++i)
-            for (int s = 0; s < padded; ++s)
-                std::swap(Ld[i * padded + s], Ld[(p - i) * padded + s]);
-        for (int s = 0; s < padded; ++s) a[s] = 1;
-        for (int i = 0; i <= p; ++i) {
-            double* row = Ld + i * padded;
-            for (int s = 0; s < padded; ++s) row[s] *= a[s];
-            if (i < p) {
-                const double inv = kInverse[i];
-                for (int s = 0; s < padded; ++s) a[s] *= (p * tmp[s] - i) * inv;
-            }
+namespace {
+
+// Row i of L holds the 1-D Lagrange polynomial l_i at each sample's coordinate x[s]
+// (sample-fastest, i * padded + s), built from the Silvester factors for all samples at
+// once (vectorised over s): L(i, s) = A_i(s) B_{p-i}(s), B built in place, A in a rolling
+// row `a`.
+void LagrangeRows(int p, const double* x, int padded, double* L, double* a) {
+    for (int s = 0; s < padded; ++s) L[s] = 1;
+    for (int m = 0; m < p; ++m) {
+        const double inv = kInverse[m];
+        const double* prev = L + m * padded;
+        double* next = L + (m + 1) * padded;
+        for (int s = 0; s < padded; ++s) next[s] = prev[s] * ((p * (1 - x[s]) - m) * inv);
+    }
+    // Reverse the rows so row i holds B_{p-i}, then multiply by A_i row by row.
+    for (int i = 0; i < (p + 1) / 2; ++i)
+        for (int s = 0; s < padded; ++s) std::swap(L[i * padded + s], L[(p - i) * padded + s]);
+    for (int s = 0; s < padded; ++s) a[s] = 1;
+    for (int i = 0; i <= p; ++i) {
+        double* row = L + i * padded;
+        for (int s = 0; s < padded; ++s) row[s] *= a[s];
+        if (i < p) {
+            const double inv = kInverse[i];
+            for (int s = 0; s < padded; ++s) a[s] *= (p * x[s] - i) * inv;
         }
     }
+}
+
+// Compile-time kernels for small padded sample counts (the adaptive projections of curved
+// cells sample 9 or 17 points, and their checks a few).
+constexpr Kernel SmallKernel(int p, int padded) {
+    constexpr Kernel k4[kMaxOrder + 1] = {nullptr,           &ContractLine<2, 4>,
+                                          &ContractLine<3, 4>, &ContractLine<4, 4>,
+                                          &ContractLine<5, 4>, &ContractLine<6, 4>,
+                                          &ContractLine<7, 4>, &ContractLine<8, 4>,
+                                          &ContractLine<9, 4>, &ContractLine<10, 4>,
+                                          &ContractLine<11, 4>};
+    constexpr Kernel k8[kMaxOrder + 1] = {nullptr,           &ContractLine<2, 8>,
+                                          &ContractLine<3, 8>, &ContractLine<4, 8>,
+                                          &ContractLine<5, 8>, &ContractLine<6, 8>,
+                                          &ContractLine<7, 8>, &ContractLine<8, 8>,
+                                          &ContractLine<9, 8>, &ContractLine<10, 8>,
+                                          &ContractLine<11, 8>};
+    constexpr Kernel k12[kMaxOrder + 1] = {nullptr,            &ContractLine<2, 12>,
+                                           &ContractLine<3, 12>, &ContractLine<4, 12>,
+                                           &ContractLine<5, 12>, &ContractLine<6, 12>,
+                                           &ContractLine<7, 12>, &ContractLine<8, 12>,
+                                           &ContractLine<9, 12>, &ContractLine<10, 12>,
+                                           &ContractLine<11, 12>};
+    return padded == 4 ? k4[p] : padded == 8 ? k8[p] : padded == 12 ? k12[p] : nullptr;
+}
+
+// f at the samples whose coordinates are in xs[d * padded + s] (padding repeats the last).
+void ContractSamples(int p, const double* u, const double* xs, int count, int padded,
+                     double* out, double* scratch) {
+    const int n = p + 1;
+    double* L[3] = {scratch, scratch + n * padded, scratch + 2 * n * padded};
+    double* result = scratch + 3 * n * padded;
+    for (int d = 0; d < 3; ++d) LagrangeRows(p, xs + d * padded, padded, L[d], result);
     if (count == 3 * p + 1) {
         kExactKernels[p](u, L[0], L[1], L[2], result);
+    } else if (const Kernel k = SmallKernel(p, padded)) {
+        k(u, L[0], L[1], L[2], result);
     } else {
         ContractLineGeneric(n, padded, u, L[0], L[1], L[2], result, result + padded,
                             result + 2 * padded);
     }
     for (int s = 0; s < count; ++s) out[s] = result[s];
+}
+
+}  // namespace
+
+void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
+                             const double dref[3], const double* t, int count, double* out,
+                             double* scratch) {
+    const int padded = (count + 3) / 4 * 4;
+    double* xs = scratch + HexLineScratchSize(p, count) - 3 * padded;
+    for (int d = 0; d < 3; ++d)
+        for (int s = 0; s < padded; ++s)
+            xs[d * padded + s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
+    ContractSamples(p, u, xs, count, padded, out, scratch);
+}
+
+void HexFieldValuesAt(int p, const double* u, const double* refs, int count, double* out,
+                      double* scratch) {
+    const int padded = (count + 3) / 4 * 4;
+    double* xs = scratch + HexLineScratchSize(p, count) - 3 * padded;
+    for (int d = 0; d < 3; ++d)
+        for (int s = 0; s < padded; ++s) xs[d * padded + s] = refs[3 * std::min(s, count - 1) + d];
+    ContractSamples(p, u, xs, count, padded, out, scratch);
 }
 
 }  // namespace hpray

@@ -24,9 +24,13 @@ void HexMapValueJacobian(int p, const double* xyz, const double ref[3], double w
 void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
                              const double dref[3], const double* t, int n, double* out,
                              double* scratch);
+/// f at n arbitrary reference points refs[3 s .. 3 s + 2], into out[s] (vectorised over the
+/// points). `scratch` must hold HexLineScratchSize(p, n) doubles.
+void HexFieldValuesAt(int p, const double* u, const double* refs, int n, double* out,
+                      double* scratch);
 inline int HexLineScratchSize(int p, int n) {
     const int padded = (n + 3) / 4 * 4;
-    return 3 * (p + 1) * padded + 3 * padded;
+    return 3 * (p + 1) * padded + 6 * padded;
 }
 
 }  // namespace hpray

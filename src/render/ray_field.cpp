@@ -178,11 +178,19 @@ double SegmentField::operator()(double t) {
 }
 
 void SegmentField::SampleBatch(const double* t, int n, double* out) {
-    if (affine_ && scalar_.nodal && cell_->basis->kind == BasisKind::HexLagrange) {
+    if (scalar_.nodal && cell_->basis->kind == BasisKind::HexLagrange) {
         const int p = cell_->basis->order;
-        batchScratch_.resize(HexLineScratchSize(p, n));
-        HexFieldValuesAlongLine(p, scalar_.nodal, ref0_, dref_, t, n, out,
-                                batchScratch_.data());
+        batchScratch_.resize(HexLineScratchSize(p, n) + 3 * n);
+        if (affine_) {
+            HexFieldValuesAlongLine(p, scalar_.nodal, ref0_, dref_, t, n, out,
+                                    batchScratch_.data());
+        } else {
+            // Invert the points in order along the ray (each warm-starts the next), then
+            // evaluate them together.
+            double* refs = batchScratch_.data() + HexLineScratchSize(p, n);
+            for (int s = 0; s < n; ++s) RefAt(t[s], refs + 3 * s);
+            HexFieldValuesAt(p, scalar_.nodal, refs, n, out, batchScratch_.data());
+        }
         evaluations_ += n;
         return;
     }

@@ -17,6 +17,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <type_traits>
 #include <utility>
@@ -179,13 +180,15 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                 if (tail <= options.tolerance * scale || n >= options.maxDegree) {
                     // Measure: f against p halfway between interpolation nodes.
                     const LglRule& rule = LglNodes(n);
+                    double checkT[kMaxLegendreDegree + 1], checkF[kMaxLegendreDegree + 1];
+                    int checks = 0;
+                    for (int i = 0; i < n; i += std::max(1, n / 4))
+                        checkT[checks++] = mid + half * 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
+                    detail::SampleMany(f, checkT, checks, checkF);
+                    stats.evaluations += checks;
                     double discrepancy = 0;
-                    for (int i = 0; i < n; i += std::max(1, n / 4)) {
-                        const double x = 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
-                        const double t = mid + half * x;
-                        discrepancy = std::max(discrepancy, std::abs(f(t) - piece.p(t)));
-                        ++stats.evaluations;
-                    }
+                    for (int i = 0; i < checks; ++i)
+                        discrepancy = std::max(discrepancy, std::abs(checkF[i] - piece.p(checkT[i])));
                     // A pinned degree need not have converged, so its tail is no error
                     // estimate: only the measured discrepancy is.
                     piece.eps = 2 * std::max({pinned ? 0.0 : tail, discrepancy, floor});
@@ -219,6 +222,57 @@ inline double PolishSeriesRoot(const LegendreSeries& q, double lo, double hi, do
     auto r = boost::math::tools::toms748_solve([&](double t) { return q(t); }, lo, hi, vlo, vhi,
                                                tol, iterations);
     return 0.5 * (r.first + r.second);
+}
+
+/// f - C with the last few values remembered, so that the ends of a bracket returned by
+/// the solver (points it has already sampled) cost no new sample.
+template <typename F>
+struct RecentValues {
+    F& f;
+    double C;
+    double t[8] = {}, v[8] = {};
+    int count = 0;
+    double operator()(double x) {
+        for (int i = 0; i < std::min(count, 8); ++i)
+            if (t[i] == x) return v[i];
+        const double value = f(x) - C;
+        t[count % 8] = x;
+        v[count % 8] = value;
+        ++count;
+        return value;
+    }
+};
+template <typename F>
+RecentValues(F&, double) -> RecentValues<F>;
+
+/// For a series p monotone on [lo, hi] with |p - C| > eps at both ends and opposite signs:
+/// [a, b] inside it, about the root of p - C, with |p - C| > eps at a and b (or a, b at
+/// the window's ends). Then every t in the window where |p - C| <= eps lies in (a, b).
+/// False if no such bracket narrower than the window was found.
+inline bool TightBracket(const LegendreSeries& p, double C, double eps, double lo, double hi,
+                         double minWidth, double& a, double& b) {
+    const double vlo = p(lo) - C, vhi = p(hi) - C;
+    if (!(std::abs(vlo) > eps && std::abs(vhi) > eps) || (vlo < 0) == (vhi < 0)) return false;
+    double r;  // the root of p - C
+    {
+        auto tol = [&](double x, double y) { return std::abs(y - x) <= minWidth; };
+        std::uintmax_t iterations = 200;
+        auto q = [&](double t) { return p(t) - C; };
+        const auto br = boost::math::tools::toms748_solve(q, lo, hi, vlo, vhi, tol, iterations);
+        r = 0.5 * (br.first + br.second);
+    }
+    const double h = std::max(minWidth, 1e-6 * (hi - lo));
+    const double slope = std::abs(p(std::min(hi, r + h)) - p(std::max(lo, r - h))) /
+                         (std::min(hi, r + h) - std::max(lo, r - h));
+    double delta = std::max(2 * minWidth, slope > 0 ? 2 * eps / slope : hi - lo);
+    for (int k = 0; k < 24; ++k, delta *= 4) {
+        a = std::max(lo, r - delta);
+        b = std::min(hi, r + delta);
+        if (a == lo && b == hi) return false;
+        if ((a == lo || std::abs(p(a) - C) > eps) && (b == hi || std::abs(p(b) - C) > eps))
+            return true;
+    }
+    return false;
 }
 
 template <typename Visit>
@@ -325,6 +379,34 @@ int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
         detail::IsolateRoots(
             piece.p, C, piece.eps, minWidth, scratch,
             [&](double lo, double hi, int kind, double tStar) {
+                if (kind == 1 && options.polish) {
+                    // A proven sign change of p - C with p monotone: the roots of f - C in
+                    // the window all lie where |p - C| <= eps, a short interval about the
+                    // root of p. Bracket that interval and polish inside it, which needs
+                    // far fewer samples of the true field than the whole window.
+                    double a, b;
+                    if (detail::TightBracket(piece.p, C, piece.eps, lo, hi, minWidth, a, b)) {
+                        detail::RecentValues g{f, C};
+                        const double ga = g(a), gb = g(b);
+                        const double pa = piece.p(a) - C;
+                        // The true field must have the projection's signs there (else the
+                        // measured eps was wrong: take the whole window below).
+                        if ((ga < 0) == (pa < 0) && (gb < 0) != (pa < 0) && ga != 0 &&
+                            gb != 0) {
+                            auto tol = [&](double x, double y) {
+                                return std::abs(y - x) <= minWidth;
+                            };
+                            std::uintmax_t iterations = 200;
+                            auto bracket = boost::math::tools::toms748_solve(
+                                std::ref(g), a, b, ga, gb, tol, iterations);
+                            const double ra = std::abs(g(bracket.first));
+                            const double rb = std::abs(g(bracket.second));
+                            const double t = ra <= rb ? bracket.first : bracket.second;
+                            result = {RootKind::Simple, t, std::min(ra, rb), result.failures};
+                            return stop = onRoot(result);
+                        }
+                    }
+                }
                 const double glo = f(lo) - C, ghi = f(hi) - C;
                 if ((glo < 0) != (ghi < 0) || glo == 0 || ghi == 0) {
                     if (glo == 0 || ghi == 0) {

@@ -1,0 +1,161 @@
+// Compile-time-sized Lagrange hexahedron kernels (see hex_kernels.h). The arithmetic mirrors
+// tensor_eval.cpp operation for operation; only the loop bounds are constants here.
+#include "elements/hex_kernels.h"
+
+#include "elements/tensor_eval.h"
+#include "mesh/cell.h"
+#include "util/check.h"
+
+namespace hpray {
+namespace {
+
+constexpr double kInverse[kMaxOrder + 1] = {1.0,       1.0 / 2, 1.0 / 3, 1.0 / 4,
+                                            1.0 / 5,   1.0 / 6, 1.0 / 7, 1.0 / 8,
+                                            1.0 / 9,   1.0 / 10, 1.0 / 11};
+
+// LagrangeEquispaced1D for a fixed order P.
+template <int P, bool Derivative>
+inline void Lagrange1D(double x, double* l, double* dl) {
+    double a[P + 1], b[P + 1];
+    const double px = P * x, py = P * (1.0 - x);
+    a[0] = b[0] = 1;
+    if constexpr (!Derivative) {
+        for (int m = 0; m < P; ++m) {
+            a[m + 1] = a[m] * ((px - m) * kInverse[m]);
+            b[m + 1] = b[m] * ((py - m) * kInverse[m]);
+        }
+        for (int i = 0; i <= P; ++i) l[i] = a[i] * b[P - i];
+    } else {
+        double da[P + 1], db[P + 1];
+        da[0] = db[0] = 0;
+        for (int m = 0; m < P; ++m) {
+            const double fa = (px - m) * kInverse[m], fb = (py - m) * kInverse[m];
+            da[m + 1] = da[m] * fa + a[m] * (P * kInverse[m]);
+            db[m + 1] = db[m] * fb + b[m] * (P * kInverse[m]);
+            a[m + 1] = a[m] * fa;
+            b[m + 1] = b[m] * fb;
+        }
+        for (int i = 0; i <= P; ++i) {
+            l[i] = a[i] * b[P - i];
+            dl[i] = da[i] * b[P - i] - a[i] * db[P - i];
+        }
+    }
+}
+
+template <int P>
+double Value(const double* u, const double ref[3]) {
+    constexpr int n = P + 1;
+    double l[3][n];
+    for (int d = 0; d < 3; ++d) Lagrange1D<P, false>(ref[d], l[d], nullptr);
+    double f = 0;
+    for (int k = 0; k < n; ++k) {
+        double fk = 0;
+        for (int j = 0; j < n; ++j) {
+            const double* row = u + n * (j + n * k);
+            double fj = 0;
+            for (int i = 0; i < n; ++i) fj += row[i] * l[0][i];
+            fk += fj * l[1][j];
+        }
+        f += fk * l[2][k];
+    }
+    return f;
+}
+
+template <int P>
+double ValueGradient(const double* u, const double ref[3], double dRef[3]) {
+    constexpr int n = P + 1;
+    double l[3][n], dl[3][n];
+    for (int d = 0; d < 3; ++d) Lagrange1D<P, true>(ref[d], l[d], dl[d]);
+    double f = 0, fr = 0, fs = 0, ft = 0;
+    for (int k = 0; k < n; ++k) {
+        double fk = 0, frk = 0, fsk = 0;
+        for (int j = 0; j < n; ++j) {
+            const double* row = u + n * (j + n * k);
+            double fj = 0, frj = 0;
+            for (int i = 0; i < n; ++i) {
+                fj += row[i] * l[0][i];
+                frj += row[i] * dl[0][i];
+            }
+            fk += fj * l[1][j];
+            frk += frj * l[1][j];
+            fsk += fj * dl[1][j];
+        }
+        f += fk * l[2][k];
+        fr += frk * l[2][k];
+        fs += fsk * l[2][k];
+        ft += fk * dl[2][k];
+    }
+    dRef[0] = fr;
+    dRef[1] = fs;
+    dRef[2] = ft;
+    return f;
+}
+
+template <int P, bool Jacobian>
+void MapImpl(const double* xyz, const double ref[3], double world[3], double* jacobian) {
+    constexpr int n = P + 1;
+    double l[3][n], dl[3][n];
+    for (int d = 0; d < 3; ++d) Lagrange1D<P, Jacobian>(ref[d], l[d], dl[d]);
+    double x[3] = {0, 0, 0}, dr[3] = {0, 0, 0}, ds[3] = {0, 0, 0}, dt[3] = {0, 0, 0};
+    for (int k = 0; k < n; ++k) {
+        double xk[3] = {0, 0, 0}, drk[3] = {0, 0, 0}, dsk[3] = {0, 0, 0};
+        for (int j = 0; j < n; ++j) {
+            const double* row = xyz + 3 * n * (j + n * k);
+            double xj[3] = {0, 0, 0}, drj[3] = {0, 0, 0};
+            for (int i = 0; i < n; ++i)
+                for (int c = 0; c < 3; ++c) {
+                    xj[c] += row[3 * i + c] * l[0][i];
+                    if constexpr (Jacobian) drj[c] += row[3 * i + c] * dl[0][i];
+                }
+            for (int c = 0; c < 3; ++c) {
+                xk[c] += xj[c] * l[1][j];
+                if constexpr (Jacobian) {
+                    drk[c] += drj[c] * l[1][j];
+                    dsk[c] += xj[c] * dl[1][j];
+                }
+            }
+        }
+        for (int c = 0; c < 3; ++c) {
+            x[c] += xk[c] * l[2][k];
+            if constexpr (Jacobian) {
+                dr[c] += drk[c] * l[2][k];
+                ds[c] += dsk[c] * l[2][k];
+                dt[c] += xk[c] * dl[2][k];
+            }
+        }
+    }
+    for (int c = 0; c < 3; ++c) world[c] = x[c];
+    if constexpr (Jacobian) {
+        for (int c = 0; c < 3; ++c) {
+            jacobian[3 * c] = dr[c];
+            jacobian[3 * c + 1] = ds[c];
+            jacobian[3 * c + 2] = dt[c];
+        }
+    }
+}
+
+template <int P>
+void Map(const double* xyz, const double ref[3], double world[3], double* jacobian) {
+    if (jacobian)
+        MapImpl<P, true>(xyz, ref, world, jacobian);
+    else
+        MapImpl<P, false>(xyz, ref, world, nullptr);
+}
+
+template <int P>
+constexpr HexKernels Make() {
+    return {P, &Value<P>, &ValueGradient<P>, &Map<P>};
+}
+
+constexpr HexKernels kTable[kMaxOrder + 1] = {
+    HexKernels{}, Make<1>(), Make<2>(), Make<3>(), Make<4>(), Make<5>(),
+    Make<6>(),    Make<7>(), Make<8>(), Make<9>(), Make<10>()};
+
+}  // namespace
+
+const HexKernels& HexKernelsFor(int p) {
+    HPRAY_CHECK(p >= 1 && p <= kMaxOrder);
+    return kTable[p];
+}
+
+}  // namespace hpray

@@ -1,0 +1,171 @@
+// The kernel table of Lagrange hexahedra (elements/hex_kernels.h) against the generic
+// sum-factorised code, and the reduced-order map of curved hexahedra against the full one.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <random>
+#include <vector>
+
+#include "elements/basis.h"
+#include "elements/geometry.h"
+#include "elements/hex_kernels.h"
+#include "elements/mesh_geometry.h"
+#include "elements/tensor_eval.h"
+#include "mesh/cell.h"
+#include "mesh/mesh.h"
+
+namespace hpray {
+namespace {
+
+// Every specialised kernel performs the generic code's operations in the same order, so
+// the results must be bitwise equal, at points inside and outside the reference cell.
+TEST(HexKernels, EverySpecialisedKernelEqualsTheGenericPathBitwise) {
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> value(-2, 2), point(-0.3, 1.3);
+    for (int p = 1; p <= kMaxOrder; ++p) {
+        const HexKernels& k = HexKernelsFor(p);
+        ASSERT_EQ(k.order, p);
+        const int n = (p + 1) * (p + 1) * (p + 1);
+        std::vector<double> u(n), xyz(3 * n);
+        for (double& v : u) v = value(rng);
+        for (double& v : xyz) v = value(rng);
+        std::vector<double> refs;
+        for (int s = 0; s < 13; ++s) {
+            const double ref[3] = {point(rng), point(rng), point(rng)};
+            refs.insert(refs.end(), ref, ref + 3);
+            EXPECT_EQ(k.value(u.data(), ref), HexFieldValue(p, u.data(), ref)) << "p " << p;
+            double g1[3], g2[3];
+            EXPECT_EQ(k.valueGradient(u.data(), ref, g1),
+                      HexFieldValueGradient(p, u.data(), ref, g2));
+            for (int d = 0; d < 3; ++d) EXPECT_EQ(g1[d], g2[d]) << "p " << p << " d " << d;
+            double w1[3], w2[3], j1[9], j2[9];
+            k.map(xyz.data(), ref, w1, j1);
+            HexMapValueJacobian(p, xyz.data(), ref, w2, j2);
+            for (int d = 0; d < 3; ++d) EXPECT_EQ(w1[d], w2[d]);
+            for (int d = 0; d < 9; ++d) EXPECT_EQ(j1[d], j2[d]);
+            k.map(xyz.data(), ref, w1, nullptr);
+            for (int d = 0; d < 3; ++d) EXPECT_EQ(w1[d], w2[d]);
+        }
+        // The batched evaluation at arbitrary points (every padded size and the kernels
+        // chosen by count) against the single-point path.
+        for (int count : {1, 3, 4, 5, 8, 9, 12, 13}) {
+            std::vector<double> out(count), scratch(HexLineScratchSize(p, count));
+            HexFieldValuesAt(p, u.data(), refs.data(), count, out.data(), scratch.data());
+            for (int s = 0; s < count; ++s)
+                EXPECT_EQ(out[s], HexFieldValue(p, u.data(), &refs[3 * s]))
+                    << "p " << p << " count " << count << " sample " << s;
+        }
+    }
+}
+
+// A hexahedron of order p whose nodes are the image of the lattice under `map`.
+std::vector<double> HexNodes(int p, const std::function<void(const double*, double*)>& map) {
+    const BasisTable& basis = GetBasis(CellShape::Hex, p, CellFamily::Lagrange);
+    std::vector<double> xyz(3 * basis.nodeCount);
+    for (int m = 0; m < basis.nodeCount; ++m) map(basis.refNodes[m].data(), &xyz[3 * m]);
+    return xyz;
+}
+
+TEST(HexKernels, ReducedMapOrderIsFoundAndIsTheSameMap) {
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> jitter(-0.08, 0.08), point(0, 1);
+    for (int q : {1, 2, 3}) {
+        // A map of exact order q per direction: x = r + a * r^q (1 - s) ... plus a trilinear
+        // distortion of the corners.
+        double c[8][3];
+        for (int v = 0; v < 8; ++v)
+            for (int d = 0; d < 3; ++d) c[v][d] = ((v >> d) & 1) + jitter(rng);
+        auto map = [&](const double* r, double* x) {
+            for (int d = 0; d < 3; ++d) {
+                x[d] = 0;
+                for (int v = 0; v < 8; ++v) {
+                    double w = 1;
+                    for (int e = 0; e < 3; ++e) w *= ((v >> e) & 1) ? r[e] : 1 - r[e];
+                    x[d] += w * c[v][d];
+                }
+            }
+            if (q >= 2) x[0] += 0.05 * std::pow(r[1], q) * r[2];
+            if (q >= 3) x[2] += 0.03 * std::pow(r[0], q - 1) * std::pow(r[1], q);
+        };
+        for (int p : {2 * q, 8, 10}) {
+            if (p < 2 * q) continue;
+            const BasisTable& basis = GetBasis(CellShape::Hex, p, CellFamily::Lagrange);
+            const std::vector<double> xyz = HexNodes(p, map);
+            std::vector<double> reduced;
+            const CellGeometry full = MakeCellGeometry(basis, xyz.data());
+            ASSERT_FALSE(full.affine);
+            const int found = ReducedHexMapOrder(basis, xyz.data(), kAffineTolerance * full.size,
+                                                 p / 2, reduced);
+            ASSERT_EQ(found, q) << "p " << p;
+            for (int s = 0; s < 50; ++s) {
+                const double ref[3] = {point(rng), point(rng), point(rng)};
+                double w1[3], w2[3], j1[9], j2[9], exact[3];
+                HexMapValueJacobian(q, reduced.data(), ref, w1, j1);
+                HexMapValueJacobian(p, xyz.data(), ref, w2, j2);
+                map(ref, exact);
+                for (int d = 0; d < 3; ++d) {
+                    EXPECT_NEAR(w1[d], exact[d], 1e-14);
+                    EXPECT_NEAR(w1[d], w2[d], 1e-12);
+                }
+                for (int d = 0; d < 9; ++d) EXPECT_NEAR(j1[d], j2[d], 1e-11);
+            }
+        }
+    }
+    // A map of full order (a small order-p bump) is not reduced.
+    for (int p : {2, 4, 8}) {
+        auto bumped = [p](const double* r, double* x) {
+            for (int d = 0; d < 3; ++d) x[d] = r[d];
+            x[1] += 1e-9 * std::pow(r[0] * (1 - r[0]), p / 2) * r[2];
+        };
+        const BasisTable& basis = GetBasis(CellShape::Hex, p, CellFamily::Lagrange);
+        const std::vector<double> xyz = HexNodes(p, bumped);
+        std::vector<double> reduced;
+        EXPECT_EQ(ReducedHexMapOrder(basis, xyz.data(), 1e-13 * std::sqrt(3.0), p / 2, reduced),
+                  0)
+            << "p " << p;
+    }
+}
+
+// MeshGeometry stores the reduced map, and inversion through it finds the same reference
+// points as through the full map.
+TEST(HexKernels, MeshGeometryInvertsThroughTheReducedMap) {
+    const int p = 8;
+    const BasisTable& basis = GetBasis(CellShape::Hex, p, CellFamily::Lagrange);
+    auto map = [](const double* r, double* x) {
+        x[0] = r[0] + 0.1 * r[1] * r[2];
+        x[1] = r[1] - 0.07 * r[0] * r[2];
+        x[2] = r[2] + 0.05 * r[0] * r[1];
+    };
+    std::vector<double> xyz = HexNodes(p, map);
+    Mesh mesh;
+    mesh.points = xyz;
+    std::vector<std::int64_t> nodes(basis.nodeCount);
+    for (int m = 0; m < basis.nodeCount; ++m) nodes[m] = m;
+    mesh.AddCell(CellShape::Hex, p, CellFamily::Lagrange, nodes.data(), basis.nodeCount);
+    const MeshGeometry g = MeshGeometry::Build(mesh);
+    EXPECT_EQ(g.reducedMapCells, 1);
+    CellScratch scratch;
+    const CellGeometry& cell = g.Cell(0, scratch);
+    EXPECT_EQ(cell.mapOrder, 1);
+    const CellGeometry full = MakeCellGeometry(basis, xyz.data());
+    EXPECT_EQ(full.mapOrder, p);
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> point(0, 1);
+    EvalWorkspace ws;
+    for (int s = 0; s < 100; ++s) {
+        const double ref[3] = {point(rng), point(rng), point(rng)};
+        double world[3];
+        map(ref, world);
+        const InversionResult a = RefFromWorld(cell, world, ws);
+        const InversionResult b = RefFromWorld(full, world, ws);
+        ASSERT_TRUE(a.converged && b.converged);
+        for (int d = 0; d < 3; ++d) {
+            EXPECT_NEAR(a.ref[d], ref[d], 1e-13);
+            EXPECT_NEAR(a.ref[d], b.ref[d], 1e-13);
+        }
+    }
+}
+
+}  // namespace
+}  // namespace hpray
