@@ -7,6 +7,7 @@
 #include <map>
 
 #include "app/commands.h"
+#include "elements/mesh_geometry.h"
 #include "io/mesh_io.h"
 #include "partition.h"
 #include "util/log.h"
@@ -33,6 +34,14 @@ nlohmann::json MeshSummaryJson(const Mesh& mesh) {
     j["ghost_cells"] = ghosts;
     const auto b = mesh.Bounds();
     j["bounds"] = {b.lo, b.hi};
+    {
+        // How the cells map: affine (closed-form inversion), curved but of a lower map
+        // order than their nodes (a trilinear cell with order-8 nodes), or curved.
+        const MeshGeometry geometry = MeshGeometry::Build(mesh);
+        j["geometry"] = {{"affine_cells", geometry.affineCells},
+                         {"reduced_map_cells", geometry.reducedMapCells},
+                         {"curved_cells", mesh.CellCount() - geometry.affineCells}};
+    }
     json fields = json::object();
     auto addField = [&](const Field& f) {
         json e;
@@ -74,6 +83,10 @@ void PrintText(const std::string& name, const nlohmann::json& j, double seconds)
     std::printf("  bounds   [%.9g, %.9g] x [%.9g, %.9g] x [%.9g, %.9g]\n",
                 b[0][0].get<double>(), b[1][0].get<double>(), b[0][1].get<double>(),
                 b[1][1].get<double>(), b[0][2].get<double>(), b[1][2].get<double>());
+    const auto& g = j["geometry"];
+    std::printf("  geometry affine: %lld  curved: %lld (of a lower map order: %lld)\n",
+                g["affine_cells"].get<long long>(), g["curved_cells"].get<long long>(),
+                g["reduced_map_cells"].get<long long>());
     for (auto& [fname, f] : j["fields"].items())
         std::printf("  field    %-24s %-5s %d component%s  range [%.9g, %.9g]\n", fname.c_str(),
                     f["association"].get<std::string>().c_str(), f["components"].get<int>(),

@@ -11,7 +11,8 @@ double FieldValue(const CellGeometry& cell, const CellScalar& field, const doubl
                   EvalWorkspace& ws) {
     if (!field.nodal) return field.constant;
     if (cell.basis->kind == BasisKind::HexLagrange)
-        return HexKernelsFor(cell.basis->order).value(field.nodal, ref);
+        return HexKernelsFor(field.hexOrder ? field.hexOrder : cell.basis->order)
+            .value(field.nodal, ref);
     if (cell.basis->shape == CellShape::Tet && cell.basis->order == 1) {
         // Barycentric: corner m sits at reference point e_m (corner 0 at the origin).
         const double* v = field.nodal;
@@ -38,7 +39,8 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     double f = 0.0, g[3] = {0.0, 0.0, 0.0};
     const bool tensor = cell.basis->kind == BasisKind::HexLagrange;
     if (tensor) {
-        f = HexKernelsFor(cell.basis->order).valueGradient(field.nodal, ref, g);
+        f = HexKernelsFor(field.hexOrder ? field.hexOrder : cell.basis->order)
+                .valueGradient(field.nodal, ref, g);
     } else {
         const double* v = ws.values.data();
         EvalBasis(*cell.basis, ref, ws.values.data(), ws.dRef.data());

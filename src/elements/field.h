@@ -12,6 +12,9 @@ namespace hpray {
 struct CellScalar {
     const double* nodal = nullptr;
     double constant = 0.0;
+    /// Lagrange hexahedra: > 0 when `nodal` holds the (hexOrder + 1)^3 values of an
+    /// interpolant of that (lower) order instead of the basis' nodes.
+    int hexOrder = 0;
 };
 
 /// Field value at reference point `ref`.

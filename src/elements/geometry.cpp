@@ -59,7 +59,13 @@ void ClampToCell(CellShape shape, double ref[3]) {
 struct NewtonOutcome {
     InversionStatus status = InversionStatus::NotConverged;
     int iterations = 0;
+    double contraction = 0;  ///< largest |delta_k| / |delta_k-1|^2 seen (full steps)
+    double inverseJacobian[9] = {};  ///< at the last iterate before convergence
 };
+
+// Steps no longer than this (reference units) are in Newton's quadratic regime, where
+// |delta_k+1| ~ K |delta_k|^2 is measured and used.
+constexpr double kQuadraticRegime = 1e-3;
 
 // Damped Newton on F(ref) = worldFromRef(ref) - target, starting at `ref` (updated).
 NewtonOutcome Newton(const CellGeometry& cell, const double target[3], double ref[3],
@@ -71,6 +77,7 @@ NewtonOutcome Newton(const CellGeometry& cell, const double target[3], double re
     WorldFromRef(cell, ref, ws, x, jac);
     for (int d = 0; d < 3; ++d) f[d] = x[d] - target[d];
     double fn = MaxAbs3(f);
+    double previousStep = 0;  // of the last full (undamped) step
     for (int it = 0; it < maxIterations; ++it) {
         double inv[9];
         const double det = Invert3x3(jac, inv);
@@ -85,8 +92,16 @@ NewtonOutcome Newton(const CellGeometry& cell, const double target[3], double re
         for (double& v : delta) v = -v;
         ++out.iterations;
         const double step = MaxAbs3(delta);
-        if (step <= opt.tolerance || fn <= roundLevel) {
+        if (previousStep > 0 && previousStep <= 10 * kQuadraticRegime)
+            out.contraction = std::max(out.contraction, step / (previousStep * previousStep));
+        // Converged: the step is below the tolerance, or (with the cell's contraction K
+        // measured by earlier inversions) the error left after it, about K step^2, is
+        // far below the tolerance.
+        if (step <= opt.tolerance || fn <= roundLevel ||
+            (opt.contraction > 0 && step <= kQuadraticRegime &&
+             opt.contraction * step * step <= opt.tolerance / 16)) {
             for (int d = 0; d < 3; ++d) ref[d] += delta[d];
+            std::copy(inv, inv + 9, out.inverseJacobian);
             out.status = InversionStatus::Converged;
             return out;
         }
@@ -112,6 +127,7 @@ NewtonOutcome Newton(const CellGeometry& cell, const double target[3], double re
                                                  : InversionStatus::NotConverged;
             return out;
         }
+        previousStep = alpha == 1.0 ? step : 0.0;
         std::copy(cand, cand + 3, ref);
         std::copy(jc, jc + 9, jac);
         std::copy(fc, fc + 3, f);
@@ -294,29 +310,15 @@ int ReducedHexMapOrder(const BasisTable& basis, const double* nodeXyz, double to
                        int maxOrder, std::vector<double>& reduced) {
     if (basis.kind != BasisKind::HexLagrange) return 0;
     const int p = basis.order;
+    std::vector<double> deviation;
     for (int q = 1; q < p && q <= maxOrder; ++q) {
-        // The order-q nodes: the order-p map at the order-q lattice.
-        const int m = q + 1;
-        reduced.resize(3 * m * m * m);
-        for (int k = 0; k < m; ++k)
-            for (int j = 0; j < m; ++j)
-                for (int i = 0; i < m; ++i) {
-                    const double ref[3] = {double(i) / q, double(j) / q, double(k) / q};
-                    HexMapValueJacobian(p, nodeXyz, ref, &reduced[3 * (i + m * (j + m * k))],
-                                        nullptr);
-                }
+        HexResample(p, 3, nodeXyz, q, reduced);
         // Does the order-q map reproduce every order-p node?
+        HexReductionDeviation(p, 3, nodeXyz, q, reduced.data(), deviation);
         bool same = true;
-        for (int node = 0; node < basis.nodeCount && same; ++node) {
-            double x[3];
-            HexMapValueJacobian(q, reduced.data(), basis.refNodes[node].data(), x, nullptr);
-            double e2 = 0;
-            for (int d = 0; d < 3; ++d) {
-                const double e = x[d] - nodeXyz[3 * node + d];
-                e2 += e * e;
-            }
-            same = std::sqrt(e2) <= tolerance;
-        }
+        for (std::size_t m = 0; m < deviation.size() && same; m += 3)
+            same = std::sqrt(deviation[m] * deviation[m] + deviation[m + 1] * deviation[m + 1] +
+                             deviation[m + 2] * deviation[m + 2]) <= tolerance;
         if (same) return q;
     }
     reduced.clear();
@@ -346,6 +348,7 @@ InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
         }
         NewtonOutcome o = Newton(cell, world, ref, ws, options, options.maxIterations);
         res.iterations = o.iterations;
+        res.contraction = o.contraction;
         // Further starts before declaring the point outside or failed: the node nearest to
         // the point (in a strongly curved cell the affine fit can be far off: MFEM's
         // order-9 spiral), then the centre.
@@ -380,6 +383,8 @@ InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
             }
         }
         std::copy(ref, ref + 3, res.ref.begin());
+        if (o.status == InversionStatus::Converged)
+            std::copy(o.inverseJacobian, o.inverseJacobian + 9, res.inverseJacobian.begin());
         res.status = o.status;
     }
     res.converged = res.status == InversionStatus::Converged;

@@ -90,10 +90,17 @@ struct InversionResult {
     bool inside = false;
     int iterations = 0;  ///< Newton iterations over all starts (0 for affine cells)
     double outsideDistance = 0.0;  ///< RefOutsideDistance(shape, ref)
+    /// Newton's measured quadratic contraction |delta_k+1| / |delta_k|^2 (largest over
+    /// consecutive full steps of at most 1e-2; 0 when there were fewer than two).
+    double contraction = 0.0;
+    /// Curved cells, when converged: the inverse Jacobian d ref / d world at the last
+    /// iterate (within the tolerance of `ref`); a predictor's slope. Zero otherwise.
+    std::array<double, 9> inverseJacobian{};
 };
 
 struct InversionOptions {
-    /// Newton stops when the max-norm of its step is below this (reference units).
+    /// Newton stops when the max-norm of its step is below this (reference units), or
+    /// when the error left is predicted below it (see `contraction`).
     double tolerance = 1e-13;
     /// Reference-distance tolerance of the `inside` test.
     double insideTolerance = 1e-10;
@@ -102,6 +109,11 @@ struct InversionOptions {
     double leaveDistance = 1.0;
     /// Optional start (reference coordinates); default: the inverse of the affine fit.
     const double* initialGuess = nullptr;
+    /// An estimate K of the cell's quadratic contraction (InversionResult::contraction of
+    /// earlier inversions in it, with a margin), or 0. With it Newton also stops after a
+    /// step of at most 1e-3 once K step^2 <= tolerance / 16: the error the next step would
+    /// remove is that far below the tolerance, so computing it is saved.
+    double contraction = 0.0;
 };
 
 /// Reference coordinates of world point `world`. Affine cells: closed form. Curved cells:

@@ -288,4 +288,53 @@ void HexFieldValuesAt(int p, const double* u, const double* refs, int count, dou
     ContractSamples(p, u, xs, count, padded, out, scratch);
 }
 
+namespace {
+// sum_ijk values[(i + n (j + n k)) * comps + c] * l0[i] l1[j] l2[k], per component c.
+void TensorSum(int p, int comps, const double* values, const double* l0, const double* l1,
+               const double* l2, double* out) {
+    const int n = p + 1;
+    for (int c = 0; c < comps; ++c) out[c] = 0;
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j) {
+            const double w = l1[j] * l2[k];
+            const double* row = values + std::size_t(comps) * n * (j + n * k);
+            for (int i = 0; i < n; ++i)
+                for (int c = 0; c < comps; ++c) out[c] += row[comps * i + c] * l0[i] * w;
+        }
+}
+}  // namespace
+
+void HexResample(int p, int components, const double* values, int q, std::vector<double>& out) {
+    const int m = q + 1;
+    out.resize(std::size_t(m) * m * m * components);
+    double l[3][kMaxOrder + 1];
+    for (int k = 0; k < m; ++k)
+        for (int j = 0; j < m; ++j)
+            for (int i = 0; i < m; ++i) {
+                LagrangeEquispaced1D(p, double(i) / q, l[0], nullptr);
+                LagrangeEquispaced1D(p, double(j) / q, l[1], nullptr);
+                LagrangeEquispaced1D(p, double(k) / q, l[2], nullptr);
+                TensorSum(p, components, values, l[0], l[1], l[2],
+                          &out[std::size_t(components) * (i + m * (j + m * k))]);
+            }
+}
+
+void HexReductionDeviation(int p, int components, const double* values, int q,
+                           const double* reduced, std::vector<double>& deviation) {
+    const int n = p + 1;
+    deviation.resize(std::size_t(n) * n * n * components);
+    double l[3][kMaxOrder + 1], v[3];
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                LagrangeEquispaced1D(q, double(i) / p, l[0], nullptr);
+                LagrangeEquispaced1D(q, double(j) / p, l[1], nullptr);
+                LagrangeEquispaced1D(q, double(k) / p, l[2], nullptr);
+                TensorSum(q, components, reduced, l[0], l[1], l[2], v);
+                const std::size_t node = i + std::size_t(n) * (j + std::size_t(n) * k);
+                for (int c = 0; c < components; ++c)
+                    deviation[components * node + c] = v[c] - values[components * node + c];
+            }
+}
+
 }  // namespace hpray

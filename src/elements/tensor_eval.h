@@ -2,6 +2,8 @@
 // instead of forming all (p+1)^3 basis functions, and a batched form along a line.
 #pragma once
 
+#include <vector>
+
 namespace hpray {
 
 /// The 1-D equispaced Lagrange polynomials of degree p on [0, 1] at x (and derivatives if
@@ -28,6 +30,17 @@ void HexFieldValuesAlongLine(int p, const double* u, const double ref0[3],
 /// points). `scratch` must hold HexLineScratchSize(p, n) doubles.
 void HexFieldValuesAt(int p, const double* u, const double* refs, int n, double* out,
                       double* scratch);
+/// Re-samples a tensor Lagrange interpolant of order p (nodal values with `components`
+/// interleaved components, internal hex order) at the order-q lattice: (q + 1)^3 *
+/// components values into `out` (resized). With q < p, interpolating those at order q gives
+/// the lower-order interpolant that agrees with the original on the order-q lattice.
+void HexResample(int p, int components, const double* values, int q, std::vector<double>& out);
+
+/// The order-q interpolant (nodal values `reduced`) minus the order-p one, at the order-p
+/// nodes, per component, into `deviation` (resized to (p + 1)^3 * components).
+void HexReductionDeviation(int p, int components, const double* values, int q,
+                           const double* reduced, std::vector<double>& deviation);
+
 inline int HexLineScratchSize(int p, int n) {
     const int padded = (n + 3) / 4 * 4;
     return 3 * (p + 1) * padded + 6 * padded;

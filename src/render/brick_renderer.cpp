@@ -71,13 +71,22 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
     }
     const SceneAccuracy& acc = scene.accuracy;
+    for (BrickSetup::Iso& iso : s.isos) {
+        const auto r = s.fields[iso.field].field->Range(s.fields[iso.field].component);
+        iso.residualTarget = acc.targetResidual * (r[1] - r[0]);
+    }
     s.projection.tolerance = acc.projectionTolerance;
+    // A looser projection converges at a lower degree: start there (a too low start costs
+    // one retry at twice the degree).
+    s.projection.startDegree = acc.projectionTolerance >= 1e-10 ? 6 : 8;
     if (acc.projectionOrder > 0) {
         s.projection.startDegree = acc.projectionOrder;
         s.projection.maxDegree = acc.projectionOrder;
     }
     s.roots.rootTolerance = acc.rootTolerance;
     s.roots.polish = acc.polish;
+    // (Not loosened with a residual target: the residual reported at a hit must be the
+    // true field's at the hit's own point.)
     s.inversion.tolerance = acc.mappingTolerance;
     const double diag = mesh.Bounds().Diagonal();
     s.duplicateDistance = 1e-9 * diag;
@@ -417,8 +426,10 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                         (iso.opacity >= 1) != (pass == 0))
                         continue;
                     double previous = lastHit_[k];
+                    RootOptions roots = setup.roots;
+                    roots.residualTarget = iso.residualTarget;
                     const int failures =
-                        FindRoots(field_, pieces_[f], iso.value, setup.roots, scratch_,
+                        FindRoots(field_, pieces_[f], iso.value, roots, scratch_,
                                   [&](const RootResult& r) {
                                       if (r.t > cutoff) return true;
                                       if (!span.Holds(r.t)) return false;

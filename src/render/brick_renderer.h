@@ -49,6 +49,9 @@ struct BrickSetup {
         /// Colour by this field's true value at the hit through colorTf, when set.
         std::optional<ScalarSelector> colorField;
         PiecewiseLinearTf colorTf;
+        /// Absolute residual at which a root is accepted (accuracy.target_residual times
+        /// the field's range); 0: polish to the root tolerance.
+        double residualTarget = 0;
     };
     std::vector<Iso> isos;
     SceneLighting lighting;

@@ -5,12 +5,81 @@
 #include <cmath>
 #include <limits>
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "elements/bounds.h"
 #include "elements/tensor_eval.h"
 #include "mesh/cell.h"
 
 namespace hpray {
+
+namespace {
+// Lebesgue constants of equispaced 1-D interpolation of order p (rounded up): an interpolant
+// of nodal values within d of zero stays within Lambda_p^3 d on the hexahedron.
+constexpr double kLebesgue[kMaxOrder + 1] = {1.0, 1.0,  1.25, 1.64, 2.21, 3.11,
+                                             4.55, 6.93, 10.95, 17.85, 29.9};
+
+// FieldCellData::reducedOrder: for each Lagrange hexahedron of order p >= 2, the lowest
+// order q <= p / 2 whose interpolant reproduces the cell's nodal values to rounding (16 ulp
+// of their magnitude): the two interpolants then differ by the interpolant of that
+// rounding, at most Lambda_p^3 times it anywhere in the cell, as the stored values' own
+// rounding does.
+void ReduceHexOrders(const Mesh& mesh, const ScalarSelector& field, FieldCellData& d) {
+    const std::int64_t cells = mesh.CellCount();
+    bool any = false;
+    for (std::int64_t c = 0; c < cells && !any; ++c)
+        any = mesh.cellShape[c] == CellShape::Hex && mesh.cellOrder[c] >= 2 &&
+              mesh.cellFamily[c] == CellFamily::Lagrange;
+    if (!any || field.field->association != Association::Point) return;
+    d.reducedOrder.assign(cells, 0);
+    d.reducedValues.resize(cells);
+    struct Partial {
+        std::int64_t count = 0;
+        double margin = 0;
+    };
+    tbb::enumerable_thread_specific<Partial> partials;
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 16),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+        Partial& part = partials.local();
+        std::vector<double> reduced, deviation;
+        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+            if (mesh.cellShape[c] != CellShape::Hex || mesh.cellOrder[c] < 2 ||
+                mesh.cellFamily[c] != CellFamily::Lagrange)
+                continue;
+            const int p = mesh.cellOrder[c];
+            const int n = (p + 1) * (p + 1) * (p + 1);
+            const double* values = d.values.data() + mesh.cellOffsets[c];
+            double magnitude = 0;
+            for (int m = 0; m < n; ++m) magnitude = std::max(magnitude, std::abs(values[m]));
+            const double tolerance =
+                16 * std::numeric_limits<double>::epsilon() * magnitude;
+            for (int q = 1; q <= p / 2; ++q) {
+                HexResample(p, 1, values, q, reduced);
+                HexReductionDeviation(p, 1, values, q, reduced.data(), deviation);
+                double worst = 0;
+                for (double v : deviation) worst = std::max(worst, std::abs(v));
+                if (worst <= tolerance) {
+                    d.reducedOrder[c] = static_cast<std::uint8_t>(q);
+                    d.reducedValues[c] = reduced;
+                    part.count += 1;
+                    const double l = kLebesgue[p];
+                    part.margin = std::max(part.margin, l * l * l * worst);
+                    break;
+                }
+            }
+        }
+    });
+    for (const Partial& part : partials) {
+        d.reducedCells += part.count;
+        d.reductionTolerance = std::max(d.reductionTolerance, part.margin);
+    }
+    if (d.reducedCells == 0) {
+        d.reducedOrder.clear();
+        d.reducedValues.clear();
+    }
+}
+}  // namespace
 
 FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometry,
                                    const ScalarSelector& field) {
@@ -69,6 +138,7 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
             }
         }
     });
+    ReduceHexOrders(mesh, field, d);
     return d;
 }
 
@@ -80,6 +150,15 @@ void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry
     scalar_.nodal = data.values.data() + data.mesh->cellOffsets[c];
     gradBound_ = &data.refGradBound[c];
     lineDegree_ = cell_->basis->lineDegree;
+    if (!data.reducedOrder.empty() && data.reducedOrder[c] > 0) {
+        // Evaluated at its own lower order: along a line in an affine cell that is a
+        // polynomial of degree 3 q.
+        hexOrder_ = data.reducedOrder[c];
+        scalar_.nodal = data.reducedValues[c].data();
+        scalar_.hexOrder = hexOrder_;
+        lineDegree_ = 3 * hexOrder_;
+        reductionMargin_ = data.reductionTolerance;
+    }
 }
 
 bool SegmentField::MayReach(const double* isovalues, int count, double t0, double t1) {
@@ -90,7 +169,10 @@ bool SegmentField::MayReach(const double* isovalues, int count, double t0, doubl
     if (!std::isfinite(lipschitz)) return true;
     auto excluded = [&](double value, double halfWidth) {
         // A small relative margin covers the rounding of the evaluation.
-        const double reach = lipschitz * halfWidth * (1 + 1e-12) + 1e-13 * std::abs(value);
+        // (The derivative bound is the cell's own; a reduced field is within
+        // reductionMargin_ of it, which moves a difference of two values by twice that.)
+        const double reach = lipschitz * halfWidth * (1 + 1e-12) + 1e-13 * std::abs(value) +
+                             2 * reductionMargin_;
         for (int k = 0; k < count; ++k)
             if (std::abs(value - isovalues[k]) <= reach) return false;
         return true;
@@ -104,12 +186,16 @@ bool SegmentField::MayReach(const double* isovalues, int count, double t0, doubl
 void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, const Ray& ray,
                                const InversionOptions& inversion) {
     cell_ = &geometry.Cell(c, cellScratch_);
+    hexOrder_ = cell_->basis->kind == BasisKind::HexLagrange ? cell_->basis->order : 0;
+    scalar_.hexOrder = 0;
+    reductionMargin_ = 0;
     ray_ = ray;
     inversion_ = inversion;
     gradBound_ = nullptr;
     affine_ = cell_->affine && cell_->linearInvertible;
     exact_ = affine_ && cell_->basis->polynomial;
     guessCount_ = 0;
+    contraction_ = 0;
     if (affine_) {
         // ref(t) = L^-1 (o + t d - origin): linear in t.
         const auto& inv = cell_->inverseLinear;
@@ -145,26 +231,45 @@ void SegmentField::RefAt(double t, double ref[3]) {
     double world[3];
     for (int i = 0; i < 3; ++i) world[i] = ray_.origin[i] + t * ray_.dir[i];
     InversionOptions options = inversion_;
-    // Start Newton from the secant prediction through the last two inverted points along
-    // the ray (the reference path is smooth), else from the last point.
+    // Start Newton from the cubic Hermite prediction through the last two inverted points
+    // along the ray and their slopes d ref / dt = J^-1 d (the reference path is smooth),
+    // else from the tangent line at the last one.
     double start[3];
     if (guessCount_ >= 2 && guessT_[1] != guessT_[0]) {
-        const double w = (t - guessT_[1]) / (guessT_[1] - guessT_[0]);
-        for (int i = 0; i < 3; ++i) start[i] = guessRef_[1][i] + w * (guessRef_[1][i] - guessRef_[0][i]);
+        const double h = guessT_[1] - guessT_[0], s = (t - guessT_[0]) / h;
+        const double s2 = s * s, s3 = s2 * s;
+        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = (s3 - 2 * s2 + s) * h,
+                     h01 = -2 * s3 + 3 * s2, h11 = (s3 - s2) * h;
+        for (int i = 0; i < 3; ++i)
+            start[i] = h00 * guessRef_[0][i] + h10 * guessSlope_[0][i] +
+                       h01 * guessRef_[1][i] + h11 * guessSlope_[1][i];
         options.initialGuess = start;
     } else if (guessCount_ == 1) {
-        options.initialGuess = guessRef_[1];
+        for (int i = 0; i < 3; ++i)
+            start[i] = guessRef_[1][i] + (t - guessT_[1]) * guessSlope_[1][i];
+        options.initialGuess = start;
     }
+    // Newton's contraction measured in this cell along this ray, with a margin of 4.
+    options.contraction = 4 * contraction_;
     const InversionResult r = RefFromWorld(*cell_, world, ws_, options);
+    contraction_ = std::max(contraction_, r.contraction);
     inversions_ += 1;
     iterations_ += r.iterations;
     if (!r.converged) failures_ += 1;
     for (int i = 0; i < 3; ++i) ref[i] = r.ref[i];
     if (r.converged) {
         guessT_[0] = guessT_[1];
-        for (int i = 0; i < 3; ++i) guessRef_[0][i] = guessRef_[1][i];
+        for (int i = 0; i < 3; ++i) {
+            guessRef_[0][i] = guessRef_[1][i];
+            guessSlope_[0][i] = guessSlope_[1][i];
+        }
         guessT_[1] = t;
-        for (int i = 0; i < 3; ++i) guessRef_[1][i] = r.ref[i];
+        const auto& inv = r.inverseJacobian;
+        for (int i = 0; i < 3; ++i) {
+            guessRef_[1][i] = r.ref[i];
+            guessSlope_[1][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
+                                inv[3 * i + 2] * ray_.dir[2];
+        }
         guessCount_ = std::min(guessCount_ + 1, 2);
     }
 }
@@ -178,8 +283,8 @@ double SegmentField::operator()(double t) {
 }
 
 void SegmentField::SampleBatch(const double* t, int n, double* out) {
-    if (scalar_.nodal && cell_->basis->kind == BasisKind::HexLagrange) {
-        const int p = cell_->basis->order;
+    if (scalar_.nodal && hexOrder_ > 0) {
+        const int p = hexOrder_;
         batchScratch_.resize(HexLineScratchSize(p, n) + 3 * n);
         if (affine_) {
             HexFieldValuesAlongLine(p, scalar_.nodal, ref0_, dref_, t, n, out,

@@ -22,6 +22,15 @@ struct FieldCellData {
     const Mesh* mesh = nullptr;
     std::vector<double> values;  ///< cell c's values start at mesh->cellOffsets[c]
     std::vector<std::array<double, 3>> refGradBound;  ///< +inf where no bound is kept
+    /// Lagrange hexahedra whose nodal values are, to rounding, those of an interpolant of a
+    /// lower order q (a quartic on order-8 cells, say): q and its (q + 1)^3 values, which
+    /// every evaluation then uses. Empty when no cell has one.
+    std::vector<std::uint8_t> reducedOrder;
+    std::vector<std::vector<double>> reducedValues;
+    std::int64_t reducedCells = 0;
+    /// Largest bound, over the reduced cells, of |reduced interpolant - cell's| (absolute):
+    /// the Lebesgue constant cubed times the nodal rounding.
+    double reductionTolerance = 0;
 
     static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
                                const ScalarSelector& field);
@@ -70,6 +79,8 @@ private:
     const CellGeometry* cell_ = nullptr;  ///< stored, or derived into cellScratch_
     CellScratch cellScratch_;
     const std::array<double, 3>* gradBound_ = nullptr;
+    int hexOrder_ = 0;  ///< order of the hexahedron field evaluated (reduced or the basis')
+    double reductionMargin_ = 0;  ///< how far a reduced field may be from the cell's
     CellScalar scalar_;
     std::vector<double> nodal_;
     Ray ray_;
@@ -78,10 +89,13 @@ private:
     bool exact_ = false;
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
-    // The last two converged inversions (t, ref) along the ray: Newton's predictor.
+    // The last two converged inversions (t, ref, d ref / dt) along the ray: Newton's
+    // predictor.
     double guessT_[2] = {0, 0};
     double guessRef_[2][3] = {{0, 0, 0}, {0, 0, 0}};
+    double guessSlope_[2][3] = {{0, 0, 0}, {0, 0, 0}};
     int guessCount_ = 0;
+    double contraction_ = 0;  ///< largest Newton contraction measured in this segment
     EvalWorkspace ws_;
     std::vector<double> batchScratch_;
     double inversions_ = 0, iterations_ = 0, failures_ = 0, evaluations_ = 0;

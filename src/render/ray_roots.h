@@ -68,6 +68,9 @@ struct RootOptions {
     /// projection p - C in the bracket (for order studies); the residual is still that of
     /// the true field there.
     bool polish = true;
+    /// > 0: a root is accepted as soon as |f - C| <= this at it (absolute), first tried at
+    /// the projection's own root; 0: polished to the root tolerance.
+    double residualTarget = 0;
 };
 
 enum class RootKind : std::uint8_t { None = 0, Simple = 1, Tangent = 2 };
@@ -182,7 +185,10 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     const LglRule& rule = LglNodes(n);
                     double checkT[kMaxLegendreDegree + 1], checkF[kMaxLegendreDegree + 1];
                     int checks = 0;
-                    for (int i = 0; i < n; i += std::max(1, n / 4))
+                    // About four checks (every gap when the degree is pinned, where
+                    // they are the only error estimate).
+                    const int stride = pinned ? std::max(1, n / 4) : std::max(2, n / 4);
+                    for (int i = 0; i < n; i += stride)
                         checkT[checks++] = mid + half * 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
                     detail::SampleMany(f, checkT, checks, checkF);
                     stats.evaluations += checks;
@@ -247,14 +253,14 @@ RecentValues(F&, double) -> RecentValues<F>;
 
 /// For a series p monotone on [lo, hi] with |p - C| > eps at both ends and opposite signs:
 /// [a, b] inside it, about the root of p - C, with |p - C| > eps at a and b (or a, b at
-/// the window's ends). Then every t in the window where |p - C| <= eps lies in (a, b).
+/// the window's ends), and r the root of p - C. Then every t in the window where
+/// |p - C| <= eps lies in (a, b).
 /// False if no such bracket narrower than the window was found.
 inline bool TightBracket(const LegendreSeries& p, double C, double eps, double lo, double hi,
-                         double minWidth, double& a, double& b) {
+                         double minWidth, double& a, double& b, double& r) {
     const double vlo = p(lo) - C, vhi = p(hi) - C;
     if (!(std::abs(vlo) > eps && std::abs(vhi) > eps) || (vlo < 0) == (vhi < 0)) return false;
-    double r;  // the root of p - C
-    {
+    {  // r: the root of p - C
         auto tol = [&](double x, double y) { return std::abs(y - x) <= minWidth; };
         std::uintmax_t iterations = 200;
         auto q = [&](double t) { return p(t) - C; };
@@ -384,9 +390,19 @@ int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                     // the window all lie where |p - C| <= eps, a short interval about the
                     // root of p. Bracket that interval and polish inside it, which needs
                     // far fewer samples of the true field than the whole window.
-                    double a, b;
-                    if (detail::TightBracket(piece.p, C, piece.eps, lo, hi, minWidth, a, b)) {
+                    double a, b, r;
+                    if (detail::TightBracket(piece.p, C, piece.eps, lo, hi, minWidth, a, b, r)) {
                         detail::RecentValues g{f, C};
+                        const double target = options.residualTarget;
+                        if (target > 0) {
+                            // The projection's root is within eps of the true one: often
+                            // good enough already.
+                            const double gr = std::abs(g(r));
+                            if (gr <= target) {
+                                result = {RootKind::Simple, r, gr, result.failures};
+                                return stop = onRoot(result);
+                            }
+                        }
                         const double ga = g(a), gb = g(b);
                         const double pa = piece.p(a) - C;
                         // The true field must have the projection's signs there (else the
@@ -394,7 +410,9 @@ int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                         if ((ga < 0) == (pa < 0) && (gb < 0) != (pa < 0) && ga != 0 &&
                             gb != 0) {
                             auto tol = [&](double x, double y) {
-                                return std::abs(y - x) <= minWidth;
+                                return std::abs(y - x) <= minWidth ||
+                                       (target > 0 && std::min(std::abs(g(x)),
+                                                               std::abs(g(y))) <= target);
                             };
                             std::uintmax_t iterations = 200;
                             auto bracket = boost::math::tools::toms748_solve(

@@ -76,7 +76,7 @@ const SchemaNode& Schema() {
             Leaf("background"),
             MapOf("accuracy",
                   {"mapping_tolerance", "projection_order", "projection_tolerance",
-                   "root_tolerance", "volume_tolerance", "polish"}),
+                   "root_tolerance", "volume_tolerance", "polish", "target_residual"}),
             MapOf("clip", {"near", "far", "box"}),
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
             Leaf("threads"),
@@ -861,6 +861,16 @@ void SceneParser::ReadAccuracy(const YAML::Node& root, Scene& scene) const {
                 Fail(path, n, "must be auto or in [1, 64], got " + std::to_string(order));
             a.projectionOrder = static_cast<int>(order);
         }
+    }
+    if (Has(acc, "target_residual")) {
+        const std::string path = "accuracy.target_residual";
+        const YAML::Node n = Get(acc, "target_residual");
+        a.targetResidual = Positive(n, path);
+        if (a.targetResidual > 1e-2)
+            Fail(path, n, "must be at most 1e-2 (a fraction of the field's range)");
+        // The projection's error budget follows the target unless given explicitly.
+        if (!Has(acc, "projection_tolerance"))
+            a.projectionTolerance = std::max(a.projectionTolerance, a.targetResidual / 4);
     }
     if (Has(acc, "polish")) {
         const YAML::Node n = Get(acc, "polish");

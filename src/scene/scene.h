@@ -143,6 +143,12 @@ struct SceneAccuracy {
     /// Polish every isosurface root on the true field (default). false reports the root
     /// of the Legendre projection itself, as Nelson & Kirby did: for order studies only.
     bool polish = true;
+    /// The isosurface residual |f - C| asked for, as a fraction of the field's range over
+    /// the data; 0: as small as the tolerances above make it (about 1e-15). A looser
+    /// target buys speed: roots are accepted once their measured residual is within it and
+    /// the projection tolerance follows it (target / 4 unless given). Every reported
+    /// residual is still measured on the true field at the reported point.
+    double targetResidual = 0;
 };
 
 /// `clip:` ray parameter range and optional world box. near >= 0, far > near (may be

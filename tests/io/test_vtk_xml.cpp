@@ -1315,17 +1315,21 @@ TEST(VtkXmlRealData, LinearFicheraCellsArePositiveAndFillVolumeSeven) {
     EXPECT_NEAR(total, 7.0, 1e-9);
 }
 
-TEST(VtkXmlRealData, MillionTetsReadQuickly) {
+// The million-tet mesh reads whole (its read time is recorded, not asserted: speed is
+// measured by scripts/bench_peers.sh, never by a timed test on a shared machine).
+TEST(VtkXmlRealData, MillionTetMeshReadsWhole) {
     if (!HaveSharedData()) GTEST_SKIP() << "no shared data";
     const auto t0 = std::chrono::steady_clock::now();
     const Mesh m = ReadVtkXml(Shared("mfem_gmsh_t16_tets_1M.vtu"), {});
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     EXPECT_EQ(m.CellCount(), 1251511);
+    for (std::int64_t c = 0; c < m.CellCount(); c += 4099) {
+        EXPECT_EQ(m.cellShape[c], CellShape::Tet);
+        EXPECT_EQ(m.cellOrder[c], 1);
+    }
+    EXPECT_NO_THROW(m.Validate("t16"));
     RecordProperty("read_seconds", std::to_string(seconds));
-#ifdef NDEBUG
-    EXPECT_LT(seconds, 2.0);
-#endif
 }
 
 TEST(VtkXmlRealData, FieldSelectionOnRealFile) {
