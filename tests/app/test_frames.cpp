@@ -302,7 +302,9 @@ TEST_F(Frames, PartsOfAStepAreMergedAsPiecesOfAPvtu) {
     std::string out;
     ASSERT_EQ(RunCommand(Hpray() + "info --json -q " + (kDir / "parts.pvd").string(), &out), 0)
         << out;
-    EXPECT_EQ(nlohmann::json::parse(out)["cells"], whole.CellCount());
+    const nlohmann::json info = nlohmann::json::parse(out);
+    EXPECT_EQ(info["cells"], whole.CellCount());
+    EXPECT_EQ(info["time_steps"], nlohmann::json::array({0.25}));
 }
 
 /// Renders `scene` text (written to bad.yaml) expecting exit 2; returns the output.
