@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <iostream>
 #include <map>
+#include <optional>
 
 #include "app/commands.h"
 #include "elements/mesh_geometry.h"
@@ -115,10 +116,22 @@ int RunInfo(const InfoArgs& args) {
     nlohmann::json j = MeshSummaryJson(mesh);
     j["source"] = args.mesh;
     j["read_seconds"] = seconds;
-    if (args.json)
+    // A time series: its steps' times; the summary is of the first step.
+    std::optional<Collection> collection;
+    if (IsCollectionPath(args.mesh)) {
+        collection = ReadCollection(args.mesh);
+        nlohmann::json times = nlohmann::json::array();
+        for (const CollectionStep& step : collection->steps) times.push_back(step.time);
+        j["time_steps"] = times;
+    }
+    if (args.json) {
         std::cout << j.dump(2) << std::endl;
-    else
+    } else {
         PrintText(args.mesh, j, seconds);
+        if (collection)
+            std::printf("  steps    %zu (the summary is of the first), at times %s\n",
+                        collection->steps.size(), collection->TimesText().c_str());
+    }
     return 0;
 }
 

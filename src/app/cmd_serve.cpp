@@ -247,6 +247,9 @@ int RunServe(const ServeArgs& args) {
     const std::string baseDir = fs::absolute(fs::path(args.scene)).parent_path().string();
     Scene scene = ParseScene(sceneText, args.scene, args.overrides, baseDir);
     scene.sourcePath = args.scene;
+    if (scene.frames && root)
+        log::Warn(args.scene + ": frames is for hpray render; hpray serve renders one frame "
+                  "per request and ignores it");
     const std::string dataPath = scene.data.mesh;
     mpi::EnsureInitialized();
     std::signal(SIGINT, OnSignal);

@@ -19,6 +19,10 @@ std::string LowerExtension(const std::string& path) {
 }
 }  // namespace
 
+bool IsCollectionPath(const std::string& path) {
+    return path.rfind("builtin:", 0) != 0 && LowerExtension(path) == ".pvd";
+}
+
 bool ReadOptions::Wants(const std::string& name) const {
     if (!fields) return true;
     for (const std::string& want : *fields) {
@@ -42,8 +46,10 @@ Mesh ReadMesh(const std::string& path, const ReadOptions& options) {
         return ReadVtkXml(path, options);
     if (ext == ".vtk") return ReadVtkLegacy(path, options);
     if (ext == ".msh") return ReadGmsh(path, options);
+    if (ext == ".pvd") return ReadCollectionStep(ReadCollection(path), options.timeStep, options);
     throw InputError(path, "", "unknown mesh format '" + ext +
-                                   "' (expected .vtu, .pvtu, .vts, .pvts, .vtk, .msh or builtin:NAME)");
+                                   "' (expected .vtu, .pvtu, .vts, .pvts, .vtk, .msh, .pvd "
+                                   "or builtin:NAME)");
 }
 
 }  // namespace hpray

@@ -12,6 +12,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "mesh/mesh.h"
+
 namespace hpray {
 struct ReadOptions;
 }
@@ -195,5 +197,11 @@ struct PieceArrays {
 /// name that no array has is an error listing the available ones.
 PieceArrays CollectArrays(const XmlFile& file, pugi::xml_node piece,
                           const std::string& where, const ReadOptions& options);
+
+/// Appends `piece` to `into` (`first`: `into` becomes `piece`): points, cells (indices
+/// shifted), fields matched by name, ghost and type bytes. Pieces of a .pvtu and parts of
+/// one time step of a .pvd. Throws InputError(source, where) when the field sets differ.
+void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source,
+                 const std::string& where);
 
 }  // namespace hpray::vtkxml

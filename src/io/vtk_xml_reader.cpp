@@ -336,9 +336,10 @@ PieceResult ReadStructuredPiece(const XmlFile& file, pugi::xml_node grid,
     return result;
 }
 
-/// Appends `piece` to `into`: points, cells (indices shifted), fields matched by name.
-void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source,
-                 const std::string& where) {
+}  // namespace
+
+void vtkxml::AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source,
+                         const std::string& where) {
     if (first) {
         into = std::move(piece);
         return;
@@ -389,6 +390,10 @@ void AppendPiece(Mesh& into, bool first, Mesh&& piece, const std::string& source
             a.insert(a.end(), b.begin(), b.end());
     }
 }
+
+namespace {
+
+using vtkxml::AppendPiece;
 
 /// Reads every <Piece> of a serial file (UnstructuredGrid or StructuredGrid),
 /// unvalidated.

@@ -317,12 +317,19 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
                                  std::to_string(P) + " MPI ranks; partition it into at least " +
                                  std::to_string(P) + " bricks");
         AssignRanks(partitionPlan_, P);
+        if (scene_.data.time)
+            throw InputError(scene_.sourcePath.empty() ? "scene" : scene_.sourcePath,
+                             "data.time",
+                             scene_.data.mesh + " is a partition directory: a partition has "
+                             "no time steps (time series of partitions are not supported)");
     } else {
-        whole_ = ReadMesh(scene_.data.mesh, readOptions_);
-        if (mpi::Root())
-            log::Info("loaded " + scene_.data.mesh + ": " +
-                      std::to_string(whole_->CellCount()) + " cells, " +
-                      std::to_string(whole_->PointCount()) + " points");
+        if (IsCollectionPath(scene_.data.mesh)) {
+            collection_ = ReadCollection(scene_.data.mesh);
+            timeStep_ = TimeStepOf(scene_);
+        } else {
+            TimeStepOf(scene_);  // data.time without a collection is an error
+        }
+        LoadWhole();
     }
     setupStats_.timing.load = Seconds(t0);
     ResolveColorMaps(scene_, [this](const std::string& f) { return FieldRange(f); },
@@ -332,6 +339,53 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
         if (mpi::Root()) prepared_->SetProgress(kProgressSeconds);
     }
     FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
+}
+
+int ResolveTimeStep(const Scene& scene, const Collection* collection) {
+    const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
+    if (!scene.data.time) return 0;
+    if (!collection)
+        throw InputError(source, "data.time",
+                         "data.mesh (" + scene.data.mesh + ") is not a .pvd collection: only "
+                         "a collection has time steps");
+    const SceneData::Time& t = *scene.data.time;
+    const long long n = static_cast<long long>(collection->steps.size());
+    const std::string steps = std::to_string(n) + " time step" + (n == 1 ? "" : "s");
+    if (t.byValue) {
+        const int k = collection->FindTime(t.value);
+        if (k < 0) {
+            char value[32];
+            std::snprintf(value, sizeof value, "%.10g", t.value);
+            throw InputError(source, "data.time",
+                             std::string("no step of ") + collection->path + " is at time " +
+                                 value + "; its " + steps + " are at " +
+                                 collection->TimesText() +
+                                 " (or give a step index: data.time: 0)");
+        }
+        return k;
+    }
+    if (t.index >= n)
+        throw InputError(source, "data.time",
+                         "step " + std::to_string(t.index) + " is past the last step of " +
+                             collection->path + " (" + steps + ": 0 to " +
+                             std::to_string(n - 1) + ", at times " + collection->TimesText() +
+                             ")");
+    return static_cast<int>(t.index);
+}
+
+void FrameJob::LoadWhole() {
+    readOptions_.timeStep = timeStep_;
+    whole_ = collection_ ? ReadCollectionStep(*collection_, timeStep_, readOptions_)
+                         : ReadMesh(scene_.data.mesh, readOptions_);
+    if (!mpi::Root()) return;
+    std::string what = scene_.data.mesh;
+    if (collection_) {
+        char time[48];
+        std::snprintf(time, sizeof time, "%.10g", collection_->steps[timeStep_].time);
+        what += " step " + std::to_string(timeStep_) + " (t = " + time + ")";
+    }
+    log::Info("loaded " + what + ": " + std::to_string(whole_->CellCount()) + " cells, " +
+              std::to_string(whole_->PointCount()) + " points");
 }
 
 double FrameJob::DataSize() const {
@@ -461,7 +515,10 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
         throw InputError(frameScene.data.mesh, "",
                          "a job renders the data it loaded (" + scene_.data.mesh + ")");
     Scene scene = frameScene;
-    FitCamera(scene.camera, DataBounds(), scene.clip.box);
+    const int step = TimeStepOf(scene);
+    // Another time step, or a mesh whose reading failed in an earlier frame.
+    const bool newStep = step != timeStep_ || (!part_ && !prepared_);
+    if (newStep) change = Change::Scene;
     scene.threads = scene_.threads;
     scene.distribute = scene_.distribute;
     if (change == Change::Scene) {
@@ -477,17 +534,29 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
         for (const std::string& name : scene.FieldNames())
             missing |= loadedFields_.insert(name).second;
         readOptions_.fields = loadedFields_;
-        if (whole_) {
-            if (missing) {
+        if (!part_) {
+            if (missing || newStep) {
+                // Another time step, or fields not yet loaded: the mesh is read again (the
+                // old one released first) and prepared anew. If the reading fails, the
+                // next frame reads again.
                 const auto t0 = std::chrono::steady_clock::now();
                 prepared_.reset();
-                whole_ = ReadMesh(scene.data.mesh, readOptions_);
+                whole_.reset();
+                const int previous = timeStep_;
+                timeStep_ = step;
+                try {
+                    LoadWhole();
+                } catch (...) {
+                    timeStep_ = previous;
+                    throw;
+                }
                 setupStats_.timing.load = Seconds(t0);
             }
             // `range: auto` colour maps need the fields' ranges before the set-up.
             ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); },
                      DataSize());
-            if (missing || scene.accuracy.mappingTolerance != prepared_->MappingTolerance()) {
+            if (missing || newStep ||
+                scene.accuracy.mappingTolerance != prepared_->MappingTolerance()) {
                 prepared_.reset();
                 setupStats_.accelBytes = 0;
                 setupStats_.traversal = TraversalStats{};
@@ -499,6 +568,8 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 prepared_->Reconfigure(scene, setupStats_);
         }
     }
+    // After any new step is prepared: an automatic camera fits the data's bounds.
+    FitCamera(scene.camera, DataBounds(), scene.clip.box);
     ResolveColorMaps(scene, [this](const std::string& f) { return FieldRange(f); },
                      DataSize());
     scene_ = scene;
@@ -517,6 +588,10 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
         stats.warnings.clear();
     } else {
         firstFrame_ = false;
+        if (collection_) {
+            stats.timeStep = timeStep_;
+            stats.time = collection_->steps[static_cast<std::size_t>(timeStep_)].time;
+        }
     }
     return image;
 }

@@ -12,12 +12,18 @@
 #include <mpi.h>
 
 #include "image/image.h"
+#include "io/mesh_io.h"
 #include "job/brick_plan.h"
 #include "render/render_job.h"
 #include "render/stats.h"
 #include "scene/scene.h"
 
 namespace hpray::job {
+
+/// The step of `collection` that `scene.data.time` selects (0 without it). Throws
+/// InputError naming the scene's data.time when the collection has no such step, or when
+/// there is no collection (nullptr).
+int ResolveTimeStep(const Scene& scene, const Collection* collection);
 
 /// How a job's ranks share a frame (scene.h Distribution, resolved).
 enum class Split { None, Image, Space };
@@ -27,10 +33,10 @@ enum class Split { None, Image, Space };
 /// same camera, in the same order.
 ///
 /// Construction reads the data the scene names: a mesh (every rank holds it whole and
-/// prepares it: geometry, traversal, per-field set-up) or a partition directory (the
+/// prepares it: geometry, traversal, per-field set-up), one time step of a .pvd
+/// collection (`data.time`; held and prepared as a mesh) or a partition directory (the
 /// manifest; each frame reads the bricks a rank renders and can contribute). Frames of
-/// another camera reuse all of it; a frame of a scene that differs in other keys needs a
-/// new job.
+/// another camera reuse all of it; see Render for frames that change more.
 class FrameJob {
   public:
     /// Throws InputError for bad input (the same on every rank: the scene and data are
@@ -52,7 +58,10 @@ class FrameJob {
     /// job's) and makes it the job's current scene. CameraOnly reuses all preparation;
     /// Scene keeps the data and the traversal and rebuilds the per-scene set-up (field
     /// ranges, transfer functions), loading fields not yet loaded (then the mesh is read
-    /// and prepared again). Throws InputError if `scene` names other data.
+    /// and prepared again). A scene whose `data.time` selects another step of the job's
+    /// collection is a Scene change whatever `change` says: that step is read and
+    /// prepared in place of the current one. Throws InputError if `scene` names other
+    /// data or a time step the collection does not have.
     ///
     /// `cancelRequest` makes the frame cancellable. It is part of the collective contract:
     /// every rank passes one, or none does. Rank 0's is asked while the frame renders
@@ -82,16 +91,26 @@ class FrameJob {
     const Mesh* WholeMesh() const { return whole_ ? &*whole_ : nullptr; }
     /// The partition's manifest (nullptr for a mesh).
     const partition::Partition* GetPartition() const { return part_ ? &*part_ : nullptr; }
+    /// The .pvd collection the data comes from (nullptr for other data), and the index of
+    /// the step the job holds.
+    const Collection* GetCollection() const { return collection_ ? &*collection_ : nullptr; }
+    int TimeStep() const { return timeStep_; }
+    /// The step of the job's collection that `scene.data.time` selects (ResolveTimeStep).
+    int TimeStepOf(const Scene& scene) const { return ResolveTimeStep(scene, GetCollection()); }
 
   private:
     class FrameCancel;
     Image RenderSingle(const Scene& scene, RenderStats& stats, FrameCancel* cancel);
     Image RenderDistributed(const Scene& scene, RenderStats& stats, FrameCancel* cancel);
+    /// Reads the whole mesh (readOptions_, and the job's time step of a collection).
+    void LoadWhole();
 
     Scene scene_;
     Split split_ = Split::None;
     std::optional<partition::Partition> part_;
     std::optional<Mesh> whole_;
+    std::optional<Collection> collection_;
+    int timeStep_ = 0;
     std::unique_ptr<PreparedBrick> prepared_;
     BrickPlan partitionPlan_;
     ReadOptions readOptions_;

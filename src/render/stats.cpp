@@ -76,6 +76,8 @@ std::string StatsToJson(const RenderStats& s) {
     json j;
     j["scene"] = s.scene;
     j["mesh"] = s.mesh;
+    if (s.timeStep >= 0) j["time"] = {{"step", s.timeStep}, {"value", s.time}};
+    if (s.frame >= 0) j["frame"] = s.frame;
     j["ranks"] = s.ranks;
     j["threads"] = s.threads;
     j["image"] = {s.width, s.height};

@@ -93,6 +93,11 @@ struct RenderStats {
     double accelBytesPerCell = 0;
     std::string scene;
     std::string mesh;
+    /// A step of a .pvd collection: its index and time (timeStep < 0: not a collection).
+    int timeStep = -1;
+    double time = 0.0;
+    /// The frame's index in a run of several frames (scene key `frames`), else -1.
+    int frame = -1;
     /// What probably went wrong, for the user (also logged once on rank 0).
     std::vector<std::string> warnings;
 };

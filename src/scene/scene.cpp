@@ -63,7 +63,7 @@ const SchemaNode& Schema() {
     static const SchemaNode root = [] {
         SchemaNode r{"", SchemaNode::Kind::Map, {}};
         r.children = {
-            MapOf("data", {"mesh"}),
+            MapOf("data", {"mesh", "time"}),
             MapOf("camera", {"position", "look_at", "up", "fov_y", "ortho_height",
                              "width", "height", "view", "zoom", "azimuth", "elevation"}),
             ListOf("isosurfaces", MapOf("#", {"field", "value", "color", "opacity",
@@ -81,6 +81,12 @@ const SchemaNode& Schema() {
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
             Leaf("threads"),
             Leaf("distribute"),
+            [] {
+                SchemaNode frames =
+                    MapOf("frames", {"count", "azimuth", "elevation", "zoom", "time"});
+                frames.children.push_back(ListOf("list", Leaf("#")));
+                return frames;
+            }(),
         };
         return r;
     }();
@@ -152,6 +158,15 @@ bool AllDigits(const std::string& s) {
     return !s.empty() && s.size() < 10 &&
            std::all_of(s.begin(), s.end(),
                        [](unsigned char c) { return std::isdigit(c) != 0; });
+}
+
+/// Whether a data path names a .pvd collection (by its extension, as io/mesh_io.h).
+bool IsCollection(const std::string& path) {
+    if (path.rfind("builtin:", 0) == 0) return false;
+    std::string ext = fs::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return ext == ".pvd";
 }
 
 // Refuse alias expansions ("billion laughs") and absurd files before walking them.
@@ -241,6 +256,11 @@ class SceneParser {
     void ReadClip(const YAML::Node& root, Scene& scene) const;
     void ReadOutput(const YAML::Node& root, Scene& scene) const;
     void ReadExtras(const YAML::Node& root, Scene& scene) const;
+    void ReadFrames(const YAML::Node& root, Scene& scene) const;
+    /// A key path of a frames.list item: a path of the schema, not one a frame may not
+    /// change.
+    void CheckFrameKey(const std::string& key, const YAML::Node& keyNode,
+                       const std::string& itemPath) const;
 
     std::string source_;
     std::string baseDir_;
@@ -628,6 +648,56 @@ void SceneParser::ReadData(const YAML::Node& root, Scene& scene) const {
     if (mesh.empty()) Fail("data.mesh", Get(data, "mesh"), "is empty");
     if (mesh == "builtin:") Fail("data.mesh", Get(data, "mesh"), "builtin name is empty");
     scene.data.mesh = InputPath(mesh);
+    if (!Has(data, "time")) return;
+    const YAML::Node n = Get(data, "time");
+    const std::string p = "data.time";
+    RequireValue(n, p);
+    if (!IsCollection(scene.data.mesh))
+        Fail(p, n,
+             "data.mesh (" + scene.data.mesh + ") is not a .pvd collection: only a "
+             "collection has time steps");
+    SceneData::Time t;
+    const std::string expected =
+        "expected a step index (0, 1, ...), a time ({value: 0.25}, or a number with a "
+        "fraction: 0.25) or {index: 2}, got ";
+    auto index = [&](const YAML::Node& v, const std::string& path) {
+        const long long i = Integer(v, path);
+        if (i < 0) Fail(path, v, "a step index must be >= 0, got " + std::to_string(i));
+        return i;
+    };
+    if (n.IsMap()) {
+        if (n.size() != 1 || !(Has(n, "value") || Has(n, "index")))
+            Fail(p, n, expected + Describe(n));
+        if (Has(n, "value")) {
+            t.byValue = true;
+            t.value = Number(Get(n, "value"), p + ".value");
+        } else {
+            t.index = index(Get(n, "index"), p + ".index");
+        }
+    } else if (n.IsScalar()) {
+        const std::string text = n.Scalar();
+        const bool integer =
+            !text.empty() &&
+            std::all_of(text.begin() + (text[0] == '+' || text[0] == '-' ? 1 : 0), text.end(),
+                        [](unsigned char c) { return std::isdigit(c) != 0; }) &&
+            text.find_first_of("0123456789") != std::string::npos;
+        if (integer) {
+            t.index = index(n, p);
+        } else {
+            bool number = true;
+            try {
+                (void)n.as<double>();
+            } catch (const YAML::Exception&) {
+                number = false;
+            }
+            if (!number) Fail(p, n, expected + Describe(n));
+            t.byValue = true;
+            t.value = Number(n, p);
+        }
+    } else {
+        Fail(p, n, expected + Describe(n));
+    }
+    scene.data.time = t;
 }
 
 void SceneParser::ReadCamera(const YAML::Node& root, Scene& scene) const {
@@ -954,6 +1024,146 @@ void SceneParser::ReadExtras(const YAML::Node& root, Scene& scene) const {
     }
 }
 
+void SceneParser::CheckFrameKey(const std::string& key, const YAML::Node& keyNode,
+                                const std::string& itemPath) const {
+    const std::string where = Child(itemPath, key);
+    std::vector<std::string> segments;
+    for (std::size_t start = 0;;) {
+        const std::size_t dot = key.find('.', start);
+        segments.push_back(key.substr(start, dot - start));
+        if (dot == std::string::npos) break;
+        start = dot + 1;
+    }
+    const SchemaNode* node = &Schema();
+    for (std::size_t k = 0; k < segments.size(); ++k) {
+        const std::string& segment = segments[k];
+        if (segment.empty()) Fail(where, keyNode, "empty key in '" + key + "'");
+        if (node->kind == SchemaNode::Kind::Map) {
+            const SchemaNode* child = node->Find(segment);
+            if (child == nullptr)
+                Fail(where, keyNode,
+                     "unknown key '" + Join(segments, k + 1) + "'; " +
+                         Suggestion(segment, node->KeyNames()));
+            node = child;
+        } else if (!AllDigits(segment)) {
+            Fail(where, keyNode,
+                 "'" + segment + "' is not a list index of '" + Join(segments, k) + "'");
+        } else if (node->kind == SchemaNode::Kind::List) {
+            node = &node->children[0];
+        }
+    }
+    const std::string top = segments[0];
+    if (top == "frames" || top == "output" || top == "threads" || top == "distribute" ||
+        key == "data" || key == "data.mesh")
+        Fail(where, keyNode,
+             "a frame cannot change '" + key + "' (frames render the same data.mesh with "
+             "the same outputs, numbered, and job settings); give it outside frames");
+}
+
+void SceneParser::ReadFrames(const YAML::Node& root, Scene& scene) const {
+    if (!Has(root, "frames")) return;
+    const YAML::Node fr = Get(root, "frames");
+    const std::string p = "frames";
+    const std::string what = "give count (with azimuth, elevation or zoom), time, or list";
+    if (fr.IsNull()) Fail(p, fr, "is empty: " + what);
+    SceneFrames f;
+    const bool hasList = Has(fr, "list");
+    if (hasList)
+        for (const char* key : {"count", "azimuth", "elevation", "zoom", "time"})
+            if (Has(fr, key))
+                Fail(p + "." + key, Get(fr, key),
+                     std::string("frames.list gives each frame's keys; it cannot be combined "
+                                 "with frames.") + key + " (put the keys in the list's items)");
+    if (Has(fr, "count")) {
+        const YAML::Node n = Get(fr, "count");
+        const long long c = Integer(n, p + ".count");
+        if (c < 1 || c > 1000000)
+            Fail(p + ".count", n, "must be in [1, 1000000], got " + std::to_string(c));
+        f.count = static_cast<int>(c);
+    }
+    auto pair = [&](const char* key, double lo, double hi, bool open,
+                    std::optional<std::array<double, 2>>& out) {
+        if (!Has(fr, key)) return;
+        const YAML::Node n = Get(fr, key);
+        const std::string path = p + "." + key;
+        RequireValue(n, path);
+        if (!n.IsSequence() || n.size() != 2)
+            Fail(path, n, "expected [first, last] (two numbers), got " + Describe(n));
+        std::array<double, 2> v{};
+        for (std::size_t k = 0; k < 2; ++k)
+            v[k] = std::isinf(lo) ? Number(n[k], Child(path, std::to_string(k)))
+                                  : InRange(n[k], Child(path, std::to_string(k)), lo, hi,
+                                            open, true);
+        out = v;
+        if (!scene.camera.autoFit)
+            Fail(path, n,
+                 std::string("moves the automatic camera (camera.") + key + "); it cannot be "
+                 "combined with camera.position (remove one of them)");
+    };
+    const double inf = std::numeric_limits<double>::infinity();
+    pair("azimuth", -inf, inf, true, f.azimuth);
+    pair("elevation", -90.0, 90.0, true, f.elevation);
+    pair("zoom", 0.0, inf, true, f.zoom);
+    if (Has(fr, "time")) {
+        const YAML::Node n = Get(fr, "time");
+        const std::string path = p + ".time";
+        RequireValue(n, path);
+        if (n.IsScalar() && n.Scalar() == "all") {
+            f.timeAll = true;
+        } else if (n.IsSequence() && n.size() == 2) {
+            const long long a = Integer(n[0], path + ".0"), b = Integer(n[1], path + ".1");
+            if (a < 0 || b < a)
+                Fail(path, n,
+                     "expected [first, last] step indices with 0 <= first <= last, got [" +
+                         std::to_string(a) + ", " + std::to_string(b) + "]");
+            f.timeRange = std::array<long long, 2>{a, b};
+        } else {
+            Fail(path, n, "expected all or [first, last] step indices, got " + Describe(n));
+        }
+        if (!IsCollection(scene.data.mesh))
+            Fail(path, n,
+                 "data.mesh (" + scene.data.mesh + ") is not a .pvd collection: only a "
+                 "collection has time steps");
+    }
+    if (hasList) {
+        const YAML::Node list = Get(fr, "list");
+        const std::string path = p + ".list";
+        RequireValue(list, path);
+        if (!list.IsSequence() || list.size() == 0)
+            Fail(path, list,
+                 "expected a non-empty list of frames, each a mapping of keys such as "
+                 "{camera.azimuth: 10}, got " + Describe(list));
+        for (std::size_t k = 0; k < list.size(); ++k) {
+            const YAML::Node item = list[k];
+            const std::string itemPath = Child(path, std::to_string(k));
+            if (!(item.IsMap() || item.IsNull()))
+                Fail(itemPath, item,
+                     "expected a mapping of keys such as {camera.azimuth: 10} ({} for the "
+                     "scene as it is), got " + Describe(item));
+            std::vector<std::string> overrides;
+            if (item.IsMap())
+                for (auto it = item.begin(); it != item.end(); ++it) {
+                    const YAML::Node keyNode = it->first;
+                    if (!keyNode.IsScalar())
+                        Fail(itemPath, keyNode,
+                             "keys must be key paths such as camera.azimuth, got " +
+                                 Describe(keyNode));
+                    CheckFrameKey(keyNode.Scalar(), keyNode, itemPath);
+                    YAML::Emitter out;
+                    out << YAML::Flow << it->second;
+                    overrides.push_back(keyNode.Scalar() + "=" + out.c_str());
+                }
+            f.list.push_back(std::move(overrides));
+        }
+    } else if (f.count == 0 && !f.HasTime()) {
+        if (f.azimuth || f.elevation || f.zoom)
+            Fail(p + ".count", fr,
+                 "required key is missing: the number of frames of the camera path");
+        Fail(p, fr, what);
+    }
+    scene.frames = f;
+}
+
 Scene SceneParser::Build(const YAML::Node& root) {
     std::size_t count = 0;
     CountNodes(root, count);
@@ -976,6 +1186,7 @@ Scene SceneParser::Build(const YAML::Node& root) {
     ReadClip(root, scene);
     ReadOutput(root, scene);
     ReadExtras(root, scene);
+    ReadFrames(root, scene);
     return scene;
 }
 
@@ -1050,7 +1261,7 @@ std::string MergeSceneOverrides(const std::string& yamlText, const std::string& 
     return out.c_str();
 }
 
-Scene LoadScene(const std::string& path, const std::vector<std::string>& overrides) {
+std::string ReadSceneText(const std::string& path) {
     std::error_code ec;
     const fs::file_status status = fs::status(path, ec);
     if (ec || !fs::exists(status))
@@ -1065,10 +1276,62 @@ Scene LoadScene(const std::string& path, const std::vector<std::string>& overrid
     if (!in) throw InputError(path, "", "cannot open scene file");
     std::ostringstream text;
     text << in.rdbuf();
+    return text.str();
+}
+
+Scene LoadScene(const std::string& path, const std::vector<std::string>& overrides) {
+    const std::string text = ReadSceneText(path);
     const std::string baseDir = fs::absolute(fs::path(path)).parent_path().string();
-    Scene scene = ParseScene(text.str(), path, overrides, baseDir);
+    Scene scene = ParseScene(text, path, overrides, baseDir);
     scene.sourcePath = path;
     return scene;
+}
+
+std::vector<std::vector<std::string>> FrameOverrides(const Scene& scene, int timeSteps) {
+    if (!scene.frames) return {};
+    const SceneFrames& f = *scene.frames;
+    if (!f.list.empty()) return f.list;
+    const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
+    std::vector<long long> steps;
+    if (f.HasTime()) {
+        const std::string count = std::to_string(timeSteps) + " time step" +
+                                  (timeSteps == 1 ? "" : "s");
+        if (timeSteps <= 0)
+            throw InputError(source, "frames.time",
+                             "data.mesh (" + scene.data.mesh + ") has no time steps");
+        long long first = 0, last = timeSteps - 1;
+        if (f.timeRange) {
+            first = (*f.timeRange)[0];
+            last = (*f.timeRange)[1];
+            if (last >= timeSteps)
+                throw InputError(source, "frames.time",
+                                 "step " + std::to_string(last) + " is past the last step of " +
+                                     scene.data.mesh + " (" + count + ": 0 to " +
+                                     std::to_string(timeSteps - 1) + ")");
+        }
+        for (long long k = first; k <= last; ++k) steps.push_back(k);
+        if (f.count > 0 && f.count != static_cast<long long>(steps.size()))
+            throw InputError(source, "frames.count",
+                             "is " + std::to_string(f.count) + " but frames.time selects " +
+                                 std::to_string(steps.size()) + " step" +
+                                 (steps.size() == 1 ? "" : "s") +
+                                 ": a path over time has one frame per step (omit count)");
+    }
+    const long long n = steps.empty() ? f.count : static_cast<long long>(steps.size());
+    std::vector<std::vector<std::string>> frames(static_cast<std::size_t>(n));
+    auto at = [n](const std::array<double, 2>& ends, long long k) {
+        return n == 1 ? ends[0] : ends[0] + (ends[1] - ends[0]) * double(k) / double(n - 1);
+    };
+    for (long long k = 0; k < n; ++k) {
+        std::vector<std::string>& items = frames[static_cast<std::size_t>(k)];
+        if (f.azimuth) items.push_back("camera.azimuth=" + FormatNumber(at(*f.azimuth, k)));
+        if (f.elevation)
+            items.push_back("camera.elevation=" + FormatNumber(at(*f.elevation, k)));
+        if (f.zoom) items.push_back("camera.zoom=" + FormatNumber(at(*f.zoom, k)));
+        if (!steps.empty())
+            items.push_back("data.time=" + std::to_string(steps[static_cast<std::size_t>(k)]));
+    }
+    return frames;
 }
 
 std::vector<std::string> SceneKeyPaths() {

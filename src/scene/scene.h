@@ -22,6 +22,35 @@ struct SceneData {
     /// (relative paths in the file are resolved against the scene file's folder), or
     /// "builtin:NAME[?k=v...]" unchanged.
     std::string mesh;
+
+    /// `data.time` (a .pvd collection only): which time step. An integer is the step's
+    /// index (0: the first, the default); `{value: T}` or a number written with a
+    /// fraction or exponent (0.5, 2.0, 1e-3) is the step whose time is T (equal to within
+    /// 1e-9 of the times' scale; another value is an error listing the times).
+    struct Time {
+        bool byValue = false;
+        long long index = 0;  ///< >= 0; checked against the collection when it is read
+        double value = 0.0;   ///< finite
+    };
+    std::optional<Time> time;
+};
+
+/// `frames:` several frames in one run (hpray render), each the scene with some keys
+/// changed; outputs are numbered (output.png: x.png -> x_0000.png, x_0001.png, ...).
+/// Either a path (`count`, `azimuth`, `elevation`, `zoom`, `time`) or a `list` of
+/// per-frame overrides.
+struct SceneFrames {
+    int count = 0;  ///< `count`: frames of the path; 0 = not given
+    /// `azimuth`, `elevation`, `zoom`: [first, last], interpolated linearly over the
+    /// frames, both ends included (frame k of n: first + (last - first) * k / (n - 1)).
+    std::optional<std::array<double, 2>> azimuth, elevation, zoom;
+    /// `time`: `all` or [first, last] step indices (inclusive), one frame per step.
+    bool timeAll = false;
+    std::optional<std::array<long long, 2>> timeRange;
+    /// `list`: per frame, its overrides as "key.path=value" (as --set), each applied to
+    /// the scene (not to the previous frame).
+    std::vector<std::vector<std::string>> list;
+    bool HasTime() const { return timeAll || timeRange.has_value(); }
 };
 
 /// `camera:` a pinhole (fov_y) or orthographic (ortho_height) camera; see camera.h for
@@ -199,11 +228,23 @@ struct Scene {
     SceneOutput output;
     int threads = 0;                  ///< >= 0; 0 = all hardware threads
     Distribution distribute = Distribution::Auto;
+    std::optional<SceneFrames> frames;  ///< `frames:` (hpray render only)
 
     /// Names of the fields the scene uses (isosurfaces, slices, volume), each once, in
     /// first-use order: the only fields a renderer needs to load.
     std::vector<std::string> FieldNames() const;
 };
+
+/// The text of the scene file `path` (checked: it exists, is a file, is at most 16 MB).
+/// Throws InputError naming it.
+std::string ReadSceneText(const std::string& path);
+
+/// The overrides ("key.path=value", as --set) of each frame that `scene.frames` asks
+/// for, in order: the camera keys of a path and `data.time` for its time steps, or the
+/// items of `list`. `timeSteps` is the number of steps of the scene's collection (0 when
+/// data.mesh is not a .pvd). Throws InputError (the scene file, the key under `frames`)
+/// when a time range lies outside the steps or `count` disagrees with them.
+std::vector<std::vector<std::string>> FrameOverrides(const Scene& scene, int timeSteps);
 
 /// Reads and validates the scene file `path`, after applying `overrides`
 /// ("key.path=value", as `hpray render --set`). Throws InputError naming the file, the

@@ -1050,6 +1050,172 @@ namespace {
 
 // docs/scene.md documents every key the parser accepts, and nothing else: each key path
 // of the schema appears as a table row "| `path` |", and every such row is a key path.
+// ---------------------------------------------------------------------------------------
+// Time steps and frames
+// ---------------------------------------------------------------------------------------
+
+const char* kSeries = "data: {mesh: sol.pvd}\n";
+
+TEST(SceneTimeTest, IndexValueAndDefault) {
+    Scene s = ParseScene(kSeries, "t.yaml", {}, "/base");
+    EXPECT_EQ(s.data.mesh, "/base/sol.pvd");
+    EXPECT_FALSE(s.data.time.has_value());
+    EXPECT_FALSE(s.frames.has_value());
+    auto time = [](const std::vector<std::string>& sets) {
+        const Scene scene = ParseScene(kSeries, "t.yaml", sets, "/base");
+        EXPECT_TRUE(scene.data.time.has_value());
+        return scene.data.time.value_or(SceneData::Time{});
+    };
+    SceneData::Time t = time({"data.time=2"});
+    EXPECT_FALSE(t.byValue);
+    EXPECT_EQ(t.index, 2);
+    t = time({"data.time={index: 0}"});
+    EXPECT_FALSE(t.byValue);
+    EXPECT_EQ(t.index, 0);
+    // A number with a fraction or exponent is a time; {value: 2} the time 2.
+    t = time({"data.time=0.3"});
+    EXPECT_TRUE(t.byValue);
+    EXPECT_EQ(t.value, 0.3);
+    t = time({"data.time=2.0"});
+    EXPECT_TRUE(t.byValue);
+    EXPECT_EQ(t.value, 2.0);
+    t = time({"data.time=1e-3"});
+    EXPECT_TRUE(t.byValue);
+    EXPECT_EQ(t.value, 1e-3);
+    t = time({"data.time={value: 2}"});
+    EXPECT_TRUE(t.byValue);
+    EXPECT_EQ(t.value, 2.0);
+    // The extension decides, in any case.
+    EXPECT_NO_THROW(ParseScene("data: {mesh: A.PVD, time: 1}\n", "t.yaml", {}, "/base"));
+}
+
+TEST(SceneTimeTest, BadTimesNameTheKey) {
+    std::string e = ErrorOf("data: {mesh: m.vtu, time: 1}\n");
+    EXPECT_TRUE(Contains(e, "data.time")) << e;
+    EXPECT_TRUE(Contains(e, "is not a .pvd collection")) << e;
+    e = ErrorOf("data: {mesh: builtin:ball-p2}\n", {"data.time=0"});
+    EXPECT_TRUE(Contains(e, "is not a .pvd collection")) << e;
+    e = ErrorOf(kSeries, {"data.time=-2"});
+    EXPECT_TRUE(Contains(e, "data.time")) << e;
+    EXPECT_TRUE(Contains(e, "must be >= 0")) << e;
+    for (const char* bad : {"data.time=later", "data.time=[1, 2]", "data.time={step: 1}",
+                            "data.time={value: 1, index: 1}", "data.time=.nan"}) {
+        e = ErrorOf(kSeries, {bad});
+        EXPECT_TRUE(Contains(e, "data.time")) << bad << ": " << e;
+    }
+    e = ErrorOf(kSeries, {"data.time={value: x}"});
+    EXPECT_TRUE(Contains(e, "data.time.value")) << e;
+    e = ErrorOf(kSeries, {"data.time=null", "data.time.value=1"});
+    EXPECT_NE(e, "NO ERROR");
+}
+
+TEST(SceneFramesTest, CameraPathInterpolatesBothEnds) {
+    const Scene s = ParseScene("data: {mesh: builtin:ball-p2}\n"
+                               "frames: {count: 4, azimuth: [0, 90], elevation: [-30, 30], "
+                               "zoom: [1, 2.5]}\n",
+                               "f.yaml", {}, "/base");
+    ASSERT_TRUE(s.frames.has_value());
+    EXPECT_EQ(s.frames->count, 4);
+    const auto frames = FrameOverrides(s, 0);
+    ASSERT_EQ(frames.size(), 4u);
+    EXPECT_EQ(frames[0], (std::vector<std::string>{"camera.azimuth=0", "camera.elevation=-30",
+                                                   "camera.zoom=1"}));
+    EXPECT_EQ(frames[1], (std::vector<std::string>{"camera.azimuth=30", "camera.elevation=-10",
+                                                   "camera.zoom=1.5"}));
+    EXPECT_EQ(frames[3], (std::vector<std::string>{"camera.azimuth=90", "camera.elevation=30",
+                                                   "camera.zoom=2.5"}));
+    // One frame: the first value; count alone repeats the scene.
+    Scene one = ParseScene("data: {mesh: builtin:ball-p2}\nframes: {count: 1, azimuth: [10, "
+                           "20]}\n", "f.yaml", {}, "/base");
+    EXPECT_EQ(FrameOverrides(one, 0),
+              (std::vector<std::vector<std::string>>{{"camera.azimuth=10"}}));
+    one = ParseScene("data: {mesh: builtin:ball-p2}\n", "f.yaml", {"frames.count=3"}, "/base");
+    EXPECT_EQ(FrameOverrides(one, 0), (std::vector<std::vector<std::string>>(3)));
+    // Every frame's items parse as --set items of the scene.
+    for (const auto& items : frames)
+        EXPECT_NO_THROW(ParseScene("data: {mesh: builtin:ball-p2}\n", "f.yaml", items, "/b"));
+}
+
+TEST(SceneFramesTest, TimeStepsAllOrARangeWithTheCameraAlong) {
+    Scene s = ParseScene(kSeries, "f.yaml", {"frames.time=all"}, "/base");
+    EXPECT_TRUE(s.frames->timeAll);
+    EXPECT_EQ(FrameOverrides(s, 3), (std::vector<std::vector<std::string>>{
+                                        {"data.time=0"}, {"data.time=1"}, {"data.time=2"}}));
+    s = ParseScene(kSeries, "f.yaml", {"frames={time: [1, 2], azimuth: [0, 45]}"}, "/base");
+    EXPECT_EQ(FrameOverrides(s, 3),
+              (std::vector<std::vector<std::string>>{{"camera.azimuth=0", "data.time=1"},
+                                                     {"camera.azimuth=45", "data.time=2"}}));
+    // A range past the last step, or a count that disagrees with the steps.
+    try {
+        FrameOverrides(s, 2);
+        ADD_FAILURE() << "no error";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.where(), "frames.time");
+        EXPECT_TRUE(Contains(e.what(), "step 2 is past the last step")) << e.what();
+    }
+    s = ParseScene(kSeries, "f.yaml", {"frames={time: all, count: 2}"}, "/base");
+    EXPECT_THROW(FrameOverrides(s, 3), InputError);
+    EXPECT_EQ(FrameOverrides(s, 2).size(), 2u);
+}
+
+TEST(SceneFramesTest, ListItemsBecomeOverrides) {
+    const Scene s = ParseScene(kSeries, "f.yaml",
+                               {"frames.list=[{camera.azimuth: 10, data.time: 2}, {}, "
+                                "{isosurfaces.0.color: [1, 0, 0]}, {'data.time': {value: "
+                                "0.5}}]"},
+                               "/base");
+    const auto frames = FrameOverrides(s, 0);
+    ASSERT_EQ(frames.size(), 4u);
+    EXPECT_EQ(frames[0], (std::vector<std::string>{"camera.azimuth=10", "data.time=2"}));
+    EXPECT_TRUE(frames[1].empty());
+    EXPECT_EQ(frames[2], (std::vector<std::string>{"isosurfaces.0.color=[1, 0, 0]"}));
+    EXPECT_EQ(frames[3], (std::vector<std::string>{"data.time={value: 0.5}"}));
+    const Scene f3 = ParseScene(kSeries, "f.yaml", frames[3], "/base");
+    EXPECT_TRUE(f3.data.time->byValue);
+    EXPECT_EQ(f3.data.time->value, 0.5);
+}
+
+TEST(SceneFramesTest, BadFramesNameTheKey) {
+    const std::string mesh = "data: {mesh: builtin:ball-p2}\n";
+    struct Case {
+        std::string yaml;
+        std::vector<std::string> sets;
+        std::string key, fragment;
+    };
+    const Case cases[] = {
+        {mesh + "frames:\n", {}, "frames", "give count"},
+        {mesh + "frames: {azimuth: [0, 90]}\n", {}, "frames.count", "required"},
+        {mesh + "frames: {count: 0}\n", {}, "frames.count", "[1, 1000000]"},
+        {mesh + "frames: {count: 3, azimuth: 90}\n", {}, "frames.azimuth", "[first, last]"},
+        {mesh + "frames: {count: 3, elevation: [0, 90]}\n", {}, "frames.elevation.1", "(-90, 90)"},
+        {mesh + "frames: {count: 3, zoom: [0, 2]}\n", {}, "frames.zoom.0", "(0,"},
+        {mesh + "camera: {position: [3, 3, 3]}\nframes: {count: 3, azimuth: [0, 9]}\n", {},
+         "frames.azimuth", "camera.position"},
+        {mesh + "frames: {time: all}\n", {}, "frames.time", "not a .pvd collection"},
+        {kSeries + std::string("frames: {time: [2, 1]}\n"), {}, "frames.time", "first <= last"},
+        {kSeries + std::string("frames: {time: some}\n"), {}, "frames.time", "all or"},
+        {mesh + "frames: {count: 2, list: [{}]}\n", {}, "frames.count", "frames.list"},
+        {mesh + "frames: {list: []}\n", {}, "frames.list", "non-empty"},
+        {mesh + "frames: {list: [5]}\n", {}, "frames.list.0", "mapping"},
+        {mesh + "frames: {list: [{}, {camera.fovy: 3}]}\n", {}, "frames.list.1.camera.fovy",
+         "did you mean 'fov_y'"},
+        {mesh + "frames: {list: [{output.png: a.png}]}\n", {}, "frames.list.0.output.png",
+         "cannot change"},
+        {mesh + "frames: {list: [{data.mesh: b.vtu}]}\n", {}, "frames.list.0.data.mesh",
+         "cannot change"},
+        {mesh + "frames: {list: [{frames.count: 2}]}\n", {}, "frames.list.0.frames.count",
+         "cannot change"},
+        {mesh + "frames: {list: [{isosurfaces.x.value: 2}]}\n", {},
+         "frames.list.0.isosurfaces.x.value", "not a list index"},
+        {mesh, {"frames.frobnicate=1"}, "frames.frobnicate", "valid keys here"},
+    };
+    for (const Case& c : cases) {
+        const std::string e = ErrorOf(c.yaml, c.sets);
+        EXPECT_TRUE(Contains(e, c.key)) << c.yaml << "\n -> " << e;
+        EXPECT_TRUE(Contains(e, c.fragment)) << c.yaml << "\n -> " << e;
+    }
+}
+
 TEST(SceneDocsTest, EveryKeyIsDocumented) {
     std::ifstream in(std::string(HPRAY_SOURCE_DIR) + "/docs/scene.md");
     ASSERT_TRUE(in) << "docs/scene.md is missing";
