@@ -22,7 +22,7 @@ int RunRender(const RenderArgs& args) {
     frameJob.AddWarnings(frameJob.GetScene(), image, stats);
     if (args.strict && !stats.warnings.empty())
         throw InputError(scene.sourcePath, "--strict", stats.warnings.front());
-    WriteJobOutputs(frameJob.GetScene(), image, stats);
+    WriteJobOutputs(frameJob.GetScene(), image, frameJob.DataBounds(), stats);
     char line[512];
     if (frameJob.Distribution() == job::Split::None) {
         std::snprintf(line, sizeof line,

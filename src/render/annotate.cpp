@@ -1,0 +1,315 @@
+// The outline and the legend drawn on the PNG's picture (see annotate.h).
+#include "render/annotate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "image/font.h"
+#include "render/volume.h"
+
+namespace hpray {
+
+namespace {
+
+using Vec3 = std::array<double, 3>;
+
+Vec3 Lerp(const Vec3& a, const Vec3& b, double s) {
+    return {a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]), a[2] + s * (b[2] - a[2])};
+}
+
+/// The colour transfer functions a legend shows, with the field each colours.
+struct ColoredField {
+    std::string field;
+    const std::vector<ColorControlPoint>* tf;
+    bool glow;  ///< a volume's glow per unit length rather than a colour
+};
+
+std::vector<ColoredField> ColoredFields(const Scene& scene) {
+    std::vector<ColoredField> out;
+    auto add = [&](const std::string& field, const std::vector<ColorControlPoint>& tf,
+                   bool glow) {
+        if (tf.empty()) return;
+        // The same map over the same field (two slices, say) gets one bar.
+        for (const ColoredField& c : out) {
+            if (c.field != field || c.tf->size() != tf.size() || c.glow != glow) continue;
+            bool same = true;
+            for (std::size_t k = 0; k < tf.size() && same; ++k)
+                same = (*c.tf)[k].scalar == tf[k].scalar && (*c.tf)[k].rgb == tf[k].rgb;
+            if (same) return;
+        }
+        out.push_back({field, &tf, glow});
+    };
+    for (const SceneIsosurface& iso : scene.isosurfaces)
+        if (!iso.colorField.empty()) add(iso.colorField, iso.colorTf, false);
+    for (const SceneSlice& slice : scene.slices) add(slice.field, slice.colorTf, false);
+    if (scene.volume)
+        add(scene.volume->colorField, scene.volume->colorTf,
+            scene.volume->glow == GlowModel::WilhelmsVanGelder);
+    return out;
+}
+
+PiecewiseLinearTf ColorFunction(const std::vector<ColorControlPoint>& tf) {
+    std::vector<double> scalars, values;
+    for (const ColorControlPoint& p : tf) {
+        scalars.push_back(p.scalar);
+        values.insert(values.end(), p.rgb.begin(), p.rgb.end());
+    }
+    return PiecewiseLinearTf(std::move(scalars), std::move(values), 3);
+}
+
+/// Lays out one bar with its panel's right edge at `right`; the panel's width follows
+/// from its labels.
+LegendBar LayOutBar(const ColoredField& colored, int right, int imageHeight, int barHeight,
+                    int s) {
+    LegendBar bar;
+    bar.title = colored.field;
+    bar.colorTf = *colored.tf;
+    bar.lo = bar.colorTf.front().scalar;
+    bar.hi = bar.colorTf.back().scalar;
+    if (!(bar.hi > bar.lo)) {
+        // One control point: a constant colour, shown over a range around its value.
+        const double half = 0.5 * std::max(1.0, std::fabs(bar.lo));
+        bar.lo -= half;
+        bar.hi += half;
+    }
+    if (colored.glow) bar.colorScale = std::max(1.0, ColorFunction(bar.colorTf).MaxValue());
+
+    const int pad = 4 * s, tickLength = 4 * s, labelGap = 2 * s, titleGap = 6 * s;
+    bar.width = 12 * s;
+    bar.height = barHeight;
+    const std::vector<double> values = NiceTicks(bar.lo, bar.hi);
+    const double step = values.size() > 1 ? values[1] - values[0] : bar.hi - bar.lo;
+    const double magnitude = std::max(std::fabs(bar.lo), std::fabs(bar.hi));
+    int labelsWidth = 0;
+    for (double v : values) {
+        LegendBar::Tick tick;
+        tick.value = v;
+        tick.label = TickLabel(v, step, magnitude);
+        tick.labelWidth = TextWidth(tick.label, s);
+        tick.labelHeight = font::kCapHeight * s;
+        labelsWidth = std::max(labelsWidth, tick.labelWidth);
+        bar.ticks.push_back(tick);
+    }
+    const int contentWidth =
+        std::max(TextWidth(bar.title, s), bar.width + tickLength + labelGap + labelsWidth);
+    bar.panelWidth = pad + contentWidth + pad;
+    // Labels reach half their height above the top tick and below the bottom one.
+    bar.panelHeight = pad + TextHeight(s) + titleGap + barHeight + 4 * s + pad;
+    bar.panelX = right - bar.panelWidth;
+    bar.panelY = std::max(0, (imageHeight - bar.panelHeight) / 2);
+    bar.titleX = bar.panelX + pad;
+    bar.titleY = bar.panelY + pad;
+    bar.x = bar.panelX + pad + s;  // room for the bar's frame
+    bar.y = bar.titleY + TextHeight(s) + titleGap;
+    for (LegendBar::Tick& tick : bar.ticks) {
+        const double k = std::floor((bar.hi - tick.value) / (bar.hi - bar.lo) * barHeight);
+        tick.row = bar.y + static_cast<int>(std::clamp(k, 0.0, double(barHeight - 1)));
+        tick.labelX = bar.x + bar.width + tickLength + labelGap;
+        // The label's capitals centred on the tick's row.
+        tick.labelY = tick.row - (tick.labelHeight - s) / 2;
+    }
+    return bar;
+}
+
+}  // namespace
+
+Canvas AnnotatedPicture(const Scene& scene, const Image& image, const Box& dataBounds) {
+    Canvas canvas = Canvas::Over(image, scene.background);
+    if (scene.outline.enabled) DrawOutline(canvas, image, scene, dataBounds);
+    if (scene.legend) DrawLegend(canvas, scene);
+    return canvas;
+}
+
+Rgb ContrastColor(const Rgb& background) {
+    const double luminance =
+        0.2126 * background[0] + 0.7152 * background[1] + 0.0722 * background[2];
+    return luminance > 0.18 ? Rgb{0, 0, 0} : Rgb{1, 1, 1};
+}
+
+Box OutlineBox(const Scene& scene, const Box& dataBounds) {
+    if (!scene.clip.box) return dataBounds;
+    const Box cut = dataBounds.Intersect(*scene.clip.box);
+    return cut.IsEmpty() ? *scene.clip.box : cut;
+}
+
+std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box) {
+    std::vector<ProjectedEdge> edges;
+    if (box.IsEmpty()) return edges;
+    Vec3 corner[8];
+    double farthest = 0;
+    for (int q = 0; q < 8; ++q) {
+        for (int d = 0; d < 3; ++d) corner[q][d] = (q >> d) & 1 ? box.hi[d] : box.lo[d];
+        farthest = std::max(farthest, std::fabs(camera.Depth(corner[q])));
+    }
+    if (!std::isfinite(farthest)) return edges;
+    // Perspective: points nearer than this project too far out to matter (and the eye
+    // itself to nowhere). Orthographic rays start on the image plane: depth 0.
+    const double near = camera.Orthographic() ? 0.0 : 1e-9 * farthest;
+    for (int q = 0; q < 8; ++q)
+        for (int d = 0; d < 3; ++d) {
+            if ((q >> d) & 1) continue;
+            const Vec3& a = corner[q];
+            const Vec3& b = corner[q | (1 << d)];
+            const double za = camera.Depth(a), zb = camera.Depth(b);
+            const bool inA = camera.Orthographic() ? za >= near : za > near;
+            const bool inB = camera.Orthographic() ? zb >= near : zb > near;
+            if (!inA && !inB) continue;
+            // The part at or beyond the near depth.
+            const Vec3 cut = inA && inB ? a : Lerp(a, b, (near - za) / (zb - za));
+            ProjectedEdge e{inA ? a : cut, inB ? b : cut, {}};
+            if (!camera.Orthographic() && !(camera.Depth(e.p0) > 0 && camera.Depth(e.p1) > 0))
+                continue;  // the eye on the box's edge: nothing of it to see
+            const auto i0 = camera.ImagePoint(e.p0), i1 = camera.ImagePoint(e.p1);
+            e.image = {i0[0], i0[1], i1[0], i1[1]};
+            edges.push_back(e);
+        }
+    return edges;
+}
+
+std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge, double u) {
+    if (camera.Orthographic()) return Lerp(edge.p0, edge.p1, u);
+    // Perspective: 1 / depth is linear along the image piece.
+    const double z0 = camera.Depth(edge.p0), z1 = camera.Depth(edge.p1);
+    const double s = u * z0 / ((1 - u) * z1 + u * z0);
+    return Lerp(edge.p0, edge.p1, std::clamp(s, 0.0, 1.0));
+}
+
+void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
+                 const Box& dataBounds) {
+    const Camera camera(scene.camera);
+    const std::vector<ProjectedEdge> edges =
+        ProjectBoxEdges(camera, OutlineBox(scene, dataBounds));
+    std::vector<LinePiece> pieces;
+    for (const ProjectedEdge& e : edges) pieces.push_back(e.image);
+    const bool hasDepth = image.z.size() == image.PixelCount() &&
+                          image.width == canvas.width && image.height == canvas.height;
+    auto visible = [&](std::size_t k, double u, int i, int j) {
+        const double t = camera.RayParameter(EdgePointAt(camera, edges[k], u));
+        if (t < scene.clip.near || t > scene.clip.far) return 0.0;
+        if (!hasDepth) return 1.0;
+        const std::size_t p = static_cast<std::size_t>(j) * image.width + i;
+        // A surface within two pixels' size of the edge is taken as touching it.
+        if (!(image.z[p] < t - 2 * camera.PixelSize(t))) return 1.0;
+        const double id = image.isoId[p];
+        const double opacity =
+            id >= 0 && id < static_cast<double>(scene.isosurfaces.size())
+                ? scene.isosurfaces[static_cast<std::size_t>(id)].opacity
+                : 1.0;
+        return 1.0 - opacity;
+    };
+    const std::vector<double> coverage =
+        LineCoverage(canvas.width, canvas.height, pieces, scene.outline.width, visible);
+    DrawCoverage(canvas, coverage,
+                 scene.outline.color ? *scene.outline.color : ContrastColor(scene.background));
+}
+
+std::vector<double> NiceTicks(double lo, double hi) {
+    const double span = hi - lo;
+    const double slack = 1e-9 * span;  // a range end that is a multiple up to rounding
+    auto multiples = [&](double step) {
+        std::vector<double> ticks;
+        const double first = std::ceil((lo - slack) / step);
+        const double last = std::floor((hi + slack) / step);
+        for (double k = first; k <= last; ++k) ticks.push_back(k * step);
+        return ticks;
+    };
+    // The largest step of 1, 2 or 5 times a power of ten with at least three multiples in
+    // [lo, hi]. Going down from 5 to 2 can jump from two to six or seven; then 2.5 has
+    // three to five (from any step to half of it at most doubles the count, minus one).
+    for (int e = static_cast<int>(std::ceil(std::log10(span))) + 1;; --e) {
+        const double unit = std::pow(10.0, e);
+        for (const double m : {5.0, 2.0, 1.0}) {
+            std::vector<double> ticks = multiples(m * unit);
+            if (ticks.size() < 3) continue;
+            if (ticks.size() > 5) ticks = multiples(2.5 * unit);
+            return ticks;
+        }
+    }
+}
+
+std::string TickLabel(double value, double step, double magnitude) {
+    if (std::fabs(value) < 1e-9 * step) return "0";
+    // The digits a step needs: one more than its power of ten for 2.5 (or 25, ...).
+    const int stepExponent = static_cast<int>(std::floor(std::log10(step) + 1e-9));
+    const double mantissa = step / std::pow(10.0, stepExponent);
+    const int extra = std::fabs(mantissa - std::round(mantissa)) > 1e-6 ? 1 : 0;
+    char text[64];
+    if (magnitude >= 1e5 || magnitude < 1e-3) {
+        // The value's own power of ten, digits down to the step's, then as short as it
+        // goes: "7.50e+05" -> "7.5e5", "1.00e+06" -> "1e6", "2e-05" -> "2e-5".
+        const int exponent = static_cast<int>(std::floor(std::log10(std::fabs(value)) + 1e-9));
+        std::snprintf(text, sizeof text, "%.*e",
+                      std::max(0, exponent - stepExponent + extra), value);
+        const std::string s = text;
+        const std::size_t e = s.find('e');
+        std::string mantissa = s.substr(0, e);
+        if (mantissa.find('.') != std::string::npos) {
+            mantissa.erase(mantissa.find_last_not_of('0') + 1);
+            if (mantissa.back() == '.') mantissa.pop_back();
+        }
+        std::string digits = s.substr(e + 2);
+        digits.erase(0, std::min(digits.find_first_not_of('0'), digits.size() - 1));
+        return mantissa + "e" + (s[e + 1] == '-' ? "-" : "") + digits;
+    }
+    std::snprintf(text, sizeof text, "%.*f", std::max(0, extra - stepExponent), value);
+    return text;
+}
+
+LegendLayout LayOutLegend(const Scene& scene) {
+    LegendLayout layout;
+    const int W = scene.camera.width, H = scene.camera.height;
+    const int s = std::max(1, static_cast<int>(std::lround(std::min(W, H) / 512.0)));
+    layout.scale = s;
+    const std::vector<ColoredField> colored = ColoredFields(scene);
+    // Half the image's height, less where the panel would not fit between the margins.
+    const int margin = 8 * s;
+    const int chrome = 2 * 4 * s + TextHeight(s) + 6 * s + 4 * s;
+    const int barHeight =
+        std::min(static_cast<int>(std::lround(0.5 * H)), H - 2 * margin - chrome);
+    int right = W - margin;
+    for (std::size_t k = 0; k < colored.size(); ++k) {
+        if (barHeight < 24 * s) {
+            layout.omitted = static_cast<int>(colored.size() - k);
+            break;
+        }
+        LegendBar bar = LayOutBar(colored[k], right, H, barHeight, s);
+        if (bar.panelX < margin) {
+            layout.omitted = static_cast<int>(colored.size() - k);
+            break;
+        }
+        right = bar.panelX - 4 * s;
+        layout.bars.push_back(std::move(bar));
+    }
+    return layout;
+}
+
+Rgb LegendColor(const LegendBar& bar, double value) {
+    Rgb rgb;
+    ColorFunction(bar.colorTf).Eval(value, rgb.data());
+    for (double& c : rgb) c = std::clamp(c / bar.colorScale, 0.0, 1.0);
+    return rgb;
+}
+
+void DrawLegend(Canvas& canvas, const Scene& scene) {
+    const LegendLayout layout = LayOutLegend(scene);
+    const int s = layout.scale;
+    const Rgb ink = ContrastColor(scene.background);
+    for (const LegendBar& bar : layout.bars) {
+        canvas.FillRect(bar.panelX, bar.panelY, bar.panelWidth, bar.panelHeight,
+                        scene.background, 0.85);
+        DrawText(canvas, bar.titleX, bar.titleY, bar.title, s, ink);
+        for (int k = 0; k < bar.height; ++k) {
+            const double value = bar.hi - (k + 0.5) / bar.height * (bar.hi - bar.lo);
+            canvas.FillRect(bar.x, bar.y + k, bar.width, 1, LegendColor(bar, value));
+        }
+        canvas.FrameRect(bar.x, bar.y, bar.width, bar.height, 1, ink);
+        for (const LegendBar::Tick& tick : bar.ticks) {
+            canvas.FillRect(bar.x + bar.width, tick.row, 4 * s, std::max(1, s / 2), ink);
+            DrawText(canvas, tick.labelX, tick.labelY, tick.label, s, ink);
+        }
+    }
+}
+
+}  // namespace hpray
