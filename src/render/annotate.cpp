@@ -24,12 +24,27 @@ struct ColoredField {
     std::string field;
     const std::vector<ColorControlPoint>* tf;
     bool glow;  ///< a volume's glow per unit length rather than a colour
+    std::string kind;  ///< isosurface, slice or volume
+    std::size_t index;  ///< in its list
 };
+
+/// The bar's title: the field's name, and where another bar shows the same field, what
+/// colours it (with its index where that is not enough: "u (slice 2)").
+std::string Title(const std::vector<ColoredField>& all, std::size_t k) {
+    int sameField = 0, sameKind = 0;
+    for (const ColoredField& c : all) {
+        sameField += c.field == all[k].field;
+        sameKind += c.field == all[k].field && c.kind == all[k].kind;
+    }
+    if (sameField == 1) return all[k].field;
+    return all[k].field + " (" + all[k].kind +
+           (sameKind > 1 ? " " + std::to_string(all[k].index) : "") + ")";
+}
 
 std::vector<ColoredField> ColoredFields(const Scene& scene) {
     std::vector<ColoredField> out;
     auto add = [&](const std::string& field, const std::vector<ColorControlPoint>& tf,
-                   bool glow) {
+                   bool glow, const char* kind, std::size_t index) {
         if (tf.empty()) return;
         // The same map over the same field (two slices, say) gets one bar.
         for (const ColoredField& c : out) {
@@ -39,14 +54,17 @@ std::vector<ColoredField> ColoredFields(const Scene& scene) {
                 same = (*c.tf)[k].scalar == tf[k].scalar && (*c.tf)[k].rgb == tf[k].rgb;
             if (same) return;
         }
-        out.push_back({field, &tf, glow});
+        out.push_back({field, &tf, glow, kind, index});
     };
-    for (const SceneIsosurface& iso : scene.isosurfaces)
-        if (!iso.colorField.empty()) add(iso.colorField, iso.colorTf, false);
-    for (const SceneSlice& slice : scene.slices) add(slice.field, slice.colorTf, false);
+    for (std::size_t k = 0; k < scene.isosurfaces.size(); ++k) {
+        const SceneIsosurface& iso = scene.isosurfaces[k];
+        if (!iso.colorField.empty()) add(iso.colorField, iso.colorTf, false, "isosurface", k);
+    }
+    for (std::size_t k = 0; k < scene.slices.size(); ++k)
+        add(scene.slices[k].field, scene.slices[k].colorTf, false, "slice", k);
     if (scene.volume)
         add(scene.volume->colorField, scene.volume->colorTf,
-            scene.volume->glow == GlowModel::WilhelmsVanGelder);
+            scene.volume->glow == GlowModel::WilhelmsVanGelder, "volume", 0);
     return out;
 }
 
@@ -61,10 +79,10 @@ PiecewiseLinearTf ColorFunction(const std::vector<ColorControlPoint>& tf) {
 
 /// Lays out one bar with its panel's right edge at `right`; the panel's width follows
 /// from its labels.
-LegendBar LayOutBar(const ColoredField& colored, int right, int imageHeight, int barHeight,
-                    int s) {
+LegendBar LayOutBar(const ColoredField& colored, const std::string& title, int right,
+                    int imageHeight, int barHeight, int s) {
     LegendBar bar;
-    bar.title = colored.field;
+    bar.title = title;
     bar.colorTf = *colored.tf;
     bar.lo = bar.colorTf.front().scalar;
     bar.hi = bar.colorTf.back().scalar;
@@ -274,7 +292,7 @@ LegendLayout LayOutLegend(const Scene& scene) {
             layout.omitted = static_cast<int>(colored.size() - k);
             break;
         }
-        LegendBar bar = LayOutBar(colored[k], right, H, barHeight, s);
+        LegendBar bar = LayOutBar(colored[k], Title(colored, k), right, H, barHeight, s);
         if (bar.panelX < margin) {
             layout.omitted = static_cast<int>(colored.size() - k);
             break;

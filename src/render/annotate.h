@@ -68,7 +68,9 @@ std::string TickLabel(double value, double step, double magnitude);
 
 /// A colour bar of the legend, in pixels of the image.
 struct LegendBar {
-    std::string title;  ///< the field coloured
+    /// The field coloured; where two bars show one field, with what it colours: "u
+    /// (slice)", "u (volume)", or "u (slice 2)" among slices.
+    std::string title;
     std::vector<ColorControlPoint> colorTf;
     /// The colours shown are colorTf's divided by this: 1, or for a volume's glow
     /// (wilhelms-van-gelder) above 1 its largest component, so the bar shows its hues.

@@ -456,9 +456,9 @@ TEST(LegendTest, OneBarPerColouredFieldAndOnlyWhatFits) {
         "isosurfaces: [{value: 0.5, color_field: v, color_tf: {map: inferno, range: [-1, 1]}}]\n";
     const LegendLayout layout = LayOutLegend(ParseScene(base, "t.yaml", {}, ""));
     ASSERT_EQ(layout.bars.size(), 3u);
-    EXPECT_EQ(layout.bars[0].title, "v");  // the isosurface's first
+    EXPECT_EQ(layout.bars[0].title, "v (isosurface)");  // the isosurface's first
     EXPECT_EQ(layout.bars[1].title, "u");
-    EXPECT_EQ(layout.bars[2].title, "v");
+    EXPECT_EQ(layout.bars[2].title, "v (slice)");
     for (std::size_t k = 1; k < layout.bars.size(); ++k)
         EXPECT_LT(layout.bars[k].panelX + layout.bars[k].panelWidth, layout.bars[k - 1].panelX);
     const LegendLayout small = LayOutLegend(ParseScene(
