@@ -91,9 +91,9 @@ void Canvas::FrameRect(int x, int y, int w, int h, int thickness, const Rgb& col
     FillRect(x + w, y, t, h, color);              // right
 }
 
-std::vector<double> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
+std::vector<float> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
                                  double lineWidth, const LineVisibility& visible) {
-    std::vector<double> coverage(static_cast<std::size_t>(width) * height, 0.0);
+    std::vector<float> coverage(static_cast<std::size_t>(width) * height, 0.0f);
     // A pixel centre farther than `reach` from a piece gets none of it.
     const double reach = 0.5 * lineWidth + 0.5;
     for (std::size_t k = 0; k < pieces.size(); ++k) {
@@ -127,17 +127,17 @@ std::vector<double> LineCoverage(int width, int height, const std::vector<LinePi
                 double u;
                 const double d = DistanceTo(p, i + 0.5, j + 0.5, u);
                 const double c = std::clamp(reach - d, 0.0, 1.0);
-                double& out = coverage[static_cast<std::size_t>(j) * width + i];
+                float& out = coverage[static_cast<std::size_t>(j) * width + i];
                 if (c <= out) continue;
-                out = std::max(out, c * (visible ? std::clamp(visible(k, u, i, j), 0.0, 1.0)
-                                                 : 1.0));
+                const double seen = visible ? std::clamp(visible(k, u, i, j), 0.0, 1.0) : 1.0;
+                out = std::max(out, static_cast<float>(c * seen));
             }
         }
     }
     return coverage;
 }
 
-void DrawCoverage(Canvas& canvas, const std::vector<double>& coverage, const Rgb& color) {
+void DrawCoverage(Canvas& canvas, const std::vector<float>& coverage, const Rgb& color) {
     HPRAY_CHECK_EQ(coverage.size(), static_cast<std::size_t>(canvas.width) * canvas.height);
     for (int j = 0; j < canvas.height; ++j)
         for (int i = 0; i < canvas.width; ++i)

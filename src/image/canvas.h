@@ -49,13 +49,14 @@ using LineVisibility = std::function<double(std::size_t piece, double u, int i, 
 /// for a pixel whose centre lies at distance d from a piece, min(1, max(0, width / 2 +
 /// 1/2 - d)) (a one-pixel ramp centred on the line's edge, the box filter's coverage of a
 /// straight edge), times visible(piece, u, i, j); where pieces overlap the largest
-/// coverage counts, so corners and crossings are not drawn twice. W * H values, row-major.
+/// coverage counts, so corners and crossings are not drawn twice. W * H values, row-major
+/// (float: the coverage of an 8-bit picture needs no more).
 /// Pieces may reach far outside the canvas (only the part on it costs time).
-std::vector<double> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
+std::vector<float> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
                                  double lineWidth, const LineVisibility& visible);
 
 /// Blend `color` into every pixel with its coverage as weight.
-void DrawCoverage(Canvas& canvas, const std::vector<double>& coverage, const Rgb& color);
+void DrawCoverage(Canvas& canvas, const std::vector<float>& coverage, const Rgb& color);
 
 /// Width and height in pixels of `text` drawn at integer `scale` (image/font.h: 6 x 10
 /// per character, the blank column after the last one not counted).

@@ -217,7 +217,7 @@ void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
                 : 1.0;
         return 1.0 - opacity;
     };
-    const std::vector<double> coverage =
+    const std::vector<float> coverage =
         LineCoverage(canvas.width, canvas.height, pieces, scene.outline.width, visible);
     DrawCoverage(canvas, coverage,
                  scene.outline.color ? *scene.outline.color : ContrastColor(scene.background));

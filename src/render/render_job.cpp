@@ -274,7 +274,14 @@ void WriteJobOutputs(const Scene& scene, const Image& image, const Box& dataBoun
     tbb::task_group writers;
     if (!out.exr.empty()) writers.run([&] { WriteExr(out.exr, image); });
     if (!out.png.empty())
-        writers.run([&] { WritePng(out.png, AnnotatedPicture(scene, image, dataBounds)); });
+        writers.run([&] {
+            // The annotated picture holds the image once more in linear RGB: only when
+            // there is something to draw on it.
+            if (scene.outline.enabled || scene.legend)
+                WritePng(out.png, AnnotatedPicture(scene, image, dataBounds));
+            else
+                WritePng(out.png, image, scene.background);
+        });
     if (!out.hits.empty())
         writers.run([&] { WriteNpy(out.hits, HitsArray(image), {H, W, 5}); });
     if (!out.rgba.empty())
