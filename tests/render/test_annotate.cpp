@@ -134,6 +134,11 @@ std::optional<double> SphereT(const V3& o, const V3& d, double R) {
 }
 
 double Srgb(double linear) { return LinearToSrgb(linear) * 255; }
+/// The linear value of an 8-bit sRGB sample.
+double Linear(std::uint8_t v) {
+    const double c = v / 255.0;
+    return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
 
 struct Png {
     int width = 0, height = 0;
@@ -156,14 +161,17 @@ Png RenderPng(const std::string& yaml, const std::string& name) {
 }
 
 /// The outline (red, 1.5 px) against the projected edges of [-1, 1]^3, with and without
-/// an opaque sphere |x| = R inside (R = 0: none). Pixels within 0.5 px of a seen edge
-/// have coverage >= 0.75 of it; pixels beyond 2 px of every edge, and pixels whose every
-/// edge within reach lies well behind the sphere, are as without the outline. Returns
-/// how many hidden pixels were checked.
-int CheckOutline(const std::string& camera, double R, const std::string& name) {
+/// a sphere |x| = R inside (R = 0: none) of the given opacity. Pixels within 0.5 px of a
+/// seen edge have coverage >= 0.75 of it; pixels beyond 2 px of every edge are as without
+/// the outline, and so are pixels whose every edge within reach lies well behind an
+/// opaque sphere; behind a translucent one the edge shows by 1 - opacity. Returns how
+/// many hidden pixels were checked.
+int CheckOutline(const std::string& camera, double R, const std::string& name,
+                 double opacity = 1) {
     const std::string base = "data: {mesh: 'builtin:ball-p2'}\ncamera: " + camera + "\n" +
                              (R > 0 ? "isosurfaces: [{field: u, value: " +
-                                          std::to_string(R * R) + "}]\n"
+                                          std::to_string(R * R) +
+                                          ", opacity: " + std::to_string(opacity) + "}]\n"
                                     : "");
     const Png plain = RenderPng(base, name + "_plain");
     const Png lined = RenderPng(base + "outline: {color: [1, 0, 0], width: 1.5}\n", name);
@@ -194,7 +202,7 @@ int CheckOutline(const std::string& camera, double R, const std::string& name) {
             }
             const std::uint8_t* p = lined.At(i, j);
             const std::uint8_t* q = plain.At(i, j);
-            if (nearest > 2.0 || (allBehind && nearest <= 1.3)) {
+            if (nearest > 2.0 || (allBehind && nearest <= 1.3 && opacity == 1)) {
                 const bool same = p[0] == q[0] && p[1] == q[1] && p[2] == q[2];
                 EXPECT_TRUE(same) << name << ": pixel (" << i << ", " << j << ") at "
                                   << nearest << " px from the outline changed";
@@ -202,6 +210,16 @@ int CheckOutline(const std::string& camera, double R, const std::string& name) {
                     ++far;
                 else
                     ++hidden;
+            } else if (allBehind && nearest <= 1.3) {
+                // Red with weight c (1 - opacity), c <= 1, and >= 0.75 within 0.5 px.
+                const double g = Linear(p[1]), plainG = Linear(q[1]);
+                const double tol = 0.01;
+                EXPECT_GE(g, opacity * plainG - tol) << name << " (" << i << ", " << j << ")";
+                if (nearest <= 0.5) {
+                    EXPECT_LE(g, (1 - 0.75 * (1 - opacity)) * plainG + tol)
+                        << name << " (" << i << ", " << j << ")";
+                    ++hidden;
+                }
             } else if (anyInFront) {
                 // Red over the plain pixel with weight >= 0.75: G and B at most a quarter
                 // of theirs (linear), R at least as high.
@@ -247,6 +265,15 @@ TEST(OutlineTest, EdgesBehindAnOpaqueIsosurfaceAreHidden) {
         "height: 160}",
         0.9, "sphere");
     EXPECT_GT(hidden, 20);
+}
+
+// Behind a translucent isosurface the far edges show through it, by 1 - its opacity.
+TEST(OutlineTest, EdgesBehindATranslucentIsosurfaceShowThroughIt) {
+    const int hidden = CheckOutline(
+        "{position: [2.2, 1.3, 2.8], look_at: [0, 0, 0], fov_y: 45, width: 200, "
+        "height: 160}",
+        0.9, "translucent", 0.4);
+    EXPECT_GT(hidden, 10);
 }
 
 TEST(OutlineTest, ImagePointInvertsTheRays) {
