@@ -152,6 +152,28 @@ Box OutlineBox(const Scene& scene, const Box& dataBounds) {
     return cut.IsEmpty() ? *scene.clip.box : cut;
 }
 
+namespace {
+
+/// Whether the edge from corner q along axis `axis` lies behind everything the image
+/// shows along the rays that pass it: both faces that meet there face away from the eye
+/// (the rays leave the box there). A face's direction to the eye is the same over the
+/// whole face: its outward normal n dotted with the ray direction, forward for an
+/// orthographic camera and (point - eye) for a perspective one, whose n-component is the
+/// face's coordinate less the eye's.
+bool BehindTheData(const Camera& camera, const Box& box, int q, int axis) {
+    for (int a = 0; a < 3; ++a) {
+        if (a == axis) continue;
+        const bool high = (q >> a) & 1;
+        const double along = camera.Orthographic()
+                                 ? camera.Forward()[a]
+                                 : (high ? box.hi[a] : box.lo[a]) - camera.Position()[a];
+        if (!((high ? along : -along) > 0)) return false;
+    }
+    return true;
+}
+
+}  // namespace
+
 std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box) {
     std::vector<ProjectedEdge> edges;
     if (box.IsEmpty()) return edges;
@@ -176,7 +198,7 @@ std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box)
             if (!inA && !inB) continue;
             // The part at or beyond the near depth.
             const Vec3 cut = inA && inB ? a : Lerp(a, b, (near - za) / (zb - za));
-            ProjectedEdge e{inA ? a : cut, inB ? b : cut, {}};
+            ProjectedEdge e{inA ? a : cut, inB ? b : cut, {}, BehindTheData(camera, box, q, d)};
             if (!camera.Orthographic() && !(camera.Depth(e.p0) > 0 && camera.Depth(e.p1) > 0))
                 continue;  // the eye on the box's edge: nothing of it to see
             const auto i0 = camera.ImagePoint(e.p0), i1 = camera.ImagePoint(e.p1);
@@ -199,28 +221,41 @@ void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
     const Camera camera(scene.camera);
     const std::vector<ProjectedEdge> edges =
         ProjectBoxEdges(camera, OutlineBox(scene, dataBounds));
-    std::vector<LinePiece> pieces;
-    for (const ProjectedEdge& e : edges) pieces.push_back(e.image);
-    const bool hasDepth = image.z.size() == image.PixelCount() &&
-                          image.width == canvas.width && image.height == canvas.height;
-    auto visible = [&](std::size_t k, double u, int i, int j) {
-        const double t = camera.RayParameter(EdgePointAt(camera, edges[k], u));
-        if (t < scene.clip.near || t > scene.clip.far) return 0.0;
-        if (!hasDepth) return 1.0;
-        const std::size_t p = static_cast<std::size_t>(j) * image.width + i;
-        // A surface within two pixels' size of the edge is taken as touching it.
-        if (!(image.z[p] < t - 2 * camera.PixelSize(t))) return 1.0;
-        const double id = image.isoId[p];
-        const double opacity =
-            id >= 0 && id < static_cast<double>(scene.isosurfaces.size())
-                ? scene.isosurfaces[static_cast<std::size_t>(id)].opacity
-                : 1.0;
-        return 1.0 - opacity;
-    };
-    const std::vector<float> coverage =
-        LineCoverage(canvas.width, canvas.height, pieces, scene.outline.width, visible);
-    DrawCoverage(canvas, coverage,
-                 scene.outline.color ? *scene.outline.color : ContrastColor(scene.background));
+    // The edges behind the data and the others, drawn apart (LineCoverage's index k is
+    // the k-th edge of its group).
+    std::vector<std::size_t> group[2];
+    std::vector<LinePiece> pieces[2];
+    for (std::size_t k = 0; k < edges.size(); ++k) {
+        group[edges[k].behind].push_back(k);
+        pieces[edges[k].behind].push_back(edges[k].image);
+    }
+    const Rgb color =
+        scene.outline.color ? *scene.outline.color : ContrastColor(scene.background);
+    std::vector<float> coverage[2];
+    for (int behind = 0; behind < 2; ++behind) {
+        // Where the box lies outside [clip.near, clip.far], neither are its edges drawn.
+        auto inClip = [&](std::size_t k, double u, int, int) {
+            const double t =
+                camera.RayParameter(EdgePointAt(camera, edges[group[behind][k]], u));
+            return t >= scene.clip.near && t <= scene.clip.far ? 1.0 : 0.0;
+        };
+        coverage[behind] = LineCoverage(canvas.width, canvas.height, pieces[behind],
+                                        scene.outline.width, inClip);
+    }
+    // Behind the data the line replaces the background with its coverage, seen through
+    // all that the pixel shows: c + (1 - a) background becomes c + (1 - a) (background +
+    // coverage (line - background)).
+    const bool hasAlpha = image.a.size() == static_cast<std::size_t>(canvas.width) *
+                                               static_cast<std::size_t>(canvas.height);
+    for (std::size_t p = 0; p < coverage[1].size(); ++p) {
+        if (!(coverage[1][p] > 0)) continue;
+        const double seen = coverage[1][p] * (hasAlpha ? std::clamp(1 - image.a[p], 0.0, 1.0)
+                                                       : 1.0);
+        for (int c = 0; c < 3; ++c)
+            canvas.rgb[3 * p + c] += seen * (color[c] - scene.background[c]);
+    }
+    // In front of the data (or beside it, on the silhouette) over everything.
+    DrawCoverage(canvas, coverage[0], color);
 }
 
 std::vector<double> NiceTicks(double lo, double hi) {

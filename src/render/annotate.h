@@ -37,6 +37,10 @@ Box OutlineBox(const Scene& scene, const Box& dataBounds);
 struct ProjectedEdge {
     std::array<double, 3> p0{}, p1{};  ///< world ends of the part
     LinePiece image;                   ///< their image points (Camera::ImagePoint)
+    /// Both faces that meet at the edge face away from the eye: the rays that pass it
+    /// leave the box there, so all of the box's content they meet lies in front of it.
+    /// Otherwise they enter the box there (all of it lies behind) or only graze it.
+    bool behind = false;
 };
 /// The parts of the twelve edges of `box` in front of `camera` (edges wholly behind it
 /// are left out).
@@ -46,11 +50,12 @@ std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box)
 std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge, double u);
 
 /// Draws the outline of OutlineBox into `canvas`: lines scene.outline.width pixels wide
-/// (LineCoverage) in scene.outline.color. Where the image has an isosurface hit nearer
-/// than the edge (Z channel; by more than two pixels' size, so that a surface touching
-/// the edge does not hide it) the edge shows only through that surface, by 1 - its
-/// opacity; parts outside [clip.near, clip.far] are not drawn. Slices and volumes leave
-/// no depth in the image: the outline is drawn over them.
+/// (LineCoverage) in scene.outline.color. The data lies inside the box, so an edge lies
+/// in front of all that a pixel near it shows, or behind all of it (ProjectedEdge::
+/// behind): the first are drawn over the picture, the second under it, in place of the
+/// background and seen through 1 - alpha of the image, which hides them behind opaque
+/// surfaces and dims them behind translucent ones, volumes and slices alike. Parts
+/// outside [clip.near, clip.far] are not drawn.
 void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
                  const Box& dataBounds);
 

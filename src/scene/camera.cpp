@@ -96,11 +96,6 @@ double Camera::RayParameter(const std::array<double, 3>& p) const {
     return Length({p[0] - position_[0], p[1] - position_[1], p[2] - position_[2]});
 }
 
-double Camera::PixelSize(double t) const {
-    const double viewHeight = 2.0 * halfExtent_ * (orthographic_ ? 1.0 : t);
-    return viewHeight / height_;
-}
-
 ViewOrigin ViewOriginOf(const SceneCamera& camera) {
     if (!camera.orthographic) return ViewOrigin::Perspective(camera.position);
     // Only the sign of each component matters, so no normalisation is needed.

@@ -45,8 +45,6 @@ class Camera {
     /// The ray parameter t at which the ray of ImagePoint(p) reaches `p`: |p - position|
     /// (perspective) or Depth(p) (orthographic); comparable with the image's Z channel.
     double RayParameter(const std::array<double, 3>& p) const;
-    /// World size of a pixel at ray parameter t (its height across the view).
-    double PixelSize(double t) const;
 
     int Width() const { return width_; }
     int Height() const { return height_; }
