@@ -40,8 +40,9 @@ bool ClipToRect(const LinePiece& p, double xlo, double ylo, double xhi, double y
 double DistanceTo(const LinePiece& p, double px, double py, double& u) {
     const double dx = p.x1 - p.x0, dy = p.y1 - p.y0;
     const double length2 = dx * dx + dy * dy;
-    u = length2 > 0 ? std::clamp(((px - p.x0) * dx + (py - p.y0) * dy) / length2, 0.0, 1.0)
-                    : 0.0;
+    u = length2 > 0
+            ? std::clamp(((px - p.x0) * dx + (py - p.y0) * dy) / length2, 0.0, 1.0)
+            : 0.0;
     return std::hypot(p.x0 + u * dx - px, p.y0 + u * dy - py);
 }
 
@@ -91,16 +92,17 @@ void Canvas::FrameRect(int x, int y, int w, int h, int thickness, const Rgb& col
     FillRect(x + w, y, t, h, color);              // right
 }
 
-std::vector<float> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
-                                 double lineWidth, const LineVisibility& visible) {
+std::vector<float> LineCoverage(int width, int height,
+                                const std::vector<LinePiece>& pieces, double lineWidth,
+                                const LineVisibility& visible) {
     std::vector<float> coverage(static_cast<std::size_t>(width) * height, 0.0f);
     // A pixel centre farther than `reach` from a piece gets none of it.
     const double reach = 0.5 * lineWidth + 0.5;
     for (std::size_t k = 0; k < pieces.size(); ++k) {
         const LinePiece& p = pieces[k];
         double u0, u1;
-        if (!ClipToRect(p, -reach - 1, -reach - 1, width + reach + 1, height + reach + 1, u0,
-                        u1))
+        if (!ClipToRect(p, -reach - 1, -reach - 1, width + reach + 1, height + reach + 1,
+                        u0, u1))
             continue;
         // Walk the major axis pixel by pixel over the part on the canvas; across it, the
         // pixels within reach of the line (measured along the minor axis: reach / cos).
@@ -111,10 +113,12 @@ std::vector<float> LineCoverage(int width, int height, const std::vector<LinePie
         const double slope = dMajor != 0 ? dMinor / dMajor : 0.0;
         const double across = reach * std::sqrt(1 + slope * slope) + 1;
         const double m0 = major0 + u0 * dMajor, m1 = major0 + u1 * dMajor;
-        const int majorSize = alongX ? width : height, minorSize = alongX ? height : width;
-        const int a0 = std::max(0, static_cast<int>(std::floor(std::min(m0, m1) - reach)));
-        const int a1 =
-            std::min(majorSize - 1, static_cast<int>(std::floor(std::max(m0, m1) + reach)));
+        const int majorSize = alongX ? width : height,
+                  minorSize = alongX ? height : width;
+        const int a0 =
+            std::max(0, static_cast<int>(std::floor(std::min(m0, m1) - reach)));
+        const int a1 = std::min(majorSize - 1,
+                                static_cast<int>(std::floor(std::max(m0, m1) + reach)));
         for (int a = a0; a <= a1; ++a) {
             const double uc =
                 dMajor != 0 ? std::clamp((a + 0.5 - major0) / dMajor, u0, u1) : u0;
@@ -129,7 +133,8 @@ std::vector<float> LineCoverage(int width, int height, const std::vector<LinePie
                 const double c = std::clamp(reach - d, 0.0, 1.0);
                 float& out = coverage[static_cast<std::size_t>(j) * width + i];
                 if (c <= out) continue;
-                const double seen = visible ? std::clamp(visible(k, u, i, j), 0.0, 1.0) : 1.0;
+                const double seen =
+                    visible ? std::clamp(visible(k, u, i, j), 0.0, 1.0) : 1.0;
                 out = std::max(out, static_cast<float>(c * seen));
             }
         }
@@ -138,10 +143,12 @@ std::vector<float> LineCoverage(int width, int height, const std::vector<LinePie
 }
 
 void DrawCoverage(Canvas& canvas, const std::vector<float>& coverage, const Rgb& color) {
-    HPRAY_CHECK_EQ(coverage.size(), static_cast<std::size_t>(canvas.width) * canvas.height);
+    HPRAY_CHECK_EQ(coverage.size(),
+                   static_cast<std::size_t>(canvas.width) * canvas.height);
     for (int j = 0; j < canvas.height; ++j)
         for (int i = 0; i < canvas.width; ++i)
-            canvas.Blend(i, j, color, coverage[static_cast<std::size_t>(j) * canvas.width + i]);
+            canvas.Blend(i, j, color,
+                         coverage[static_cast<std::size_t>(j) * canvas.width + i]);
 }
 
 int TextWidth(const std::string& text, int scale) {

@@ -15,8 +15,8 @@ namespace hpray {
 using Rgb = std::array<double, 3>;
 
 /// An opaque W x H picture in linear RGB, row-major with the top row first; pixel (i, j)
-/// covers the square [i, i + 1] x [j, j + 1] of continuous image coordinates (the camera's,
-/// scene/camera.h: RayAt), its centre at (i + 1/2, j + 1/2).
+/// covers the square [i, i + 1] x [j, j + 1] of continuous image coordinates (the
+/// camera's, scene/camera.h: RayAt), its centre at (i + 1/2, j + 1/2).
 struct Canvas {
     int width = 0;
     int height = 0;
@@ -31,7 +31,7 @@ struct Canvas {
     void Blend(int i, int j, const Rgb& color, double alpha);
     /// Blend over the pixels [x, x + w) x [y, y + h), clipped to the canvas.
     void FillRect(int x, int y, int w, int h, const Rgb& color, double alpha = 1.0);
-    /// A frame `thickness` pixels wide just outside the rectangle [x, x + w) x [y, y + h).
+    /// A frame `thickness` pixels wide around [x, x + w) x [y, y + h), just outside.
     void FrameRect(int x, int y, int w, int h, int thickness, const Rgb& color);
 };
 
@@ -52,8 +52,9 @@ using LineVisibility = std::function<double(std::size_t piece, double u, int i, 
 /// coverage counts, so corners and crossings are not drawn twice. W * H values, row-major
 /// (float: the coverage of an 8-bit picture needs no more).
 /// Pieces may reach far outside the canvas (only the part on it costs time).
-std::vector<float> LineCoverage(int width, int height, const std::vector<LinePiece>& pieces,
-                                 double lineWidth, const LineVisibility& visible);
+std::vector<float> LineCoverage(int width, int height,
+                                const std::vector<LinePiece>& pieces, double lineWidth,
+                                const LineVisibility& visible);
 
 /// Blend `color` into every pixel with its coverage as weight.
 void DrawCoverage(Canvas& canvas, const std::vector<float>& coverage, const Rgb& color);

@@ -15,8 +15,8 @@ constexpr int kLineHeight = 10;
 /// Rows 0 .. kCapHeight - 1 hold capitals and digits.
 constexpr int kCapHeight = 7;
 
-/// The rows of the glyph of `c`, top first; bit 4 of a row is its leftmost pixel. Printable
-/// ASCII (32-126) has a glyph of its own, any other byte that of '?'.
+/// The rows of the glyph of `c`, top first; bit 4 of a row is its leftmost pixel.
+/// Printable ASCII (32-126) has a glyph of its own, any other byte that of '?'.
 const std::uint8_t* Glyph(char c);
 
 }  // namespace hpray::font

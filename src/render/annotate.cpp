@@ -23,8 +23,8 @@ Vec3 Lerp(const Vec3& a, const Vec3& b, double s) {
 struct ColoredField {
     std::string field;
     const std::vector<ColorControlPoint>* tf;
-    bool glow;  ///< a volume's glow per unit length rather than a colour
-    std::string kind;  ///< isosurface, slice or volume
+    bool glow;          ///< a volume's glow per unit length rather than a colour
+    std::string kind;   ///< isosurface, slice or volume
     std::size_t index;  ///< in its list
 };
 
@@ -58,7 +58,8 @@ std::vector<ColoredField> ColoredFields(const Scene& scene) {
     };
     for (std::size_t k = 0; k < scene.isosurfaces.size(); ++k) {
         const SceneIsosurface& iso = scene.isosurfaces[k];
-        if (!iso.colorField.empty()) add(iso.colorField, iso.colorTf, false, "isosurface", k);
+        if (!iso.colorField.empty())
+            add(iso.colorField, iso.colorTf, false, "isosurface", k);
     }
     for (std::size_t k = 0; k < scene.slices.size(); ++k)
         add(scene.slices[k].field, scene.slices[k].colorTf, false, "slice", k);
@@ -92,7 +93,8 @@ LegendBar LayOutBar(const ColoredField& colored, const std::string& title, int r
         bar.lo -= half;
         bar.hi += half;
     }
-    if (colored.glow) bar.colorScale = std::max(1.0, ColorFunction(bar.colorTf).MaxValue());
+    if (colored.glow)
+        bar.colorScale = std::max(1.0, ColorFunction(bar.colorTf).MaxValue());
 
     const int pad = 4 * s, tickLength = 4 * s, labelGap = 2 * s, titleGap = 6 * s;
     bar.width = 12 * s;
@@ -110,8 +112,8 @@ LegendBar LayOutBar(const ColoredField& colored, const std::string& title, int r
         labelsWidth = std::max(labelsWidth, tick.labelWidth);
         bar.ticks.push_back(tick);
     }
-    const int contentWidth =
-        std::max(TextWidth(bar.title, s), bar.width + tickLength + labelGap + labelsWidth);
+    const int contentWidth = std::max(TextWidth(bar.title, s),
+                                      bar.width + tickLength + labelGap + labelsWidth);
     bar.panelWidth = pad + contentWidth + pad;
     // Labels reach half their height above the top tick and below the bottom one.
     bar.panelHeight = pad + TextHeight(s) + titleGap + barHeight + 4 * s + pad;
@@ -122,7 +124,8 @@ LegendBar LayOutBar(const ColoredField& colored, const std::string& title, int r
     bar.x = bar.panelX + pad + s;  // room for the bar's frame
     bar.y = bar.titleY + TextHeight(s) + titleGap;
     for (LegendBar::Tick& tick : bar.ticks) {
-        const double k = std::floor((bar.hi - tick.value) / (bar.hi - bar.lo) * barHeight);
+        const double k =
+            std::floor((bar.hi - tick.value) / (bar.hi - bar.lo) * barHeight);
         tick.row = bar.y + static_cast<int>(std::clamp(k, 0.0, double(barHeight - 1)));
         tick.labelX = bar.x + bar.width + tickLength + labelGap;
         // The label's capitals centred on the tick's row.
@@ -198,8 +201,10 @@ std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box)
             if (!inA && !inB) continue;
             // The part at or beyond the near depth.
             const Vec3 cut = inA && inB ? a : Lerp(a, b, (near - za) / (zb - za));
-            ProjectedEdge e{inA ? a : cut, inB ? b : cut, {}, BehindTheData(camera, box, q, d)};
-            if (!camera.Orthographic() && !(camera.Depth(e.p0) > 0 && camera.Depth(e.p1) > 0))
+            ProjectedEdge e{
+                inA ? a : cut, inB ? b : cut, {}, BehindTheData(camera, box, q, d)};
+            if (!camera.Orthographic() &&
+                !(camera.Depth(e.p0) > 0 && camera.Depth(e.p1) > 0))
                 continue;  // the eye on the box's edge: nothing of it to see
             const auto i0 = camera.ImagePoint(e.p0), i1 = camera.ImagePoint(e.p1);
             e.image = {i0[0], i0[1], i1[0], i1[1]};
@@ -208,7 +213,8 @@ std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box)
     return edges;
 }
 
-std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge, double u) {
+std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge,
+                                  double u) {
     if (camera.Orthographic()) return Lerp(edge.p0, edge.p1, u);
     // Perspective: 1 / depth is linear along the image piece.
     const double z0 = camera.Depth(edge.p0), z1 = camera.Depth(edge.p1);
@@ -246,11 +252,11 @@ void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
     // all that the pixel shows: c + (1 - a) background becomes c + (1 - a) (background +
     // coverage (line - background)).
     const bool hasAlpha = image.a.size() == static_cast<std::size_t>(canvas.width) *
-                                               static_cast<std::size_t>(canvas.height);
+                                                static_cast<std::size_t>(canvas.height);
     for (std::size_t p = 0; p < coverage[1].size(); ++p) {
         if (!(coverage[1][p] > 0)) continue;
-        const double seen = coverage[1][p] * (hasAlpha ? std::clamp(1 - image.a[p], 0.0, 1.0)
-                                                       : 1.0);
+        const double seen =
+            coverage[1][p] * (hasAlpha ? std::clamp(1 - image.a[p], 0.0, 1.0) : 1.0);
         for (int c = 0; c < 3; ++c)
             canvas.rgb[3 * p + c] += seen * (color[c] - scene.background[c]);
     }
@@ -292,7 +298,8 @@ std::string TickLabel(double value, double step, double magnitude) {
     if (magnitude >= 1e5 || magnitude < 1e-3) {
         // The value's own power of ten, digits down to the step's, then as short as it
         // goes: "7.50e+05" -> "7.5e5", "1.00e+06" -> "1e6", "2e-05" -> "2e-5".
-        const int exponent = static_cast<int>(std::floor(std::log10(std::fabs(value)) + 1e-9));
+        const int exponent =
+            static_cast<int>(std::floor(std::log10(std::fabs(value)) + 1e-9));
         std::snprintf(text, sizeof text, "%.*e",
                       std::max(0, exponent - stepExponent + extra), value);
         const std::string s = text;

@@ -21,7 +21,7 @@ namespace hpray {
 /// legend the scene asks for. `dataBounds`: the guaranteed bounds of the data.
 Canvas AnnotatedPicture(const Scene& scene, const Image& image, const Box& dataBounds);
 
-// --- outline ----------------------------------------------------------------------------
+// --- outline --------------------------------------------------------------------------
 
 /// Black over a light background (linear luminance above 0.18, mid grey), white over a
 /// dark one: the default colour of the outline and the legend's text.
@@ -47,7 +47,8 @@ struct ProjectedEdge {
 std::vector<ProjectedEdge> ProjectBoxEdges(const Camera& camera, const Box& box);
 /// The world point of `edge` seen at parameter u in [0, 1] along its image piece (image
 /// points are not spread evenly along a perspective edge: 1 / depth is linear in u).
-std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge, double u);
+std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edge,
+                                  double u);
 
 /// Draws the outline of OutlineBox into `canvas`: lines scene.outline.width pixels wide
 /// (LineCoverage) in scene.outline.color. The data lies inside the box, so an edge lies
@@ -59,7 +60,7 @@ std::array<double, 3> EdgePointAt(const Camera& camera, const ProjectedEdge& edg
 void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
                  const Box& dataBounds);
 
-// --- legend -----------------------------------------------------------------------------
+// --- legend ---------------------------------------------------------------------------
 
 /// Between 3 and 5 round values in [lo, hi] (lo < hi, both finite), ascending, evenly
 /// spaced by the largest step of 1, 2 or 5 times a power of ten that gives three or more
@@ -67,7 +68,7 @@ void DrawOutline(Canvas& canvas, const Image& image, const Scene& scene,
 std::vector<double> NiceTicks(double lo, double hi);
 /// A tick value written for the legend: fixed point with as many decimals as `step`
 /// needs (0.25: two), or, when the range's largest absolute value `magnitude` is at least
-/// 1e5 or below 1e-3, as m.de±x with the digits down to the step's and no trailing zeros,
+/// 1e5 or below 1e-3, as m.deX with the digits down to the step's and no trailing zeros,
 /// '+' or leading zeros in the exponent (7.5e5, 1e6, 2e-5); 0 as "0".
 std::string TickLabel(double value, double step, double magnitude);
 
@@ -87,7 +88,8 @@ struct LegendBar {
     struct Tick {
         double value = 0;
         std::string label;
-        int row = 0;  ///< the pixel row of the tick mark (the bar's row nearest the value)
+        /// The pixel row of the tick mark: the bar's row nearest the value.
+        int row = 0;
         int labelX = 0, labelY = 0, labelWidth = 0, labelHeight = 0;  ///< the label's box
     };
     std::vector<Tick> ticks;

@@ -33,7 +33,8 @@ using V3 = std::array<double, 3>;
 V3 Sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 double Dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 V3 Cross(const V3& a, const V3& b) {
-    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0]};
 }
 V3 Unit(const V3& a) {
     const double n = std::sqrt(Dot(a, a));
@@ -60,7 +61,8 @@ struct ContractCamera {
         const double sx = (2 * (i + 0.5) / W - 1) * (W / H) * h;
         const double sy = (1 - 2 * (j + 0.5) / H) * h;
         if (ortho) {
-            for (int k = 0; k < 3; ++k) origin[k] = position[k] + sx * right[k] + sy * up[k];
+            for (int k = 0; k < 3; ++k)
+                origin[k] = position[k] + sx * right[k] + sy * up[k];
             dir = forward;
         } else {
             origin = position;
@@ -88,7 +90,8 @@ struct Edge {
 };
 
 /// The 12 edges of [lo, hi]^3, each cut to its part at depth >= minDepth.
-std::vector<Edge> BoxEdges(const ContractCamera& cam, double lo, double hi, double minDepth) {
+std::vector<Edge> BoxEdges(const ContractCamera& cam, double lo, double hi,
+                           double minDepth) {
     std::vector<Edge> edges;
     for (int q = 0; q < 8; ++q)
         for (int d = 0; d < 3; ++d) {
@@ -146,12 +149,15 @@ double Linear(std::uint8_t v) {
 struct Png {
     int width = 0, height = 0;
     std::vector<std::uint8_t> rgb;
-    const std::uint8_t* At(int i, int j) const { return &rgb[3 * (std::size_t(j) * width + i)]; }
+    const std::uint8_t* At(int i, int j) const {
+        return &rgb[3 * (std::size_t(j) * width + i)];
+    }
 };
 
 /// Renders `yaml` (ball-p2: u = |x|^2 on [-1, 1]^3) to a PNG and reads it back; the
 /// image rendered into `rendered` if given.
-Png RenderPng(const std::string& yaml, const std::string& name, Image* rendered = nullptr) {
+Png RenderPng(const std::string& yaml, const std::string& name,
+              Image* rendered = nullptr) {
     const fs::path dir = fs::temp_directory_path() / "hpray_test_annotate";
     fs::create_directories(dir);
     const std::string path = (dir / (name + ".png")).string();
@@ -176,11 +182,11 @@ Png RenderPng(const std::string& yaml, const std::string& name, Image* rendered 
 /// how many pixels near hidden or dimmed edges were checked.
 int CheckOutline(const std::string& camera, double R, const std::string& name,
                  double opacity = 1) {
-    const std::string base = "data: {mesh: 'builtin:ball-p2'}\ncamera: " + camera + "\n" +
-                             (R > 0 ? "isosurfaces: [{field: u, value: " +
-                                          std::to_string(R * R) +
-                                          ", opacity: " + std::to_string(opacity) + "}]\n"
-                                    : "");
+    const std::string base =
+        "data: {mesh: 'builtin:ball-p2'}\ncamera: " + camera + "\n" +
+        (R > 0 ? "isosurfaces: [{field: u, value: " + std::to_string(R * R) +
+                     ", opacity: " + std::to_string(opacity) + "}]\n"
+               : "");
     const Png plain = RenderPng(base, name + "_plain");
     const Png lined = RenderPng(base + "outline: {color: [1, 0, 0], width: 1.5}\n", name);
     const Scene scene = ParseScene(base, "test.yaml", {}, "");
@@ -208,8 +214,8 @@ int CheckOutline(const std::string& camera, double R, const std::string& name,
             }
             const std::uint8_t* p = lined.At(i, j);
             const std::uint8_t* q = plain.At(i, j);
-            const std::string where = name + ": pixel (" + std::to_string(i) + ", " +
-                                      std::to_string(j) + ")";
+            const std::string where =
+                name + ": pixel (" + std::to_string(i) + ", " + std::to_string(j) + ")";
             if (nearest > 2.0) {
                 EXPECT_TRUE(p[0] == q[0] && p[1] == q[1] && p[2] == q[2])
                     << where << " at " << nearest << " px from the outline changed";
@@ -227,7 +233,8 @@ int CheckOutline(const std::string& camera, double R, const std::string& name,
             const double g = Linear(p[1]), plainG = Linear(q[1]);
             if (inFront == 0) {
                 if (dist > 0.5) continue;
-                EXPECT_LE(g, 0.25 * plainG + tol) << where << " on the outline, not red enough";
+                EXPECT_LE(g, 0.25 * plainG + tol)
+                    << where << " on the outline, not red enough";
                 EXPECT_GE(p[0] + 1, q[0]) << where;
                 ++seen;
             } else if (inBack == 0) {
@@ -253,22 +260,25 @@ int CheckOutline(const std::string& camera, double R, const std::string& name,
 }
 
 TEST(OutlineTest, PerspectivePixelsFollowTheProjectedEdges) {
-    CheckOutline("{position: [2.6, 1.9, 3.4], look_at: [0, 0, 0], fov_y: 40, width: 160, "
-                 "height: 120}",
-                 0, "perspective");
+    CheckOutline(
+        "{position: [2.6, 1.9, 3.4], look_at: [0, 0, 0], fov_y: 40, width: 160, "
+        "height: 120}",
+        0, "perspective");
 }
 
 TEST(OutlineTest, OrthographicPixelsFollowTheProjectedEdges) {
-    CheckOutline("{position: [3, -2, 2.5], look_at: [0, 0, 0], up: [0, 0, 1], "
-                 "ortho_height: 4, width: 150, height: 130}",
-                 0, "ortho");
+    CheckOutline(
+        "{position: [3, -2, 2.5], look_at: [0, 0, 0], up: [0, 0, 1], "
+        "ortho_height: 4, width: 150, height: 130}",
+        0, "ortho");
 }
 
 // The eye inside the box: edges that pass beside and behind it are cut at its plane.
 TEST(OutlineTest, EdgesBehindThePerspectiveEyeAreCut) {
-    CheckOutline("{position: [0.3, 0.2, 0.4], look_at: [-0.5, -0.6, -1], fov_y: 90, "
-                 "width: 140, height: 100}",
-                 0, "inside");
+    CheckOutline(
+        "{position: [0.3, 0.2, 0.4], look_at: [-0.5, -0.6, -1], fov_y: 90, "
+        "width: 140, height: 100}",
+        0, "inside");
 }
 
 // Behind an opaque isosurface (the sphere u = 0.81) the far edges are hidden, in front
@@ -335,10 +345,13 @@ TEST(OutlineTest, EdgesBehindAVolumeAreSeenThroughIt) {
             }
             if (near != 1 || dist > 0.5) continue;
             const double tIn = BoxEntry(o, d, -1, 1);
-            const double g = Linear(lined.At(i, j)[1]), plainG = Linear(plain.At(i, j)[1]);
-            const std::string where = "pixel (" + std::to_string(i) + ", " + std::to_string(j) + ")";
+            const double g = Linear(lined.At(i, j)[1]),
+                         plainG = Linear(plain.At(i, j)[1]);
+            const std::string where =
+                "pixel (" + std::to_string(i) + ", " + std::to_string(j) + ")";
             if (std::fabs(tEdge - tIn) < 0.02) {
-                EXPECT_LE(g, 0.25 * plainG + tol) << where << ": an edge in front, not drawn over";
+                EXPECT_LE(g, 0.25 * plainG + tol)
+                    << where << ": an edge in front, not drawn over";
                 ++over;
             } else if (tEdge > tIn + 0.3) {
                 const double T = 1 - image.a[std::size_t(j) * image.width + i];
@@ -383,8 +396,9 @@ TEST(OutlineTest, ImagePointInvertsTheRays) {
 
 // The outline's box is the data's cut to the clip box.
 TEST(OutlineTest, TheClipBoxCutsTheOutlinedBox) {
-    Scene scene = ParseScene("data: {mesh: m.vtu}\nclip: {box: [[0, -5, 0], [5, 0.5, 5]]}\n",
-                             "t.yaml", {}, "/");
+    Scene scene =
+        ParseScene("data: {mesh: m.vtu}\nclip: {box: [[0, -5, 0], [5, 0.5, 5]]}\n",
+                   "t.yaml", {}, "/");
     const Box data{{-1, -1, -1}, {1, 1, 1}};
     const Box box = OutlineBox(scene, data);
     EXPECT_EQ(box.lo, (V3{0, -1, 0}));
@@ -401,7 +415,8 @@ TEST(LegendTest, TicksAreThreeToFiveRoundValues) {
     for (int k = 0; k < 2000; ++k) {
         const double scale = std::pow(10.0, -8 + 16 * unit(rng));
         const double lo = (unit(rng) * 2 - 1) * scale;
-        const double hi = lo + scale * std::pow(10.0, -3 * unit(rng)) * (0.01 + unit(rng));
+        const double hi =
+            lo + scale * std::pow(10.0, -3 * unit(rng)) * (0.01 + unit(rng));
         const std::vector<double> ticks = NiceTicks(lo, hi);
         ASSERT_GE(ticks.size(), 3u) << lo << " " << hi;
         ASSERT_LE(ticks.size(), 5u) << lo << " " << hi;
@@ -413,8 +428,9 @@ TEST(LegendTest, TicksAreThreeToFiveRoundValues) {
             << step;
         // Labels tell the ticks apart.
         for (std::size_t i = 1; i < ticks.size(); ++i)
-            EXPECT_NE(TickLabel(ticks[i], step, std::max(std::fabs(lo), std::fabs(hi))),
-                      TickLabel(ticks[i - 1], step, std::max(std::fabs(lo), std::fabs(hi))));
+            EXPECT_NE(
+                TickLabel(ticks[i], step, std::max(std::fabs(lo), std::fabs(hi))),
+                TickLabel(ticks[i - 1], step, std::max(std::fabs(lo), std::fabs(hi))));
         for (std::size_t i = 0; i < ticks.size(); ++i) {
             EXPECT_GE(ticks[i], lo - 1e-9 * (hi - lo));
             EXPECT_LE(ticks[i], hi + 1e-9 * (hi - lo));
@@ -476,10 +492,11 @@ TEST(LegendTest, BarShowsTheColorMapAndLabelsAreDrawn) {
     auto truth = [&](double v) {
         std::size_t k = 0;
         while (k + 2 < map.size() && v > map[k + 1].scalar) ++k;
-        const double s = std::clamp((v - map[k].scalar) / (map[k + 1].scalar - map[k].scalar),
-                                    0.0, 1.0);
+        const double s = std::clamp(
+            (v - map[k].scalar) / (map[k + 1].scalar - map[k].scalar), 0.0, 1.0);
         std::array<double, 3> c;
-        for (int i = 0; i < 3; ++i) c[i] = map[k].rgb[i] + s * (map[k + 1].rgb[i] - map[k].rgb[i]);
+        for (int i = 0; i < 3; ++i)
+            c[i] = map[k].rgb[i] + s * (map[k + 1].rgb[i] - map[k].rgb[i]);
         return c;
     };
     for (int k = 0; k < bar.height; k += std::max(1, bar.height / 9)) {
@@ -493,7 +510,8 @@ TEST(LegendTest, BarShowsTheColorMapAndLabelsAreDrawn) {
         }
     }
     // The bottom and top rows hold the ends of the map.
-    EXPECT_NEAR(png.At(bar.x, bar.y + bar.height - 1)[2], Srgb(truth(1.0 / bar.height)[2]), 0.51);
+    EXPECT_NEAR(png.At(bar.x, bar.y + bar.height - 1)[2],
+                Srgb(truth(1.0 / bar.height)[2]), 0.51);
 
     // Ticks at 0, 1, 2, each label the font's glyphs in black at its box.
     ASSERT_EQ(bar.ticks.size(), 3u);
@@ -501,8 +519,9 @@ TEST(LegendTest, BarShowsTheColorMapAndLabelsAreDrawn) {
     for (std::size_t t = 0; t < 3; ++t) {
         const LegendBar::Tick& tick = bar.ticks[t];
         EXPECT_EQ(tick.label, labels[t]);
-        EXPECT_EQ(tick.row, bar.y + std::min(bar.height - 1, int(std::floor((2 - tick.value) /
-                                                                          2 * bar.height))));
+        EXPECT_EQ(tick.row,
+                  bar.y + std::min(bar.height - 1,
+                                   int(std::floor((2 - tick.value) / 2 * bar.height))));
         const std::uint8_t* glyph = font::Glyph(tick.label[0]);
         int ink = 0, paper = 0;
         for (int r = 0; r < font::kGlyphHeight; ++r)
@@ -550,23 +569,29 @@ TEST(LegendTest, BarShowsTheColorMapAndLabelsAreDrawn) {
 // One bar per distinct field and map; bars that do not fit a small image are left out.
 TEST(LegendTest, OneBarPerColouredFieldAndOnlyWhatFits) {
     const std::string base =
-        "data: {mesh: 'builtin:ball-p2'}\ncamera: {width: 600, height: 400}\nlegend: true\n"
-        "slices: [{normal: [0, 0, 1], point: [0, 0, 0], field: u, color_tf: {map: viridis, "
+        "data: {mesh: 'builtin:ball-p2'}\ncamera: {width: 600, height: 400}\nlegend: "
+        "true\n"
+        "slices: [{normal: [0, 0, 1], point: [0, 0, 0], field: u, color_tf: {map: "
+        "viridis, "
         "range: [0, 3]}},\n"
-        "         {normal: [0, 1, 0], point: [0, 0, 0], field: u, color_tf: {map: viridis, "
+        "         {normal: [0, 1, 0], point: [0, 0, 0], field: u, color_tf: {map: "
+        "viridis, "
         "range: [0, 3]}},\n"
-        "         {normal: [1, 0, 0], point: [0, 0, 0], field: v, color_tf: [[-1, 0, 0, 1], "
+        "         {normal: [1, 0, 0], point: [0, 0, 0], field: v, color_tf: [[-1, 0, 0, "
+        "1], "
         "[1, 1, 0, 0]]}]\n"
-        "isosurfaces: [{value: 0.5, color_field: v, color_tf: {map: inferno, range: [-1, 1]}}]\n";
+        "isosurfaces: [{value: 0.5, color_field: v, color_tf: {map: inferno, range: [-1, "
+        "1]}}]\n";
     const LegendLayout layout = LayOutLegend(ParseScene(base, "t.yaml", {}, ""));
     ASSERT_EQ(layout.bars.size(), 3u);
     EXPECT_EQ(layout.bars[0].title, "v (isosurface)");  // the isosurface's first
     EXPECT_EQ(layout.bars[1].title, "u");
     EXPECT_EQ(layout.bars[2].title, "v (slice)");
     for (std::size_t k = 1; k < layout.bars.size(); ++k)
-        EXPECT_LT(layout.bars[k].panelX + layout.bars[k].panelWidth, layout.bars[k - 1].panelX);
-    const LegendLayout small = LayOutLegend(ParseScene(
-        base + "", "t.yaml", {"camera.width=90", "camera.height=90"}, ""));
+        EXPECT_LT(layout.bars[k].panelX + layout.bars[k].panelWidth,
+                  layout.bars[k - 1].panelX);
+    const LegendLayout small = LayOutLegend(
+        ParseScene(base + "", "t.yaml", {"camera.width=90", "camera.height=90"}, ""));
     EXPECT_EQ(small.bars.size() + small.omitted, 3u);
     EXPECT_GT(small.omitted, 0);
 }
