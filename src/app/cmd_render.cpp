@@ -130,7 +130,7 @@ int RunFrames(const RenderArgs& args, const std::string& sceneText, const std::s
         if (args.strict && !stats.warnings.empty())
             throw InputError(args.scene, "--strict",
                              "frame " + std::to_string(k) + ": " + stats.warnings.front());
-        WriteJobOutputs(frameJob->GetScene(), image, stats);
+        WriteJobOutputs(frameJob->GetScene(), image, frameJob->DataBounds(), stats);
         LogFrame(*frameJob, stats,
                  "frame " + std::to_string(k) + " of " + std::to_string(count) + ": ");
     }
@@ -155,7 +155,7 @@ int RunRender(const RenderArgs& args) {
     frameJob.AddWarnings(frameJob.GetScene(), image, stats);
     if (args.strict && !stats.warnings.empty())
         throw InputError(scene.sourcePath, "--strict", stats.warnings.front());
-    WriteJobOutputs(frameJob.GetScene(), image, stats);
+    WriteJobOutputs(frameJob.GetScene(), image, frameJob.DataBounds(), stats);
     LogFrame(frameJob, stats, "");
     return 0;
 }

@@ -510,9 +510,10 @@ int RunServe(const ServeArgs& args) {
             // Answered before the files are written: the stats say so (timing_s.write 0).
             json statsJson = json::parse(StatsToJson(stats));
             auto write = std::async(std::launch::async,
-                                    [out, dir, image = std::move(image), stats]() mutable {
+                                    [out, dir, image = std::move(image), stats,
+                                     bounds = frameJob.DataBounds()]() mutable {
                                         try {
-                                            WriteJobOutputs(out, image, stats);
+                                            WriteJobOutputs(out, image, bounds, stats);
                                             WriteNpyFloat32((dir / "errors.npy").string(),
                                                      ErrorArray(image),
                                                      {std::size_t(image.height),

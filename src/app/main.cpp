@@ -53,7 +53,8 @@ int main(int argc, char** argv) {
         std::string keys;
         for (const std::string& path : SceneKeyPaths())
             if (path.find('.') != std::string::npos || path == "background" ||
-                path == "threads" || path == "distribute")
+                path == "outline" || path == "legend" || path == "threads" ||
+                path == "distribute")
                 keys += "  " + path + "\n";
         renderCmd->footer("\nScene keys (docs/scene.md gives their types, defaults and "
                           "meaning; # is a list index):\n" + keys);

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "image/canvas.h"
 #include "image/image.h"
 
 namespace hpray {
@@ -19,6 +20,8 @@ Image ReadExr(const std::string& path);
 
 /// Writes the RGB composited over `background` (linear RGB), sRGB-encoded, 8 bits.
 void WritePng(const std::string& path, const Image& image, const std::array<double, 3>& background);
+/// Writes a picture (linear RGB, annotations included), sRGB-encoded, 8 bits.
+void WritePng(const std::string& path, const Canvas& canvas);
 /// Reads an 8-bit RGB/RGBA PNG into `rgb` (W*H*3 bytes, top row first).
 void ReadPng(const std::string& path, int& width, int& height, std::vector<std::uint8_t>& rgb);
 

@@ -38,33 +38,21 @@ std::uint8_t EncodeSrgb8(double linear) {
 
 }  // namespace
 
-void WritePng(const std::string& path, const Image& image,
-              const std::array<double, 3>& background) {
-    HPRAY_CHECK(image.width >= 1 && image.height >= 1);
-    const std::size_t n = image.PixelCount();
-    HPRAY_CHECK(image.r.size() == n && image.g.size() == n && image.b.size() == n &&
-                image.a.size() == n);
+namespace {
 
-    // Premultiplied colour over an opaque background: out = c + (1 - a) * background.
-    std::vector<std::uint8_t> rgb(3 * n);
-    for (std::size_t p = 0; p < n; ++p) {
-        const double transmit = 1.0 - image.a[p];
-        rgb[3 * p + 0] = EncodeSrgb8(image.r[p] + transmit * background[0]);
-        rgb[3 * p + 1] = EncodeSrgb8(image.g[p] + transmit * background[1]);
-        rgb[3 * p + 2] = EncodeSrgb8(image.b[p] + transmit * background[2]);
-    }
-
+/// Writes 8-bit sRGB samples, 3 per pixel, top row first.
+void WriteRgb8(const std::string& path, int width, int height,
+               const std::vector<std::uint8_t>& rgb) {
     png_image png;
     std::memset(&png, 0, sizeof(png));
     png.version = PNG_IMAGE_VERSION;
-    png.width = static_cast<png_uint_32>(image.width);
-    png.height = static_cast<png_uint_32>(image.height);
+    png.width = static_cast<png_uint_32>(width);
+    png.height = static_cast<png_uint_32>(height);
     png.format = PNG_FORMAT_RGB;  // 8-bit sRGB: libpng records an sRGB chunk
 
     const std::string tmp = detail::BeginOutputFile(path);
-    const int ok =
-        png_image_write_to_file(&png, tmp.c_str(), 0, rgb.data(),
-                                static_cast<png_int_32>(3 * image.width), nullptr);
+    const int ok = png_image_write_to_file(&png, tmp.c_str(), 0, rgb.data(),
+                                           static_cast<png_int_32>(3 * width), nullptr);
     if (!ok) {
         const std::string message = png.message;
         png_image_free(&png);
@@ -72,6 +60,36 @@ void WritePng(const std::string& path, const Image& image,
         throw InputError(path, "", "cannot write PNG file: " + message);
     }
     detail::CommitOutputFile(tmp, path);
+}
+
+}  // namespace
+
+void WritePng(const std::string& path, const Image& image,
+              const std::array<double, 3>& background) {
+    HPRAY_CHECK(image.width >= 1 && image.height >= 1);
+    const std::size_t n = image.PixelCount();
+    HPRAY_CHECK(image.r.size() == n && image.g.size() == n && image.b.size() == n &&
+                image.a.size() == n);
+
+    // Premultiplied colour over an opaque background: out = c + (1 - a) * background
+    // (Canvas::Over, without a picture in memory: 3 bytes a pixel).
+    std::vector<std::uint8_t> rgb(3 * n);
+    for (std::size_t p = 0; p < n; ++p) {
+        const double transmit = 1.0 - image.a[p];
+        rgb[3 * p + 0] = EncodeSrgb8(image.r[p] + transmit * background[0]);
+        rgb[3 * p + 1] = EncodeSrgb8(image.g[p] + transmit * background[1]);
+        rgb[3 * p + 2] = EncodeSrgb8(image.b[p] + transmit * background[2]);
+    }
+    WriteRgb8(path, image.width, image.height, rgb);
+}
+
+void WritePng(const std::string& path, const Canvas& canvas) {
+    HPRAY_CHECK(canvas.width >= 1 && canvas.height >= 1);
+    const std::size_t n = static_cast<std::size_t>(canvas.width) * canvas.height;
+    HPRAY_CHECK(canvas.rgb.size() == 3 * n);
+    std::vector<std::uint8_t> rgb(3 * n);
+    for (std::size_t k = 0; k < 3 * n; ++k) rgb[k] = EncodeSrgb8(canvas.rgb[k]);
+    WriteRgb8(path, canvas.width, canvas.height, rgb);
 }
 
 void ReadPng(const std::string& path, int& width, int& height,

@@ -21,6 +21,7 @@
 #include "compositor.h"
 #include "io/mesh_io.h"
 #include "job/tile_dealer.h"
+#include "render/annotate.h"
 #include "scene/camera.h"
 #include "util/error.h"
 #include "util/log.h"
@@ -482,6 +483,17 @@ void FrameJob::AddWarnings(const Scene& scene, const Image& image, RenderStats& 
         warn("the image is empty: the camera sees none of the data (check camera.position "
              "and camera.look_at against the data's bounds, hpray info), or nothing in view "
              "contributes (isovalues, transfer functions, clip)");
+    if (scene.legend) {
+        const LegendLayout legend = LayOutLegend(scene);
+        if (legend.bars.empty() && legend.omitted == 0)
+            warn("legend: nothing in the scene is coloured by a field (isosurfaces.#."
+                 "color_field, slices, volume): there is no legend to draw");
+        if (legend.omitted > 0)
+            warn("legend: " + std::to_string(legend.omitted) + " of " +
+                 std::to_string(legend.omitted + legend.bars.size()) +
+                 " colour bars do not fit the " + std::to_string(scene.camera.width) + "x" +
+                 std::to_string(scene.camera.height) + " image and are left out");
+    }
     const double segments = std::max(1.0, stats.counters.segments);
     if (stats.counters.inversionFailures > 1e-3 * segments) {
         char text[320];

@@ -16,6 +16,7 @@
 
 #include "elements/mesh_geometry.h"
 #include "io/image.h"
+#include "render/annotate.h"
 #include "render/brick_renderer.h"
 #include "trace/brick_traverser.h"
 #include "util/error.h"
@@ -260,7 +261,8 @@ void CheckJobOutputs(const Scene& scene) {
     }
 }
 
-void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats) {
+void WriteJobOutputs(const Scene& scene, const Image& image, const Box& dataBounds,
+                     RenderStats& stats) {
     if (!(stats.isoFieldRange[0] <= stats.isoFieldRange[1])) stats.isoFieldRange = {0, 0};
     const double range = stats.isoFieldRange[1] - stats.isoFieldRange[0];
     stats.counters.isoResidualRelMax = range > 0 ? stats.counters.isoResidualMax / range : 0;
@@ -271,7 +273,15 @@ void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats)
     // once all have finished; each writer leaves no partial file).
     tbb::task_group writers;
     if (!out.exr.empty()) writers.run([&] { WriteExr(out.exr, image); });
-    if (!out.png.empty()) writers.run([&] { WritePng(out.png, image, scene.background); });
+    if (!out.png.empty())
+        writers.run([&] {
+            // The annotated picture holds the image once more in linear RGB: only when
+            // there is something to draw on it.
+            if (scene.outline.enabled || scene.legend)
+                WritePng(out.png, AnnotatedPicture(scene, image, dataBounds));
+            else
+                WritePng(out.png, image, scene.background);
+        });
     if (!out.hits.empty())
         writers.run([&] { WriteNpy(out.hits, HitsArray(image), {H, W, 5}); });
     if (!out.rgba.empty())
@@ -286,8 +296,12 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& sceneIn, RenderStats& stats,
                     double loadSeconds) {
     const auto start = std::chrono::steady_clock::now();
     Scene scene = sceneIn;
-    if (scene.camera.autoFit)
-        FitCamera(scene.camera, MeshGeometry::Build(mesh).bounds, scene.clip.box);
+    // The guaranteed bounds (curved cells may bulge beyond their nodes) cost a pass over
+    // the cells: only when a fitted camera or the outline needs them.
+    const Box bounds = scene.camera.autoFit || scene.outline.enabled
+                           ? MeshGeometry::Build(mesh).bounds
+                           : mesh.Bounds();
+    FitCamera(scene.camera, bounds, scene.clip.box);
     ResolveColorMaps(scene, [&mesh](const std::string& f) {
         const auto sel = SelectScalar(mesh, f);
         return sel ? std::optional<std::array<double, 2>>(sel->field->Range(sel->component))
@@ -299,7 +313,7 @@ Image RenderMeshJob(const Mesh& mesh, const Scene& sceneIn, RenderStats& stats,
     Image image;
     RenderOneBrick(mesh, std::nullopt, scene, image, stats);
     stats.timing.total = Seconds(start) + loadSeconds;
-    WriteJobOutputs(scene, image, stats);
+    WriteJobOutputs(scene, image, bounds, stats);
     return image;
 }
 

@@ -90,8 +90,11 @@ class PreparedBrick {
 void CheckJobOutputs(const Scene& scene);
 
 /// Writes the outputs the scene names (EXR, PNG, hits, rgba; then stats), timing the
-/// writes into stats.timing.write.
-void WriteJobOutputs(const Scene& scene, const Image& image, RenderStats& stats);
+/// writes into stats.timing.write. The PNG carries the scene's outline and legend
+/// (render/annotate.h), the outline of `dataBounds` (the data's guaranteed bounds); the
+/// other files are the image as rendered.
+void WriteJobOutputs(const Scene& scene, const Image& image, const Box& dataBounds,
+                     RenderStats& stats);
 
 /// A fresh RenderStats for a scene (scene, mesh, threads, image size).
 RenderStats StartStats(const Scene& scene);

@@ -69,6 +69,33 @@ CameraRay Camera::RayAt(double x, double y) const {
     return ray;
 }
 
+double Camera::Depth(const std::array<double, 3>& p) const {
+    return (p[0] - position_[0]) * forward_[0] + (p[1] - position_[1]) * forward_[1] +
+           (p[2] - position_[2]) * forward_[2];
+}
+
+std::array<double, 2> Camera::ImagePoint(const std::array<double, 3>& p) const {
+    const Vec3 d = {p[0] - position_[0], p[1] - position_[1], p[2] - position_[2]};
+    double sx = d[0] * right_[0] + d[1] * right_[1] + d[2] * right_[2];
+    double sy = d[0] * trueUp_[0] + d[1] * trueUp_[1] + d[2] * trueUp_[2];
+    if (!orthographic_) {
+        // The ray direction is forward + sx right + sy trueUp, normalised: p lies on it
+        // where its offsets across the view, divided by its depth, are sx and sy.
+        const double depth = Depth(p);
+        HPRAY_CHECK_MSG(depth > 0, "a point behind the camera has no image point");
+        sx /= depth;
+        sy /= depth;
+    }
+    // RayAt solved for x and y.
+    return {0.5 * width_ * (1.0 + sx / (aspect_ * halfExtent_)),
+            0.5 * height_ * (1.0 - sy / halfExtent_)};
+}
+
+double Camera::RayParameter(const std::array<double, 3>& p) const {
+    if (orthographic_) return Depth(p);
+    return Length({p[0] - position_[0], p[1] - position_[1], p[2] - position_[2]});
+}
+
 ViewOrigin ViewOriginOf(const SceneCamera& camera) {
     if (!camera.orthographic) return ViewOrigin::Perspective(camera.position);
     // Only the sign of each component matters, so no normalisation is needed.

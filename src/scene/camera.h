@@ -36,6 +36,16 @@ class Camera {
     /// sx' = (2x/W - 1)(W/H) ortho_height/2, sy' = (1 - 2y/H) ortho_height/2.
     CameraRay RayAt(double x, double y) const;
 
+    /// The distance of world point `p` in front of the camera: along forward from the
+    /// camera's position (perspective) or from its image plane (orthographic).
+    double Depth(const std::array<double, 3>& p) const;
+    /// The inverse of RayAt: the image point (x, y) whose ray passes through `p`. For a
+    /// perspective camera `p` must lie in front of it (Depth(p) > 0).
+    std::array<double, 2> ImagePoint(const std::array<double, 3>& p) const;
+    /// The ray parameter t at which the ray of ImagePoint(p) reaches `p`: |p - position|
+    /// (perspective) or Depth(p) (orthographic); comparable with the image's Z channel.
+    double RayParameter(const std::array<double, 3>& p) const;
+
     int Width() const { return width_; }
     int Height() const { return height_; }
     bool Orthographic() const { return orthographic_; }

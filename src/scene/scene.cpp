@@ -79,6 +79,8 @@ const SchemaNode& Schema() {
                    "root_tolerance", "volume_tolerance", "polish", "target_residual"}),
             MapOf("clip", {"near", "far", "box"}),
             MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
+            MapOf("outline", {"color", "width"}),
+            Leaf("legend"),
             Leaf("threads"),
             Leaf("distribute"),
             [] {
@@ -234,6 +236,7 @@ class SceneParser {
                    bool openLo, bool openHi) const;
     double Positive(const YAML::Node& node, const std::string& path) const;
     double NonNegative(const YAML::Node& node, const std::string& path) const;
+    bool Bool(const YAML::Node& node, const std::string& path) const;
     std::string FieldName(const YAML::Node& node, const std::string& path) const;
     std::vector<ColorControlPoint> ColorTf(const YAML::Node& node,
                                            const std::string& path, bool unitRange) const;
@@ -255,6 +258,7 @@ class SceneParser {
     void ReadAccuracy(const YAML::Node& root, Scene& scene) const;
     void ReadClip(const YAML::Node& root, Scene& scene) const;
     void ReadOutput(const YAML::Node& root, Scene& scene) const;
+    void ReadAnnotations(const YAML::Node& root, Scene& scene) const;
     void ReadExtras(const YAML::Node& root, Scene& scene) const;
     void ReadFrames(const YAML::Node& root, Scene& scene) const;
     /// A key path of a frames.list item: a path of the schema, not one a frame may not
@@ -302,6 +306,7 @@ void SceneParser::CheckKeys(const YAML::Node& node, const SchemaNode& schema,
                             const std::string& path) const {
     if (node.IsNull()) return;  // an empty section: all defaults
     if (path == "camera" && node.IsScalar() && node.Scalar() == "auto") return;
+    if (path == "outline" && node.IsScalar()) return;  // true or false: ReadAnnotations
     if (schema.kind == SchemaNode::Kind::Map) {
         if (!node.IsMap())
             Fail(path, node, "expected a mapping of keys, got " + Describe(node));
@@ -387,9 +392,12 @@ void SceneParser::ApplyAt(YAML::Node node, const SchemaNode& schema,
             }
             return;
         }
-        // Create a missing (or empty) intermediate section, then descend into it.
+        // Create a missing (or empty) intermediate section, then descend into it. An
+        // outline given as true or false becomes a mapping: setting its colour or width
+        // asks for one.
         const YAML::Node existing = Get(node, segment);
-        if (!existing.IsDefined() || existing.IsNull())
+        const bool shorthand = pathSoFar == "outline" && existing.IsScalar();
+        if (!existing.IsDefined() || existing.IsNull() || shorthand)
             node[segment] = YAML::Node(child->kind == SchemaNode::Kind::List
                                            ? YAML::NodeType::Sequence
                                            : YAML::NodeType::Map);
@@ -521,6 +529,14 @@ double SceneParser::NonNegative(const YAML::Node& node, const std::string& path)
     const double v = Number(node, path);
     if (!(v >= 0.0)) Fail(path, node, "must be >= 0, got " + FormatNumber(v));
     return v;
+}
+
+bool SceneParser::Bool(const YAML::Node& node, const std::string& path) const {
+    RequireValue(node, path);
+    const std::string v = node.IsScalar() ? node.Scalar() : "";
+    if (v == "true") return true;
+    if (v == "false") return false;
+    Fail(path, node, "expected true or false, got " + Describe(node));
 }
 
 std::string SceneParser::FieldName(const YAML::Node& node,
@@ -942,16 +958,7 @@ void SceneParser::ReadAccuracy(const YAML::Node& root, Scene& scene) const {
         if (!Has(acc, "projection_tolerance"))
             a.projectionTolerance = std::max(a.projectionTolerance, a.targetResidual / 4);
     }
-    if (Has(acc, "polish")) {
-        const YAML::Node n = Get(acc, "polish");
-        const std::string v = n.IsScalar() ? n.Scalar() : "";
-        if (v == "true")
-            a.polish = true;
-        else if (v == "false")
-            a.polish = false;
-        else
-            Fail("accuracy.polish", n, "expected true or false, got " + Describe(n));
-    }
+    if (Has(acc, "polish")) a.polish = Bool(Get(acc, "polish"), "accuracy.polish");
 }
 
 void SceneParser::ReadClip(const YAML::Node& root, Scene& scene) const {
@@ -996,6 +1003,24 @@ void SceneParser::ReadOutput(const YAML::Node& root, Scene& scene) const {
         if (value.empty()) Fail(path, Get(out, key), "is empty (omit the key instead)");
         *target = OutputPath(value);
     }
+}
+
+void SceneParser::ReadAnnotations(const YAML::Node& root, Scene& scene) const {
+    if (Has(root, "legend")) scene.legend = Bool(Get(root, "legend"), "legend");
+    if (!Has(root, "outline")) return;
+    const YAML::Node node = Get(root, "outline");
+    SceneOutline& o = scene.outline;
+    if (!node.IsMap()) {
+        if (!node.IsScalar() || (node.Scalar() != "true" && node.Scalar() != "false"))
+            Fail("outline", node,
+                 "expected true, false or a mapping {color, width}, got " + Describe(node));
+        o.enabled = node.Scalar() == "true";
+        return;
+    }
+    o.enabled = true;
+    if (Has(node, "color")) o.color = Color(Get(node, "color"), "outline.color");
+    if (Has(node, "width"))
+        o.width = InRange(Get(node, "width"), "outline.width", 0.0, 16.0, true, false);
 }
 
 void SceneParser::ReadExtras(const YAML::Node& root, Scene& scene) const {
@@ -1185,6 +1210,7 @@ Scene SceneParser::Build(const YAML::Node& root) {
     ReadAccuracy(root, scene);
     ReadClip(root, scene);
     ReadOutput(root, scene);
+    ReadAnnotations(root, scene);
     ReadExtras(root, scene);
     ReadFrames(root, scene);
     return scene;

@@ -199,6 +199,16 @@ struct SceneOutput {
     std::string rgba;   ///< float64 .npy (H, W, 4): premultiplied R, G, B, A
 };
 
+/// `outline:` the twelve edges of the data's bounding box drawn into the PNG (only: the
+/// EXR and the arrays stay data). `outline: true` draws it with the defaults, a mapping
+/// sets them; absent or `false`: none.
+struct SceneOutline {
+    bool enabled = false;
+    /// Linear RGB in [0, 1]; none: black over a light background, white over a dark one.
+    std::optional<std::array<double, 3>> color;
+    double width = 1.5;  ///< line width in pixels, in (0, 16]
+};
+
 /// How several MPI ranks share a job (top-level key `distribute`).
 enum class Distribution {
     /// `auto` (default): `image` for a mesh given directly, `space` for a partition.
@@ -226,6 +236,10 @@ struct Scene {
     SceneAccuracy accuracy;
     SceneClip clip;
     SceneOutput output;
+    SceneOutline outline;
+    /// `legend`: a colour bar with ticks in the PNG for each colour transfer function the
+    /// scene uses (render/annotate.h); default false.
+    bool legend = false;
     int threads = 0;                  ///< >= 0; 0 = all hardware threads
     Distribution distribute = Distribution::Auto;
     std::optional<SceneFrames> frames;  ///< `frames:` (hpray render only)

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <iterator>
 #include <string>
 #include <sys/wait.h>
 
@@ -216,6 +217,53 @@ TEST(Cli, NamedColorMapWithAutomaticRange) {
     const auto viridis = hpray::ExpandColorMap("viridis", 0.0, 3.0);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(a[centre + c], viridis[0].rgb[c], 1e-9) << c;
     EXPECT_EQ(a[centre + 3], 1.0);
+    fs::remove_all(dir);
+}
+
+// The outline and the legend go into the PNG only: the EXR and the arrays are the same
+// bytes as without them. A bad annotation key exits 2 naming it; a legend with nothing
+// to show is a warning.
+TEST(Cli, AnnotationsGoIntoThePngOnly) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_annotations";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string scene = std::string(HPRAY_SOURCE_DIR) + "/configs/ball_p2.yaml";
+    auto render = [&](const std::string& name, const std::string& extra) {
+        return RunHpray("render " + scene + " --set camera.width=96 --set camera.height=80" +
+                        " --set output.stats=null --set output.hits=null" +
+                        " --set output.exr=" + (dir / (name + ".exr")).string() +
+                        " --set output.png=" + (dir / (name + ".png")).string() +
+                        " --set output.rgba=" + (dir / (name + ".npy")).string() + extra);
+    };
+    auto bytes = [&](const std::string& file) {
+        std::ifstream in(dir / file, std::ios::binary);
+        return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    RunResult r = render("plain", "");
+    ASSERT_EQ(r.code, 0) << r.out;
+    r = render("marked", " --set outline=true --set slices.0.point=[0,0,0]"
+                         " --set slices.0.normal=[0,0,1]"
+                         " --set 'slices.0.color_tf={map: viridis}' --set legend=true");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(r.out.find("warning"), std::string::npos) << r.out;
+    r = render("outlined", " --set outline.color=[0,0,0]");
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(bytes("plain.npy"), bytes("outlined.npy"));
+    EXPECT_EQ(bytes("plain.exr"), bytes("outlined.exr"));
+    EXPECT_NE(bytes("plain.png"), bytes("outlined.png"));
+    EXPECT_NE(bytes("plain.png"), bytes("marked.png"));
+
+    r = RunHpray("render " + scene + " --set outline.widht=2");
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("outline.widht"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("did you mean 'width'"), std::string::npos) << r.out;
+    r = RunHpray("render " + scene + " --set legend=maybe");
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("legend"), std::string::npos) << r.out;
+    r = render("empty", " --set legend=true --strict");
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("there is no legend to draw"), std::string::npos) << r.out;
     fs::remove_all(dir);
 }
 

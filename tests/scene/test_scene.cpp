@@ -1235,3 +1235,65 @@ TEST(SceneDocsTest, EveryKeyIsDocumented) {
 
 }  // namespace
 }  // namespace hpray
+
+// ---------------------------------------------------------------------------------------
+// Annotations: outline and legend
+// ---------------------------------------------------------------------------------------
+
+namespace hpray {
+namespace {
+
+TEST(AnnotationKeysTest, OutlineAndLegendParse) {
+    const std::string m = kMinimal;
+    const Scene none = ParseScene(m, "t.yaml");
+    EXPECT_FALSE(none.outline.enabled);
+    EXPECT_FALSE(none.legend);
+    const Scene on = ParseScene(m + "outline: true\nlegend: true\n", "t.yaml");
+    EXPECT_TRUE(on.outline.enabled);
+    EXPECT_FALSE(on.outline.color.has_value());
+    EXPECT_EQ(on.outline.width, 1.5);
+    EXPECT_TRUE(on.legend);
+    EXPECT_FALSE(ParseScene(m + "outline: false\n", "t.yaml").outline.enabled);
+    const Scene styled =
+        ParseScene(m + "outline: {color: [1, 0, 0.5], width: 3}\n", "t.yaml");
+    EXPECT_TRUE(styled.outline.enabled);
+    EXPECT_EQ(*styled.outline.color, (std::array<double, 3>{1, 0, 0.5}));
+    EXPECT_EQ(styled.outline.width, 3.0);
+    EXPECT_TRUE(ParseScene(m + "outline: {}\n", "t.yaml").outline.enabled);
+    // --set: a colour or width asks for an outline, even over `outline: true` or `false`.
+    for (const char* given : {"", "outline: true\n", "outline: false\n"}) {
+        const Scene set = ParseScene(m + given, "t.yaml", {"outline.width=2.5"});
+        EXPECT_TRUE(set.outline.enabled) << given;
+        EXPECT_EQ(set.outline.width, 2.5) << given;
+    }
+    EXPECT_TRUE(ParseScene(m, "t.yaml", {"outline=true", "legend=true"}).legend);
+    EXPECT_FALSE(ParseScene(m + "outline: true\n", "t.yaml", {"outline=null"}).outline.enabled);
+}
+
+TEST(AnnotationKeysTest, BadValuesNameTheKey) {
+    const std::string m = kMinimal;
+    const std::pair<std::string, std::string> cases[] = {
+        {"outline: 2\n", "outline"},
+        {"outline: yes please\n", "outline"},
+        {"outline:\n", "outline"},
+        {"outline: [1, 2]\n", "outline"},
+        {"outline: {width: 0}\n", "outline.width"},
+        {"outline: {width: 17}\n", "outline.width"},
+        {"outline: {color: [2, 0, 0]}\n", "outline.color"},
+        {"outline: {colour: [1, 0, 0]}\n", "outline.colour"},
+        {"legend: yes\n", "legend"},
+        {"legend: {bars: 2}\n", "legend"},
+        {"legends: true\n", "legends"},
+    };
+    for (const auto& [yaml, key] : cases) {
+        const std::string error = ErrorOf(m + yaml);
+        EXPECT_TRUE(Contains(error, key)) << yaml << " -> " << error;
+        EXPECT_FALSE(Contains(error, "NO ERROR")) << yaml;
+    }
+    EXPECT_TRUE(Contains(ErrorOf(m + "outline: {colour: [1, 0, 0]}\n"), "did you mean 'color'"));
+    EXPECT_TRUE(Contains(ErrorOf(m + "legends: true\n"), "did you mean 'legend'"));
+    EXPECT_TRUE(Contains(ErrorOf(m, {"outline.widht=2"}), "outline.widht"));
+}
+
+}  // namespace
+}  // namespace hpray
