@@ -125,5 +125,34 @@ TEST(AutoView, FramesEverySharedMesh) {
     EXPECT_EQ(checked, static_cast<int>(meshes.size() * cameras.size()));
 }
 
+// A scene with nothing but the data and `volume: {color_field: u}` (default transfer
+// functions, automatic camera) gives a picture with substance: over the pixels the volume
+// covers (alpha > 1e-3, at least 30% of the image) the mean opacity is at least 0.5 and
+// the most opaque pixel at least 0.8, yet at most 35% of them are opaque (alpha > 0.95).
+// An extinction ramp to 4 / diagonal gave a pale fog (mean 0.35 to 0.45 here).
+TEST(AutoView, DefaultVolumeIsNeitherFaintNorOpaque) {
+    for (const std::string spec : {"builtin:ball-p2", "builtin:cube-tets-4", "builtin:nk-sinc"}) {
+        const Scene scene = ParseScene("data: {mesh: \"" + spec + "\"}\n"
+                                       "volume: {color_field: u}\n"
+                                       "camera: {width: 64, height: 64}\n",
+                                       "auto_view.yaml");
+        RenderStats stats;
+        const Image image = RenderMeshJob(MakeBuiltin(spec), scene, stats);
+        std::size_t covered = 0, opaque = 0;
+        double sum = 0, most = 0;
+        for (const double a : image.a) {
+            if (!(a > 1e-3)) continue;
+            ++covered;
+            opaque += a > 0.95;
+            sum += a;
+            most = std::max(most, a);
+        }
+        ASSERT_GE(covered, image.a.size() * 3 / 10) << spec;
+        EXPECT_GE(sum / covered, 0.5) << spec;
+        EXPECT_GE(most, 0.8) << spec;
+        EXPECT_LE(opaque, covered * 35 / 100) << spec;
+    }
+}
+
 }  // namespace
 }  // namespace hpray

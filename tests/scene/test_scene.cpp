@@ -1023,7 +1023,7 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     EXPECT_EQ(constant.volume->colorTf.front().scalar, 2.0);
     EXPECT_EQ(constant.volume->colorTf.back().scalar, 6.0);
     // A volume with only its field: viridis over the field and an extinction ramp from 0
-    // to 4 / (the data's diagonal), an optical depth of about 1 through the data.
+    // to 10 / (the data's diagonal).
     Scene bare = ParseScene(std::string(kMinimal) + "volume: {color_field: u}\n", "t.yaml");
     ASSERT_TRUE(bare.volume);
     EXPECT_TRUE(bare.volume->defaultExtinction);
@@ -1037,7 +1037,7 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     EXPECT_EQ(bare.volume->extinctionTf[0].scalar, -1.0);
     EXPECT_EQ(bare.volume->extinctionTf[0].extinction, 0.0);
     EXPECT_EQ(bare.volume->extinctionTf[1].scalar, 3.0);
-    EXPECT_EQ(bare.volume->extinctionTf[1].extinction, 0.5);
+    EXPECT_EQ(bare.volume->extinctionTf[1].extinction, 1.25);
     EXPECT_EQ(bare.volume->colorTf.size(), 33u);
     EXPECT_EQ(bare.volume->colorTf.front().rgb, ExpandColorMap("viridis", -1, 3).front().rgb);
     // Slices too.
