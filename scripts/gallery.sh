@@ -26,7 +26,8 @@ for arg in "$@"; do
   case "$arg" in
     --newcomer) newcomer=1 ;;
     --thumbs) thumbs=1 ;;
-    -h|--help) sed -n 2,19p "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "${BASH_SOURCE[0]}"
+       exit 0 ;;
     -*) echo "gallery.sh: unknown option $arg" >&2; exit 2 ;;
     *) out="$arg" ;;
   esac
