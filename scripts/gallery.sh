@@ -59,6 +59,7 @@ if [ $newcomer -eq 1 ]; then
   : > "$list"
   for mesh in "$DATA"/*.vtu "$DATA"/*.msh; do
     name="$(basename "${mesh%.*}")"
+    field=""
     step "newcomer scenes of $name"
     # The field to show and the middle of its range, from hpray info.
     read -r field mid < <("$HPRAY" info "$mesh" --json 2>/dev/null | /usr/bin/python3 -c '
@@ -69,7 +70,11 @@ for f in ["u", "solution", "displacement_magnitude", "pressure", "analytic"]:
         lo, hi = fields[f]["range"]
         print(f, repr(0.5 * (lo + hi)))
         break
-')
+') || true
+    if [ -z "${field:-}" ]; then
+      echo "    no scalar field among u, solution, displacement_magnitude, pressure, analytic: skipped"
+      continue
+    fi
     printf 'data: {mesh: "%s"}\nisosurfaces: [{field: %s, value: %s}]\n' \
       "$mesh" "$field" "$mid" > "$dir/$name.iso.yaml"
     printf 'data: {mesh: "%s"}\nvolume: {color_field: %s}\n' "$mesh" "$field" \
