@@ -106,6 +106,7 @@ ViewOrigin ViewOriginOf(const SceneCamera& camera) {
 
 void FitCamera(SceneCamera& camera, const Box& bounds, const std::optional<Box>& clip) {
     if (!camera.autoFit) return;
+    constexpr double kAutoFill = 0.9;  // the box fills 90% of the view where it is tightest
     using V = std::array<double, 3>;
     auto dot = [](const V& a, const V& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
     auto cross = [](const V& a, const V& b) {
@@ -177,9 +178,27 @@ void FitCamera(SceneCamera& camera, const Box& bounds, const std::optional<Box>&
         camera.orthoHeight /= camera.zoom;
         distance = 2 * radius;
     } else {
-        const double halfY = 0.5 * camera.fovYDegrees * M_PI / 180;
-        const double halfX = std::atan(std::tan(halfY) * aspect);
-        distance = radius / std::sin(std::min(halfX, halfY)) / camera.zoom;
+        // The nearest eye from which every corner of the box lies within kAutoFill of the
+        // image's half-width and half-height about its centre (camera.h: Camera::RayAt):
+        // a corner at c (from the centre) has depth distance + c.forward and needs
+        // |c.right| <= kAutoFill tx depth and |c.trueUp| <= kAutoFill ty depth. The box is
+        // the hull of its corners, so all of it is then in view.
+        const V forward = {-eye[0], -eye[1], -eye[2]};
+        const V right = unit(cross(forward, up));
+        const V trueUp = cross(right, forward);
+        const double ty = std::tan(0.5 * camera.fovYDegrees * M_PI / 180), tx = ty * aspect;
+        distance = 0;
+        for (int q = 0; q < 8; ++q) {
+            V corner;
+            for (int d = 0; d < 3; ++d) corner[d] = ((q >> d) & 1 ? hi[d] : lo[d]) - centre[d];
+            const double depth = dot(corner, forward);
+            distance = std::max({distance,
+                                 std::fabs(dot(corner, right)) / (kAutoFill * tx) - depth,
+                                 std::fabs(dot(corner, trueUp)) / (kAutoFill * ty) - depth,
+                                 // never at a corner (a flat box seen edge-on)
+                                 1e-3 * radius - depth});
+        }
+        distance /= camera.zoom;
     }
     for (int d = 0; d < 3; ++d) camera.position[d] = centre[d] + distance * eye[d];
     camera.lookAt = centre;

@@ -74,10 +74,11 @@ ViewOrigin ViewOriginOf(const SceneCamera& camera);
 /// guaranteed bounds are `bounds`, seen through `clip` when the scene has a clip box
 /// (their intersection is what is fitted): look_at is the box's centre (or the given
 /// look_at), the eye is on the side `view` names (iso: along (1, 1, 1)), turned by
-/// `azimuth` about `up` and raised by `elevation` toward it, and so far away that the
-/// sphere around the box fits the image's smaller field of view, divided by `zoom`
-/// (orthographic cameras keep that distance; their ortho_height is the given one over
-/// `zoom`). Without a given up: +y, or -z and +z for views from +y and -y. The camera is
+/// `azimuth` about `up` and raised by `elevation` toward it, at the distance from which
+/// the box's projection just fits 90% of the image's width and height about the image
+/// centre (the nearest such eye; the limiting side is 90% filled), divided by `zoom`
+/// (orthographic cameras stay outside the sphere around the box; their ortho_height is the
+/// given one over `zoom`). Without a given up: +y, or -z and +z for views from +y and -y. The camera is
 /// then an ordinary one (autoFit false). Does nothing to a camera that is not automatic.
 void FitCamera(SceneCamera& camera, const Box& bounds, const std::optional<Box>& clip);
 

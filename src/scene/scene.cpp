@@ -1391,7 +1391,9 @@ void ResolveColorMaps(
         if (v.defaultExtinction) {
             const auto r = rangeOf(v.extinctionField.empty() ? v.colorField : v.extinctionField);
             const double size = dataSize > 0 && std::isfinite(dataSize) ? dataSize : 1.0;
-            v.extinctionTf = {{r[0], 0.0}, {r[1], 4.0 / size}};
+            // 10 / diagonal: rays through typical data meet an optical depth of about 1 to
+            // 3 where the field is high, so its colours show and little is opaque.
+            v.extinctionTf = {{r[0], 0.0}, {r[1], 10.0 / size}};
         }
     }
     for (SceneSlice& s : scene.slices) resolve(s.colorMap, s.field, s.colorTf);

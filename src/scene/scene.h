@@ -145,9 +145,9 @@ struct SceneVolume {
     std::optional<ColorMapRequest> colorMap;  ///< as SceneSlice::colorMap
     /// [[s, sigma], ...], >= 1 point, s strictly increasing, sigma >= 0. Without
     /// extinction_tf (defaultExtinction): a ramp from 0 at the field's minimum over the
-    /// data to 4 / (the data's diagonal) at its maximum, so that a ray through the data
-    /// meets an optical depth of about 1 (ResolveColorMaps). Without color_tf: viridis
-    /// over the field's range.
+    /// data to 10 / (the data's diagonal) at its maximum, so that rays through the data
+    /// meet an optical depth of about 1 to 3 where the field is high (ResolveColorMaps).
+    /// Without color_tf: viridis over the field's range.
     std::vector<ExtinctionControlPoint> extinctionTf;
     bool defaultExtinction = false;
 };

@@ -297,7 +297,7 @@ TEST(Cli, VectorFieldUsedAsItsMagnitudeIsAWarning) {
 }
 
 // A volume given only its field is visible and not opaque: the default transfer functions
-// put an optical depth of about 1 through the data.
+// put an optical depth of about 1 to 3 through the data where the field is high.
 TEST(Cli, DefaultVolumeIsNeitherInvisibleNorOpaque) {
     namespace fs = std::filesystem;
     const fs::path dir = fs::temp_directory_path() / "hpray_test_cli_default_volume";

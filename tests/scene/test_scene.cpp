@@ -865,8 +865,9 @@ void ExpectBoxInView(const SceneCamera& c, const Box& box, const std::string& wh
 }
 
 // The fitted view holds the whole box from every side, aspect and zoom 1, and is tight:
-// the sphere about the box touches the narrower side of the view; the views look from the
-// side they name, azimuth turns about up and elevation raises toward it.
+// the box's projection fills 90% of the view's width or height about the image centre;
+// the views look from the side they name, azimuth turns about up and elevation raises
+// toward it.
 TEST(AutoCameraTest, FitsTheBoxFromEverySide) {
     const Box box{{-1.0, 2.0, 0.5}, {3.0, 2.5, 4.0}};
     const double cx = 1.0, cy = 2.25, cz = 2.25;
@@ -884,11 +885,26 @@ TEST(AutoCameraTest, FitsTheBoxFromEverySide) {
                                      std::to_string(h);
             EXPECT_EQ(c.lookAt, (std::array<double, 3>{cx, cy, cz})) << what;
             ExpectBoxInView(c, box, what);
-            const double halfY = 0.5 * c.fovYDegrees * M_PI / 180;
-            const double half = std::min(halfY, std::atan(std::tan(halfY) * w / h));
-            const double distance = std::hypot(c.position[0] - cx, c.position[1] - cy,
-                                               c.position[2] - cz);
-            EXPECT_NEAR(distance * std::sin(half), radius, 1e-12 * radius) << what;
+            // The largest share of the half-width or half-height a corner takes is 0.9.
+            const Camera camera(c);
+            const double ty = std::tan(0.5 * c.fovYDegrees * M_PI / 180), tx = ty * w / h;
+            double fill = 0;
+            for (int q = 0; q < 8; ++q) {
+                double along = 0, right = 0, upward = 0;
+                for (int d = 0; d < 3; ++d) {
+                    const double x = ((q >> d) & 1 ? box.hi[d] : box.lo[d]) - c.position[d];
+                    along += x * camera.Forward()[d];
+                    right += x * camera.Right()[d];
+                    upward += x * camera.TrueUp()[d];
+                }
+                fill = std::max({fill, std::fabs(right) / (tx * along),
+                                 std::fabs(upward) / (ty * along)});
+            }
+            EXPECT_NEAR(fill, 0.9, 1e-12) << what;
+            // No farther than where the sphere about the box fills 90% of the view.
+            EXPECT_LE(std::hypot(c.position[0] - cx, c.position[1] - cy, c.position[2] - cz),
+                      radius / std::sin(std::atan(0.9 * std::min(tx, ty))) * (1 + 1e-12))
+                << what;
         }
     SceneCamera c;
     c.autoFit = true;
@@ -1007,7 +1023,7 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     EXPECT_EQ(constant.volume->colorTf.front().scalar, 2.0);
     EXPECT_EQ(constant.volume->colorTf.back().scalar, 6.0);
     // A volume with only its field: viridis over the field and an extinction ramp from 0
-    // to 4 / (the data's diagonal), an optical depth of about 1 through the data.
+    // to 10 / (the data's diagonal).
     Scene bare = ParseScene(std::string(kMinimal) + "volume: {color_field: u}\n", "t.yaml");
     ASSERT_TRUE(bare.volume);
     EXPECT_TRUE(bare.volume->defaultExtinction);
@@ -1021,7 +1037,7 @@ TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     EXPECT_EQ(bare.volume->extinctionTf[0].scalar, -1.0);
     EXPECT_EQ(bare.volume->extinctionTf[0].extinction, 0.0);
     EXPECT_EQ(bare.volume->extinctionTf[1].scalar, 3.0);
-    EXPECT_EQ(bare.volume->extinctionTf[1].extinction, 0.5);
+    EXPECT_EQ(bare.volume->extinctionTf[1].extinction, 1.25);
     EXPECT_EQ(bare.volume->colorTf.size(), 33u);
     EXPECT_EQ(bare.volume->colorTf.front().rgb, ExpandColorMap("viridis", -1, 3).front().rgb);
     // Slices too.
