@@ -116,6 +116,73 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     return s;
 }
 
+namespace {
+using CostClock = std::chrono::steady_clock;
+
+/// Appends the cost sample of each segment of a ray as its work ends (see
+/// SegmentCostSample); inactive when `out` is null.
+class SegmentCostRecorder {
+  public:
+    SegmentCostRecorder(std::vector<SegmentCostSample>* out, const Ray& ray,
+                        const std::vector<Segment>& segments, double traceSeconds)
+        : out_(out), ray_(ray), segments_(segments) {
+        if (!out_ || segments.empty()) return;
+        traceShare_ = traceSeconds / static_cast<double>(segments.size());
+        start_ = CostClock::now();
+    }
+    /// Whether costs are being measured (else every call is a no-op).
+    bool Active() const { return out_ != nullptr; }
+    /// Segment `index`'s work is done (called for every segment reached, in order).
+    void Done(std::size_t index) {
+        if (!out_) return;
+        const auto now = CostClock::now();
+        Add(index, std::chrono::duration<double>(now - start_).count());
+        start_ = now;
+        next_ = index + 1;
+        if (pending_) {
+            occluded_ = true;
+            std::copy(stop_, stop_ + 3, occluder_);
+            pending_ = false;
+        }
+    }
+    /// The ray would have stopped at t (inside the current segment): later segments are
+    /// occluded from here.
+    void Stopped(double t) {
+        pending_ = true;
+        for (int d = 0; d < 3; ++d) stop_[d] = ray_.origin[d] + t * ray_.dir[d];
+    }
+    /// The segments never reached (after an opaque hit) cost their traversal share.
+    ~SegmentCostRecorder() {
+        if (!out_) return;
+        for (std::size_t i = next_; i < segments_.size(); ++i) Add(i, 0.0);
+    }
+
+  private:
+    void Add(std::size_t index, double work) {
+        const Segment& seg = segments_[index];
+        SegmentCostSample s;
+        s.cell = seg.cell;
+        for (int d = 0; d < 3; ++d) {
+            s.enter[d] = ray_.origin[d] + seg.tEnter * ray_.dir[d];
+            s.exit[d] = ray_.origin[d] + seg.tExit * ray_.dir[d];
+        }
+        s.seconds = static_cast<float>(work + traceShare_);
+        s.occluded = occluded_;
+        std::copy(occluder_, occluder_ + 3, s.occluder);
+        out_->push_back(s);
+    }
+
+    std::vector<SegmentCostSample>* out_;
+    const Ray& ray_;
+    const std::vector<Segment>& segments_;
+    double traceShare_ = 0;
+    CostClock::time_point start_;
+    std::size_t next_ = 0;
+    bool occluded_ = false, pending_ = false;
+    double occluder_[3] = {0, 0, 0}, stop_[3] = {0, 0, 0};
+};
+}  // namespace
+
 /// Per-thread scratch of the ray loop: grown once, then reused without allocation.
 class RayIntegrator {
   public:
@@ -125,12 +192,36 @@ class RayIntegrator {
                    std::vector<SegmentCostSample>* costSamples = nullptr);
 
   private:
+    /// Something the ray meets at one point of a segment: an isosurface root or a slice
+    /// plane. The volume is the continuous source, integrated between events.
     struct Event {
         double t;
         int iso;  ///< isosurface index, or -1 for a slice
         double residual;
         int slice = -1;  ///< slice index, or -1 for an isosurface
     };
+    // Event sources. Each appends the events of one segment to events_ (the compositing
+    // loop sorts them): a new kind of effect is one more source.
+    void BeginRaySources(const BrickSetup& setup, const Ray& ray);
+    /// Marks the isosurfaces whose value lies in the cell's guaranteed field range; true
+    /// if any does.
+    bool IsoSourceRelevant(const BrickSetup& setup, const Segment& seg);
+    /// The roots of the relevant isosurfaces (opaque ones first; the first opaque hit
+    /// bounds the search of the others); returns that bound (+inf if none).
+    double IsoSource(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                     const RaySpan& span, RenderCounters& counters);
+    /// The slice planes this segment owns (a plane through a face shared by two segments
+    /// belongs to the second); true if any.
+    bool SliceSource(const BrickSetup& setup, const Segment& seg, bool openStart,
+                     bool closedEnd);
+    /// The one front-to-back loop: volume up to each event, the event, ..., the rest of
+    /// the segment up to `cutoff`. True when the ray is done (opaque).
+    bool Composite(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                   double cutoff, bool volumeHere, RayComposite& composite, Pixel& out,
+                   RenderCounters& counters, SegmentCostRecorder& recorder);
+    /// Where the ray turns opaque at t: true (stop) when rendering; the cost observer
+    /// instead notes t and lets the ray go on, to measure what lies behind.
+    static bool StopsHere(double t, RayComposite& composite, SegmentCostRecorder& recorder);
     void Shade(const BrickSetup& setup, const Ray& ray, std::int64_t cell, const Event& e,
                SegmentField& field, Pixel& out, double& transmittance,
                RenderCounters& counters);
@@ -221,70 +312,6 @@ void RayIntegrator::Shade(const BrickSetup& setup, const Ray& ray, std::int64_t 
     counters.isoResidualMax = std::max(counters.isoResidualMax, e.residual);
 }
 
-namespace {
-using CostClock = std::chrono::steady_clock;
-
-/// Appends the cost sample of each segment of a ray as its work ends (see
-/// SegmentCostSample); inactive when `out` is null.
-class SegmentCostRecorder {
-  public:
-    SegmentCostRecorder(std::vector<SegmentCostSample>* out, const Ray& ray,
-                        const std::vector<Segment>& segments, double traceSeconds)
-        : out_(out), ray_(ray), segments_(segments) {
-        if (!out_ || segments.empty()) return;
-        traceShare_ = traceSeconds / static_cast<double>(segments.size());
-        start_ = CostClock::now();
-    }
-    /// Segment `index`'s work is done (called for every segment reached, in order).
-    void Done(std::size_t index) {
-        if (!out_) return;
-        const auto now = CostClock::now();
-        Add(index, std::chrono::duration<double>(now - start_).count());
-        start_ = now;
-        next_ = index + 1;
-        if (pending_) {
-            occluded_ = true;
-            std::copy(stop_, stop_ + 3, occluder_);
-            pending_ = false;
-        }
-    }
-    /// The ray would have stopped at t (inside the current segment): later segments are
-    /// occluded from here.
-    void Stopped(double t) {
-        pending_ = true;
-        for (int d = 0; d < 3; ++d) stop_[d] = ray_.origin[d] + t * ray_.dir[d];
-    }
-    /// The segments never reached (after an opaque hit) cost their traversal share.
-    ~SegmentCostRecorder() {
-        if (!out_) return;
-        for (std::size_t i = next_; i < segments_.size(); ++i) Add(i, 0.0);
-    }
-
-  private:
-    void Add(std::size_t index, double work) {
-        const Segment& seg = segments_[index];
-        SegmentCostSample s;
-        s.cell = seg.cell;
-        for (int d = 0; d < 3; ++d) {
-            s.enter[d] = ray_.origin[d] + seg.tEnter * ray_.dir[d];
-            s.exit[d] = ray_.origin[d] + seg.tExit * ray_.dir[d];
-        }
-        s.seconds = static_cast<float>(work + traceShare_);
-        s.occluded = occluded_;
-        std::copy(occluder_, occluder_ + 3, s.occluder);
-        out_->push_back(s);
-    }
-
-    std::vector<SegmentCostSample>* out_;
-    const Ray& ray_;
-    const std::vector<Segment>& segments_;
-    double traceShare_ = 0;
-    CostClock::time_point start_;
-    std::size_t next_ = 0;
-    bool occluded_ = false, pending_ = false;
-    double occluder_[3] = {0, 0, 0}, stop_[3] = {0, 0, 0};
-};
-}  // namespace
 
 void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& out,
                               RenderCounters& counters,
@@ -294,8 +321,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
     RaySpan span{setup.tNear, setup.tFar};
     if (setup.clipBox && !ClipRayToBox(ray, *setup.clipBox, span)) return;
     const bool hasVolume = setup.volume.has_value();
-    const std::size_t nSlices = setup.slices.size();
-    if (!(span.t0 < span.t1) || (setup.isos.empty() && !hasVolume && nSlices == 0)) return;
+    if (!(span.t0 < span.t1) ||
+        (setup.isos.empty() && !hasVolume && setup.slices.empty()))
+        return;
     // The traverser clips to its brick box by the same arithmetic, so segments cut by a
     // clip plane start or end exactly at tMin / tMax. The brick owns the points of the
     // span (geom/box.h): where an end is open, a neighbouring brick owns that point, so
@@ -306,29 +334,13 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         costSamples ? CostClock::now() : CostClock::time_point{};
     setup.traverser->Trace(ray, tMin, tMax, segments_);
     counters.segments += static_cast<double>(segments_.size());
-    const bool measure = costSamples != nullptr;
     SegmentCostRecorder recorder(
         costSamples, ray, segments_,
         costSamples ? std::chrono::duration<double>(CostClock::now() - traceStart).count()
                     : 0.0);
-    const std::size_t nIso = setup.isos.size();
-    lastHit_.assign(nIso, -std::numeric_limits<double>::infinity());
-    relevant_.resize(nIso);
-    // Ray parameter of each slice plane (NaN for a ray parallel to it).
-    sliceT_.resize(nSlices);
-    for (std::size_t k = 0; k < nSlices; ++k) {
-        const BrickSetup::Slice& sl = setup.slices[k];
-        double nd = 0, no = 0;
-        for (int d = 0; d < 3; ++d) {
-            nd += sl.normal[d] * ray.dir[d];
-            no += sl.normal[d] * ray.origin[d];
-        }
-        sliceT_[k] =
-            nd != 0 ? (sl.offset - no) / nd : std::numeric_limits<double>::quiet_NaN();
-    }
+    BeginRaySources(setup, ray);
     RayComposite composite;
     composite.rgba = out.rgba;
-    double& transmittance = composite.transmittance;
     if (hasVolume && !segments_.empty())
         marcher_.BeginRay(*setup.volume, ray, segments_.front().tEnter,
                           segments_.back().tExit);
@@ -344,168 +356,36 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             recorder.Done(si);
             continue;
         }
-        bool any = false;
-        for (std::size_t k = 0; k < nIso; ++k) {
-            const Interval& r = (*setup.cellRanges[setup.isos[k].field])[seg.cell];
-            relevant_[k] = setup.isos[k].value >= r.lo && setup.isos[k].value <= r.hi;
-            any |= relevant_[k] != 0;
-        }
-        // A plane through a face shared by two segments belongs to the second; the end of
-        // the last segment of a run inside the mesh is closed.
-        bool anySlice = false;
+        // The sources of this segment: isosurfaces whose field's guaranteed range holds
+        // their value, slice planes it owns, and the volume unless its transfer functions
+        // map the cell's guaranteed ranges to nothing (empty-space skipping).
+        events_.clear();
+        const bool isoHere = IsoSourceRelevant(setup, seg);
         const bool closedEnd =
             (si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit) &&
             (seg.tExit != tMax || span.closed1);
         const bool openStart = seg.tEnter == tMin && !span.closed0;
-        auto sliceHere = [&](double t) {
-            return (t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
-                   (t < seg.tExit || (closedEnd && t == seg.tExit));
-        };
-        for (std::size_t k = 0; k < nSlices; ++k) anySlice |= sliceHere(sliceT_[k]);
-        // Empty-space skipping: BeginSegment evaluates nothing in cells whose guaranteed
-        // ranges map to no extinction (and no glow).
+        const bool sliceHere = SliceSource(setup, seg, openStart, closedEnd);
         const bool volumeHere =
             hasVolume &&
             marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
-        if (!any && !anySlice && !volumeHere) {
+        if (!isoHere && !sliceHere && !volumeHere) {
             counters.segmentsCulled += 1;
             recorder.Done(si);
             continue;
         }
         volumeSeen |= volumeHere;
-        events_.clear();
-        double cutoff = std::numeric_limits<double>::infinity();
-        const std::size_t nFields = setup.fields.size();
-        if (pieces_.size() < nFields) pieces_.resize(nFields);
-        fieldUsed_.assign(nFields, 0);
-        for (std::size_t k = 0; k < nIso; ++k)
-            if (relevant_[k]) fieldUsed_[setup.isos[k].field] = 1;
-        // Opaque isosurfaces first: their first hit bounds the search of the others.
-        for (int pass = 0; pass < 2; ++pass)
-            for (std::size_t f = 0; f < nFields; ++f) {
-                if (!fieldUsed_[f]) continue;
-                bool any = false;
-                for (std::size_t k = 0; k < nIso; ++k)
-                    any |= relevant_[k] && setup.isos[k].field == int(f) &&
-                           (setup.isos[k].opacity >= 1) == (pass == 0);
-                if (!any) continue;
-                field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f],
-                             seg.cell, ray, setup.inversion);
-                if (fieldUsed_[f] == 1) {  // project once per field and segment
-                    fieldUsed_[f] = 2;
-                    // Rule the segment out cheaply when the mean value theorem proves
-                    // that no isovalue of this field is crossed in it.
-                    isoValues_.clear();
-                    for (std::size_t k = 0; k < nIso; ++k)
-                        if (relevant_[k] && setup.isos[k].field == int(f))
-                            isoValues_.push_back(setup.isos[k].value);
-                    if (!field_.MayReach(isoValues_.data(), int(isoValues_.size()),
-                                         seg.tEnter, seg.tExit)) {
-                        for (std::size_t k = 0; k < nIso; ++k)
-                            if (setup.isos[k].field == int(f)) relevant_[k] = 0;
-                        fieldUsed_[f] = 0;
-                        field_.AddCountersTo(counters);
-                        continue;
-                    }
-                    ProjectionOptions projection = setup.projection;
-                    projection.scaleFloor = setup.fieldScale[f];
-                    if (field_.ExactAlongLine())
-                        projection.exactDegree = std::max(1, field_.LineDegree());
-                    projectionStats_ = ProjectionStats{};
-                    ProjectSegment(field_, seg.tEnter, seg.tExit, projection, pieces_[f],
-                                   projectionStats_, scratch_);
-                    counters.projections += projectionStats_.pieces;
-                    counters.projectionOrderSum += projectionStats_.degreeSum;
-                    counters.projectionOrderMax = std::max<double>(
-                        counters.projectionOrderMax, projectionStats_.maxDegree);
-                    counters.projectionUnconverged += projectionStats_.unconverged;
-                }
-                for (std::size_t k = 0; k < nIso; ++k) {
-                    const BrickSetup::Iso& iso = setup.isos[k];
-                    if (!relevant_[k] || iso.field != int(f) ||
-                        (iso.opacity >= 1) != (pass == 0))
-                        continue;
-                    double previous = lastHit_[k];
-                    RootOptions roots = setup.roots;
-                    roots.residualTarget = iso.residualTarget;
-                    const int failures =
-                        FindRoots(field_, pieces_[f], iso.value, roots, scratch_,
-                                  [&](const RootResult& r) {
-                                      if (r.t > cutoff) return true;
-                                      if (!span.Holds(r.t)) return false;
-                                      if (r.t - previous <= setup.duplicateDistance)
-                                          return false;
-                                      previous = r.t;
-                                      events_.push_back({r.t, int(k), r.residual});
-                                      if (iso.opacity >= 1) {
-                                          cutoff = std::min(cutoff, r.t);
-                                          return true;
-                                      }
-                                      return false;
-                                  });
-                    counters.rootFailures += failures;
-                }
-                field_.AddCountersTo(counters);
-            }
-        if (anySlice)
-            for (std::size_t k = 0; k < nSlices; ++k) {
-                const double t = sliceT_[k];
-                if (sliceHere(t)) events_.push_back({t, -1, 0.0, int(k)});
-            }
+        const double cutoff =
+            isoHere ? IsoSource(setup, ray, seg, span, counters)
+                    : std::numeric_limits<double>::infinity();
         std::sort(events_.begin(), events_.end(), [](const Event& a, const Event& b) {
             return a.t < b.t || (a.t == b.t && (a.iso < b.iso ||
                                                 (a.iso == b.iso && a.slice < b.slice)));
         });
-        // Front to back: the volume up to each event, the event, ..., the rest.
-        int loaded = -1;
-        double tDone = seg.tEnter;
-        bool stop = false;
-        for (const Event& e : events_) {
-            if (e.t > cutoff) break;
-            if (volumeHere) {
-                stop = marcher_.Integrate(tDone, e.t, composite, counters);
-                tDone = std::max(tDone, e.t);
-                if (stop && measure) {
-                    recorder.Stopped(e.t);
-                    transmittance = 1;
-                    stop = false;
-                }
-                if (stop) break;
-            }
-            if (e.slice >= 0) {
-                ShadeSlice(setup, ray, seg, e, composite, counters);
-            } else {
-                const int f = setup.isos[e.iso].field;
-                if (f != loaded) {
-                    field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f],
-                                 seg.cell, ray, setup.inversion);
-                    loaded = f;
-                }
-                lastHit_[e.iso] = e.t;
-                const double before[3] = {out.rgba[0], out.rgba[1], out.rgba[2]};
-                Shade(setup, ray, seg.cell, e, field_, out, transmittance, counters);
-                if (composite.depthError > 0)
-                    for (int c = 0; c < 3; ++c)
-                        composite.error[c] +=
-                            std::abs(out.rgba[c] - before[c]) * composite.depthError;
-            }
-            if (transmittance <= 0 && measure) {
-                recorder.Stopped(e.t);
-                transmittance = 1;
-            }
-            if (transmittance <= 0) break;
-        }
-        if (volumeHere && !stop && transmittance > 0)
-            stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite,
-                                      counters);
-        field_.AddCountersTo(counters);
-        if ((transmittance <= 0 || stop) && measure) {
-            recorder.Stopped(std::min(seg.tExit, cutoff));
-            transmittance = 1;
-            stop = false;
-        }
+        const bool done = Composite(setup, ray, seg, cutoff, volumeHere, composite, out,
+                                    counters, recorder);
         recorder.Done(si);
-        if (transmittance <= 0 || stop) break;
+        if (done) break;
     }
     if (volumeSeen) {
         marcher_.FinishRay(composite);
@@ -515,6 +395,178 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         counters.volumeErrorSqSum += out.volError * out.volError;
         counters.volumeErrorMax = std::max(counters.volumeErrorMax, out.volError);
     }
+}
+
+void RayIntegrator::BeginRaySources(const BrickSetup& setup, const Ray& ray) {
+    const std::size_t nIso = setup.isos.size(), nSlices = setup.slices.size();
+    lastHit_.assign(nIso, -std::numeric_limits<double>::infinity());
+    relevant_.resize(nIso);
+    // Ray parameter of each slice plane (NaN for a ray parallel to it).
+    sliceT_.resize(nSlices);
+    for (std::size_t k = 0; k < nSlices; ++k) {
+        const BrickSetup::Slice& sl = setup.slices[k];
+        double nd = 0, no = 0;
+        for (int d = 0; d < 3; ++d) {
+            nd += sl.normal[d] * ray.dir[d];
+            no += sl.normal[d] * ray.origin[d];
+        }
+        sliceT_[k] =
+            nd != 0 ? (sl.offset - no) / nd : std::numeric_limits<double>::quiet_NaN();
+    }
+}
+
+bool RayIntegrator::IsoSourceRelevant(const BrickSetup& setup, const Segment& seg) {
+    bool any = false;
+    for (std::size_t k = 0; k < setup.isos.size(); ++k) {
+        const Interval& r = (*setup.cellRanges[setup.isos[k].field])[seg.cell];
+        relevant_[k] = setup.isos[k].value >= r.lo && setup.isos[k].value <= r.hi;
+        any |= relevant_[k] != 0;
+    }
+    return any;
+}
+
+bool RayIntegrator::SliceSource(const BrickSetup& setup, const Segment& seg, bool openStart,
+                                bool closedEnd) {
+    // A plane through a face shared by two segments belongs to the second; the end of the
+    // last segment of a run inside the mesh is closed.
+    bool any = false;
+    for (std::size_t k = 0; k < setup.slices.size(); ++k) {
+        const double t = sliceT_[k];
+        if ((t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
+            (t < seg.tExit || (closedEnd && t == seg.tExit))) {
+            events_.push_back({t, -1, 0.0, int(k)});
+            any = true;
+        }
+    }
+    return any;
+}
+
+double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                                const RaySpan& span, RenderCounters& counters) {
+    const std::size_t nIso = setup.isos.size();
+    double cutoff = std::numeric_limits<double>::infinity();
+    const std::size_t nFields = setup.fields.size();
+    if (pieces_.size() < nFields) pieces_.resize(nFields);
+    fieldUsed_.assign(nFields, 0);
+    for (std::size_t k = 0; k < nIso; ++k)
+        if (relevant_[k]) fieldUsed_[setup.isos[k].field] = 1;
+    // Opaque isosurfaces first: their first hit bounds the search of the others.
+    for (int pass = 0; pass < 2; ++pass)
+        for (std::size_t f = 0; f < nFields; ++f) {
+            if (!fieldUsed_[f]) continue;
+            bool any = false;
+            for (std::size_t k = 0; k < nIso; ++k)
+                any |= relevant_[k] && setup.isos[k].field == int(f) &&
+                       (setup.isos[k].opacity >= 1) == (pass == 0);
+            if (!any) continue;
+            field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell, ray,
+                         setup.inversion);
+            if (fieldUsed_[f] == 1) {  // project once per field and segment
+                fieldUsed_[f] = 2;
+                // Rule the segment out cheaply when the mean value theorem proves that no
+                // isovalue of this field is crossed in it.
+                isoValues_.clear();
+                for (std::size_t k = 0; k < nIso; ++k)
+                    if (relevant_[k] && setup.isos[k].field == int(f))
+                        isoValues_.push_back(setup.isos[k].value);
+                if (!field_.MayReach(isoValues_.data(), int(isoValues_.size()), seg.tEnter,
+                                     seg.tExit)) {
+                    for (std::size_t k = 0; k < nIso; ++k)
+                        if (setup.isos[k].field == int(f)) relevant_[k] = 0;
+                    fieldUsed_[f] = 0;
+                    field_.AddCountersTo(counters);
+                    continue;
+                }
+                ProjectionOptions projection = setup.projection;
+                projection.scaleFloor = setup.fieldScale[f];
+                if (field_.ExactAlongLine())
+                    projection.exactDegree = std::max(1, field_.LineDegree());
+                projectionStats_ = ProjectionStats{};
+                ProjectSegment(field_, seg.tEnter, seg.tExit, projection, pieces_[f],
+                               projectionStats_, scratch_);
+                counters.projections += projectionStats_.pieces;
+                counters.projectionOrderSum += projectionStats_.degreeSum;
+                counters.projectionOrderMax =
+                    std::max<double>(counters.projectionOrderMax, projectionStats_.maxDegree);
+                counters.projectionUnconverged += projectionStats_.unconverged;
+            }
+            for (std::size_t k = 0; k < nIso; ++k) {
+                const BrickSetup::Iso& iso = setup.isos[k];
+                if (!relevant_[k] || iso.field != int(f) || (iso.opacity >= 1) != (pass == 0))
+                    continue;
+                double previous = lastHit_[k];
+                RootOptions roots = setup.roots;
+                roots.residualTarget = iso.residualTarget;
+                const int failures = FindRoots(
+                    field_, pieces_[f], iso.value, roots, scratch_, [&](const RootResult& r) {
+                        if (r.t > cutoff) return true;
+                        if (!span.Holds(r.t)) return false;
+                        if (r.t - previous <= setup.duplicateDistance) return false;
+                        previous = r.t;
+                        events_.push_back({r.t, int(k), r.residual});
+                        if (iso.opacity >= 1) {
+                            cutoff = std::min(cutoff, r.t);
+                            return true;
+                        }
+                        return false;
+                    });
+                counters.rootFailures += failures;
+            }
+            field_.AddCountersTo(counters);
+        }
+    return cutoff;
+}
+
+bool RayIntegrator::StopsHere(double t, RayComposite& composite,
+                              SegmentCostRecorder& recorder) {
+    if (!recorder.Active()) return true;
+    // Measuring costs: note where the ray would have stopped and go on as if transparent,
+    // so the segments behind are measured too (and marked occluded).
+    recorder.Stopped(t);
+    composite.transmittance = 1;
+    return false;
+}
+
+bool RayIntegrator::Composite(const BrickSetup& setup, const Ray& ray, const Segment& seg,
+                              double cutoff, bool volumeHere, RayComposite& composite,
+                              Pixel& out, RenderCounters& counters,
+                              SegmentCostRecorder& recorder) {
+    double& transmittance = composite.transmittance;
+    int loaded = -1;
+    double tDone = seg.tEnter;
+    bool stop = false;
+    // Front to back: the volume up to each event, the event, ..., the rest.
+    for (const Event& e : events_) {
+        if (e.t > cutoff) break;
+        if (volumeHere) {
+            stop = marcher_.Integrate(tDone, e.t, composite, counters);
+            tDone = std::max(tDone, e.t);
+            if (stop && (stop = StopsHere(e.t, composite, recorder))) break;
+        }
+        if (e.slice >= 0) {
+            ShadeSlice(setup, ray, seg, e, composite, counters);
+        } else {
+            const int f = setup.isos[e.iso].field;
+            if (f != loaded) {
+                field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
+                             ray, setup.inversion);
+                loaded = f;
+            }
+            lastHit_[e.iso] = e.t;
+            const double before[3] = {out.rgba[0], out.rgba[1], out.rgba[2]};
+            Shade(setup, ray, seg.cell, e, field_, out, transmittance, counters);
+            if (composite.depthError > 0)
+                for (int c = 0; c < 3; ++c)
+                    composite.error[c] += std::abs(out.rgba[c] - before[c]) * composite.depthError;
+        }
+        if (transmittance <= 0 && StopsHere(e.t, composite, recorder)) break;
+    }
+    if (volumeHere && !stop && transmittance > 0)
+        stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite, counters);
+    field_.AddCountersTo(counters);
+    if (transmittance <= 0 || stop)
+        return StopsHere(std::min(seg.tExit, cutoff), composite, recorder);
+    return false;
 }
 
 void IntegrateRay(const BrickSetup& setup, const Ray& ray, Pixel& sample,
