@@ -42,6 +42,10 @@ class MeshGeometry {
         const std::int64_t k = stored_.empty() ? (allStored_ ? c : -1) : stored_[c];
         return k >= 0 ? cells_[k] : Derive(c, scratch);
     }
+    /// True when cell c is a linear tetrahedron whose geometry is derived on request.
+    bool IsDerived(std::int64_t c) const {
+        return stored_.empty() ? !allStored_ : stored_[c] < 0;
+    }
     /// The basis of cell c.
     const BasisTable& Basis(std::int64_t c) const;
     /// A guaranteed world box of cell c (Bernstein hull of its nodes).

@@ -142,10 +142,56 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
     return d;
 }
 
+bool SegmentField::BeginLinearTet(const Mesh& mesh, std::int64_t c, const double* nodal,
+                                  const Ray& ray) {
+    const std::int64_t* nodes = mesh.CellNodes(c);
+    const double* p0 = &mesh.points[3 * nodes[0]];
+    double e[3][3], du[3];
+    for (int i = 0; i < 3; ++i) {
+        const double* p = &mesh.points[3 * nodes[i + 1]];
+        for (int d = 0; d < 3; ++d) e[i][d] = p[d] - p0[d];
+        du[i] = nodal[i + 1] - nodal[0];
+    }
+    // Solve E g = du (rows of E: the edges from corner 0) by Cramer's rule: E^-1 has the
+    // cross products of E's rows as columns, over det E.
+    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
+                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
+                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
+    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    if (det == 0 || !std::isfinite(det)) return false;
+    const double c1[3] = {e[2][1] * e[0][2] - e[2][2] * e[0][1],
+                          e[2][2] * e[0][0] - e[2][0] * e[0][2],
+                          e[2][0] * e[0][1] - e[2][1] * e[0][0]};
+    const double c2[3] = {e[0][1] * e[1][2] - e[0][2] * e[1][1],
+                          e[0][2] * e[1][0] - e[0][0] * e[1][2],
+                          e[0][0] * e[1][1] - e[0][1] * e[1][0]};
+    const double inv = 1.0 / det;
+    double rel = 0, slope = 0;
+    for (int d = 0; d < 3; ++d) {
+        worldGradient_[d] = (c0[d] * du[0] + c1[d] * du[1] + c2[d] * du[2]) * inv;
+        rel += worldGradient_[d] * (ray.origin[d] - p0[d]);
+        slope += worldGradient_[d] * ray.dir[d];
+    }
+    lineA_ = nodal[0] + rel;
+    lineB_ = slope;
+    linearTet_ = affine_ = exact_ = true;
+    lineDegree_ = 1;
+    gradBound_ = nullptr;
+    reductionMargin_ = 0;
+    hexOrder_ = 0;
+    scalar_.nodal = nodal;
+    scalar_.hexOrder = 0;
+    return true;
+}
+
 void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {
     (void)field;  // `data` was built for this field
+    linearTet_ = false;
+    if (geometry.IsDerived(c) &&
+        BeginLinearTet(*data.mesh, c, data.values.data() + data.mesh->cellOffsets[c], ray))
+        return;
     BeginCommon(geometry, c, ray, inversion);
     scalar_.nodal = data.values.data() + data.mesh->cellOffsets[c];
     gradBound_ = &data.refGradBound[c];
@@ -162,6 +208,15 @@ void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry
 }
 
 bool SegmentField::MayReach(const double* isovalues, int count, double t0, double t1) {
+    if (linearTet_) {
+        // Linear along the ray: its range on [t0, t1] is that of its end values.
+        const double v0 = (*this)(t0), v1 = (*this)(t1);
+        const double margin = 1e-13 * std::max(std::abs(v0), std::abs(v1));
+        const double lo = std::min(v0, v1) - margin, hi = std::max(v0, v1) + margin;
+        for (int k = 0; k < count; ++k)
+            if (isovalues[k] >= lo && isovalues[k] <= hi) return true;
+        return false;
+    }
     if (!gradBound_ || !affine_ || !scalar_.nodal) return true;
     // |df/dt| = |grad_ref f . dref/dt| <= sum_d M_d |dref_d|.
     double lipschitz = 0;
@@ -212,6 +267,11 @@ void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, con
 void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {
+    linearTet_ = false;
+    if (field.field->association == Association::Point && geometry.IsDerived(c)) {
+        GatherCellValues(mesh, *field.field, field.component, c, nodal_);
+        if (BeginLinearTet(mesh, c, nodal_.data(), ray)) return;
+    }
     BeginCommon(geometry, c, ray, inversion);
     if (field.field->association == Association::Point) {
         GatherCellValues(mesh, *field.field, field.component, c, nodal_);
@@ -276,6 +336,7 @@ void SegmentField::RefAt(double t, double ref[3]) {
 
 double SegmentField::operator()(double t) {
     evaluations_ += 1;
+    if (linearTet_) return lineA_ + lineB_ * t;
     if (!scalar_.nodal) return scalar_.constant;
     double ref[3];
     RefAt(t, ref);
@@ -283,7 +344,7 @@ double SegmentField::operator()(double t) {
 }
 
 void SegmentField::SampleBatch(const double* t, int n, double* out) {
-    if (scalar_.nodal && hexOrder_ > 0) {
+    if (!linearTet_ && scalar_.nodal && hexOrder_ > 0) {
         const int p = hexOrder_;
         batchScratch_.resize(HexLineScratchSize(p, n) + 3 * n);
         if (affine_) {
@@ -304,6 +365,11 @@ void SegmentField::SampleBatch(const double* t, int n, double* out) {
 
 bool SegmentField::ValueGradient(double t, double& value, double gradient[3]) {
     evaluations_ += 1;
+    if (linearTet_) {
+        value = lineA_ + lineB_ * t;
+        for (int d = 0; d < 3; ++d) gradient[d] = worldGradient_[d];
+        return true;
+    }
     double ref[3];
     RefAt(t, ref);
     return FieldValueGradient(*cell_, scalar_, ref, ws_, value, gradient);

@@ -72,6 +72,11 @@ public:
     void AddCountersTo(RenderCounters& counters);
 
 private:
+    /// A linear tetrahedron (derived geometry) with a point field: the field along the
+    /// ray is a + b t with the world gradient from its corners, no cell geometry needed.
+    /// False (and nothing set) for a degenerate tetrahedron.
+    bool BeginLinearTet(const Mesh& mesh, std::int64_t c, const double* nodal,
+                        const Ray& ray);
     void BeginCommon(const MeshGeometry& geometry, std::int64_t c, const Ray& ray,
                      const InversionOptions& inversion);
     void RefAt(double t, double ref[3]);
@@ -86,6 +91,8 @@ private:
     Ray ray_;
     InversionOptions inversion_;
     bool affine_ = false;
+    bool linearTet_ = false;  ///< BeginLinearTet's closed form is in use
+    double lineA_ = 0, lineB_ = 0, worldGradient_[3] = {0, 0, 0};
     bool exact_ = false;
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
