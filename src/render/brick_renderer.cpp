@@ -236,6 +236,7 @@ class RayIntegrator {
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<Event> events_;
+    int fieldLoaded_ = -1;  ///< the field field_ was last begun for in this segment
     std::vector<double> lastHit_;
     std::vector<char> relevant_;
     std::vector<double> sliceT_;
@@ -375,6 +376,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             continue;
         }
         volumeSeen |= volumeHere;
+        fieldLoaded_ = -1;
         const double cutoff =
             isoHere ? IsoSource(setup, ray, seg, span, counters)
                     : std::numeric_limits<double>::infinity();
@@ -445,6 +447,7 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                                 const RaySpan& span, RenderCounters& counters) {
     const std::size_t nIso = setup.isos.size();
     double cutoff = std::numeric_limits<double>::infinity();
+    fieldLoaded_ = -1;
     const std::size_t nFields = setup.fields.size();
     if (pieces_.size() < nFields) pieces_.resize(nFields);
     fieldUsed_.assign(nFields, 0);
@@ -461,6 +464,7 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
             if (!any) continue;
             field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell, ray,
                          setup.inversion);
+            fieldLoaded_ = int(f);
             if (fieldUsed_[f] == 1) {  // project once per field and segment
                 fieldUsed_[f] = 2;
                 // Rule the segment out cheaply when the mean value theorem proves that no
@@ -532,7 +536,9 @@ bool RayIntegrator::Composite(const BrickSetup& setup, const Ray& ray, const Seg
                               Pixel& out, RenderCounters& counters,
                               SegmentCostRecorder& recorder) {
     double& transmittance = composite.transmittance;
-    int loaded = -1;
+    // The field the isosurface source left loaded in this cell (its last inversions, near
+    // the roots, start the shading's).
+    int loaded = fieldLoaded_;
     double tDone = seg.tEnter;
     bool stop = false;
     // Front to back: the volume up to each event, the event, ..., the rest.
