@@ -351,16 +351,33 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             any |= relevant_[k] != 0;
         }
         // A plane through a face shared by two segments belongs to the second; the end of
-        // the last segment of a run inside the mesh is closed.
+        // the last segment of a run inside the mesh is closed. Where a run enters or
+        // leaves the mesh through a boundary face lying in the plane, the plane's t and
+        // the face's differ by rounding either way: the run's first (last) segment also
+        // owns the plane up to `snap` before (after) it, inside the brick's span and
+        // outside the neighbouring segments and what the previous run's last segment
+        // owns; the slice is then drawn at the segment's end (sliceAt).
         bool anySlice = false;
-        const bool closedEnd =
-            (si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit) &&
-            (seg.tExit != tMax || span.closed1);
+        const bool runStart = si == 0 || segments_[si - 1].tExit != seg.tEnter;
+        const bool runEnd =
+            si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
+        const bool closedEnd = runEnd && (seg.tExit != tMax || span.closed1);
         const bool openStart = seg.tEnter == tMin && !span.closed0;
+        const double snap = setup.duplicateDistance;
         auto sliceHere = [&](double t) {
-            return (t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
-                   (t < seg.tExit || (closedEnd && t == seg.tExit));
+            if ((t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
+                (t < seg.tExit || (closedEnd && t == seg.tExit)))
+                return true;
+            if (!span.Holds(t)) return false;
+            if (runEnd && t > seg.tExit)
+                return t <= seg.tExit + snap &&
+                       (si + 1 == segments_.size() || t < segments_[si + 1].tEnter);
+            if (runStart && t < seg.tEnter)
+                return t >= seg.tEnter - snap &&
+                       (si == 0 || t > segments_[si - 1].tExit + snap);
+            return false;
         };
+        auto sliceAt = [&](double t) { return std::clamp(t, seg.tEnter, seg.tExit); };
         for (std::size_t k = 0; k < nSlices; ++k) anySlice |= sliceHere(sliceT_[k]);
         // Empty-space skipping: BeginSegment evaluates nothing in cells whose guaranteed
         // ranges map to no extinction (and no glow).
@@ -450,7 +467,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         if (anySlice)
             for (std::size_t k = 0; k < nSlices; ++k) {
                 const double t = sliceT_[k];
-                if (sliceHere(t)) events_.push_back({t, -1, 0.0, int(k)});
+                if (sliceHere(t)) events_.push_back({sliceAt(t), -1, 0.0, int(k)});
             }
         std::sort(events_.begin(), events_.end(), [](const Event& a, const Event& b) {
             return a.t < b.t || (a.t == b.t && (a.iso < b.iso ||
