@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Pictures a newcomer gets without tuning anything, and thumbnails of the example scenes.
 #
-#   scripts/gallery.sh [--newcomer] [--thumbs] [OUT_DIR]     (default: --newcomer, out/gallery)
+#   scripts/gallery.sh [--newcomer] [--thumbs[=NAME,...]] [OUT_DIR]
+#                                                  (default: --newcomer, out/gallery)
 #
 # --newcomer: for every mesh of ../shared/data that hpray reads (.vtu, .msh), two scenes
 #   with nothing but the data and one thing to show, and no camera (so the camera is fitted
@@ -11,7 +12,7 @@
 #   mesh's name under each pair.
 # --thumbs: every configs/*.yaml rendered at 384x384 (configs/volume_t16_tets_1M.yaml at
 #   256x256) into OUT_DIR/configs/, and shrunk to 192x192 into docs/thumbs/NAME.png (the
-#   table of README.md).
+#   table of README.md). --thumbs=slice_nk_sinc,mfem_escher: only those configs.
 # The field shown is the first of u, solution, displacement_magnitude, pressure, analytic
 # that the file has. Uses build/bin/hpray (builds it if missing) and python3 with PIL
 # (installs python3-pil from Debian if missing). On 2 cores --newcomer takes about 8
@@ -21,11 +22,13 @@ source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
 newcomer=0
 thumbs=0
+only=""
 out=""
 for arg in "$@"; do
   case "$arg" in
     --newcomer) newcomer=1 ;;
     --thumbs) thumbs=1 ;;
+    --thumbs=*) thumbs=1; only="${arg#--thumbs=}" ;;
     -h|--help) awk 'NR > 1 && !/^#/ { exit } NR > 1 { sub(/^# ?/, ""); print }' "${BASH_SOURCE[0]}"
        exit 0 ;;
     -*) echo "gallery.sh: unknown option $arg" >&2; exit 2 ;;
@@ -119,20 +122,28 @@ fi
 if [ $thumbs -eq 1 ]; then
   dir="$out/configs"
   mkdir -p "$dir" "$HPRAY_ROOT/docs/thumbs"
-  for scene in "$HPRAY_ROOT"/configs/*.yaml; do
-    name="$(basename "${scene%.yaml}")"
+  names=()
+  if [ -n "$only" ]; then
+    IFS=, read -r -a names <<< "$only"
+  else
+    for scene in "$HPRAY_ROOT"/configs/*.yaml; do names+=("$(basename "${scene%.yaml}")"); done
+  fi
+  for name in "${names[@]}"; do
+    scene="$HPRAY_ROOT/configs/$name.yaml"
+    [ -f "$scene" ] || { echo "gallery.sh: no configs/$name.yaml" >&2; exit 2; }
     size=384
     case "$name" in *_1M) size=256 ;; esac
     step "configs/$name.yaml at ${size}x${size}"
     render "$scene" "$dir/$name.png" --set "camera.width=$size" --set "camera.height=$size"
   done
   step "thumbnails in docs/thumbs/"
-  /usr/bin/python3 - "$dir" "$HPRAY_ROOT/docs/thumbs" <<'EOF'
-import glob, os, sys
+  /usr/bin/python3 - "$dir" "$HPRAY_ROOT/docs/thumbs" "${names[@]}" <<'EOF'
+import os, sys
 from PIL import Image
-src, dst = sys.argv[1], sys.argv[2]
+src, dst, names = sys.argv[1], sys.argv[2], sys.argv[3:]
 total = 0
-for png in sorted(glob.glob(os.path.join(src, "*.png"))):
+for name in names:
+    png = os.path.join(src, name + ".png")
     out = os.path.join(dst, os.path.basename(png))
     Image.open(png).convert("RGB").resize((192, 192), Image.LANCZOS).save(out, optimize=True)
     total += os.path.getsize(out)

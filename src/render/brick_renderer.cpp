@@ -210,10 +210,11 @@ class RayIntegrator {
     /// bounds the search of the others); returns that bound (+inf if none).
     double IsoSource(const BrickSetup& setup, const Ray& ray, const Segment& seg,
                      const RaySpan& span, RenderCounters& counters);
-    /// The slice planes this segment owns (a plane through a face shared by two segments
-    /// belongs to the second); true if any.
-    bool SliceSource(const BrickSetup& setup, const Segment& seg, bool openStart,
-                     bool closedEnd);
+    /// The slice planes segment `si` owns (a plane through a face shared by two segments
+    /// belongs to the second; see the definition for planes through boundary faces); true
+    /// if any.
+    bool SliceSource(const BrickSetup& setup, std::size_t si, const RaySpan& span,
+                     double tMin, double tMax);
     /// The one front-to-back loop: volume up to each event, the event, ..., the rest of
     /// the segment up to `cutoff`. True when the ray is done (opaque).
     bool Composite(const BrickSetup& setup, const Ray& ray, const Segment& seg,
@@ -362,11 +363,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         // map the cell's guaranteed ranges to nothing (empty-space skipping).
         events_.clear();
         const bool isoHere = IsoSourceRelevant(setup, seg);
-        const bool closedEnd =
-            (si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit) &&
-            (seg.tExit != tMax || span.closed1);
-        const bool openStart = seg.tEnter == tMin && !span.closed0;
-        const bool sliceHere = SliceSource(setup, seg, openStart, closedEnd);
+        const bool sliceHere = SliceSource(setup, si, span, tMin, tMax);
         const bool volumeHere =
             hasVolume &&
             marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
@@ -427,16 +424,38 @@ bool RayIntegrator::IsoSourceRelevant(const BrickSetup& setup, const Segment& se
     return any;
 }
 
-bool RayIntegrator::SliceSource(const BrickSetup& setup, const Segment& seg, bool openStart,
-                                bool closedEnd) {
+bool RayIntegrator::SliceSource(const BrickSetup& setup, std::size_t si, const RaySpan& span,
+                                double tMin, double tMax) {
     // A plane through a face shared by two segments belongs to the second; the end of the
-    // last segment of a run inside the mesh is closed.
+    // last segment of a run inside the mesh is closed. Where a run enters or leaves the
+    // mesh through a boundary face lying in the plane, the plane's t and the face's differ
+    // by rounding either way: the run's first (last) segment also owns the plane up to
+    // `snap` before (after) it, inside the brick's span and outside the neighbouring
+    // segments and what the previous run's last segment owns; the slice is then drawn at
+    // the segment's end.
+    const Segment& seg = segments_[si];
+    const bool runStart = si == 0 || segments_[si - 1].tExit != seg.tEnter;
+    const bool runEnd = si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
+    const bool closedEnd = runEnd && (seg.tExit != tMax || span.closed1);
+    const bool openStart = seg.tEnter == tMin && !span.closed0;
+    const double snap = setup.duplicateDistance;
+    auto owns = [&](double t) {
+        if ((t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
+            (t < seg.tExit || (closedEnd && t == seg.tExit)))
+            return true;
+        if (!span.Holds(t)) return false;
+        if (runEnd && t > seg.tExit)
+            return t <= seg.tExit + snap &&
+                   (si + 1 == segments_.size() || t < segments_[si + 1].tEnter);
+        if (runStart && t < seg.tEnter)
+            return t >= seg.tEnter - snap && (si == 0 || t > segments_[si - 1].tExit + snap);
+        return false;
+    };
     bool any = false;
     for (std::size_t k = 0; k < setup.slices.size(); ++k) {
         const double t = sliceT_[k];
-        if ((t > seg.tEnter || (t == seg.tEnter && !openStart)) &&
-            (t < seg.tExit || (closedEnd && t == seg.tExit))) {
-            events_.push_back({t, -1, 0.0, int(k)});
+        if (owns(t)) {
+            events_.push_back({std::clamp(t, seg.tEnter, seg.tExit), -1, 0.0, int(k)});
             any = true;
         }
     }

@@ -83,6 +83,17 @@ RenderStats StartStats(const Scene& scene) {
     stats.cameraOrthographic = scene.camera.orthographic;
     stats.cameraFovY = scene.camera.fovYDegrees;
     stats.cameraOrthoHeight = scene.camera.orthoHeight;
+    if (scene.volume) {
+        const SceneVolume& v = *scene.volume;
+        stats.hasVolume = true;
+        stats.volumeColorField = v.colorField;
+        stats.volumeExtinctionField =
+            v.extinctionField.empty() ? v.colorField : v.extinctionField;
+        for (const ColorControlPoint& p : v.colorTf)
+            stats.volumeColorTf.push_back({p.scalar, p.rgb[0], p.rgb[1], p.rgb[2]});
+        for (const ExtinctionControlPoint& p : v.extinctionTf)
+            stats.volumeExtinctionTf.push_back({p.scalar, p.extinction});
+    }
     stats.isoFieldRange = {std::numeric_limits<double>::infinity(),
                            -std::numeric_limits<double>::infinity()};
     return stats;

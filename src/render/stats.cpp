@@ -122,6 +122,13 @@ std::string StatsToJson(const RenderStats& s) {
                     {"failures", c.inversionFailures}};
     j["volume"] = {{"rms_error_estimate", std::sqrt(safeDiv(c.volumeErrorSqSum, c.volumePixels))},
                    {"max_error_estimate", c.volumeErrorMax}};
+    if (s.hasVolume) {
+        json& v = j["volume"];
+        v["color_field"] = s.volumeColorField;
+        v["extinction_field"] = s.volumeExtinctionField;
+        v["color_tf"] = s.volumeColorTf;
+        v["extinction_tf"] = s.volumeExtinctionTf;
+    }
     const TraversalStats& tr = s.traversal;
     j["traversal"] = {{"nonconforming_faces", tr.nonConformingFaces},
                       {"nonconforming_edges", tr.nonConformingEdges},

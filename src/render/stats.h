@@ -82,6 +82,13 @@ struct RenderStats {
     std::array<double, 3> cameraPosition{0, 0, 0}, cameraLookAt{0, 0, 0}, cameraUp{0, 1, 0};
     bool cameraOrthographic = false;
     double cameraFovY = 0, cameraOrthoHeight = 0;
+    /// The volume the frame was rendered with (hasVolume), its transfer functions as
+    /// resolved from the data (defaults, `range: auto` colour maps), so that a client can
+    /// show and edit what was drawn: [s, r, g, b] and [s, sigma] control points.
+    bool hasVolume = false;
+    std::string volumeColorField, volumeExtinctionField;
+    std::vector<std::array<double, 4>> volumeColorTf;
+    std::vector<std::array<double, 2>> volumeExtinctionTf;
     PhaseTimes timing;
     RenderCounters counters;
     CompositeStats composite;

@@ -20,7 +20,14 @@ Chromium with the token and, with real mouse and keyboard input, checks that:
 then saves a screenshot; opens the page once more through a proxy that drops
 `?progressive=1`, as a service without progressive frames would, and checks that frames
 still arrive, in one piece, and that orbiting still works; shuts the service down through /api/shutdown and checks that it
-exits 0. Every wait has a deadline and the whole test stops after TOTAL_SECONDS.
+exits 0.
+
+Then serves the same data with a volume that names only its field (the renderer's default
+transfer functions) and checks that the viewer starts from the renderer's default: its
+first frame is pixel for pixel `hpray render` of that scene; its editors show the transfer
+functions the frame's stats report as rendered; switching the volume off and on again
+sends no transfer function and gives the same picture; an edit sends both, starting from
+the reported ones. Every wait has a deadline and the whole test stops after TOTAL_SECONDS.
 
     /usr/bin/python3 tests/app/test_viewer.py --hpray build/bin/hpray --screenshot shot.png
 """
@@ -66,7 +73,7 @@ SCENE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data",
                      "viewer_scene.yaml")
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
-TOTAL_SECONDS = 85   # the whole test, whatever hangs
+TOTAL_SECONDS = 120  # the whole test, whatever hangs
 START_SECONDS = 30   # hpray serve's start-up line
 FRAME_SECONDS = 20   # one interaction's final frame
 
@@ -87,9 +94,9 @@ def on_alarm(signum, frame):
 class HprayService:
     """hpray serve on the test scene: its URL and token, its requests, its end."""
 
-    def __init__(self, hpray, log_path):
+    def __init__(self, hpray, log_path, scene=SCENE):
         self.log = open(log_path, "w")
-        self.proc = subprocess.Popen([hpray, "serve", SCENE, "--port", "0"],
+        self.proc = subprocess.Popen([hpray, "serve", scene, "--port", "0"],
                                      stdout=subprocess.PIPE, stderr=self.log, text=True)
         lines = queue.Queue()
         threading.Thread(target=lambda: lines.put(self.proc.stdout.readline()),
@@ -441,6 +448,91 @@ def run(args, service, driver):
         proxy.close()
 
 
+# The viewer scene's data and camera with a volume that names only its field: viridis over
+# the field's range and an extinction ramp up to 10 / the data's diagonal, resolved by the
+# renderer (docs/scene.md).
+DEFAULT_VOLUME_SCENE = """\
+data: {mesh: "builtin:nk-sinc?order=4"}
+camera: {position: [2.2, 1.6, 2.6], look_at: [0.5, 0.5, 0.5], up: [0, 1, 0], fov_y: 30,
+         width: 160, height: 160}
+volume: {color_field: u}
+background: [1, 1, 1]
+accuracy: {volume_tolerance: 1e-6}
+"""
+
+
+def same_pixels(driver, a, b, what):
+    diff = driver.execute_async_script(DIFF_JS, base64.b64encode(a).decode(),
+                                       base64.b64encode(b).decode())
+    check("error" not in diff, f"{what}: comparing the PNGs failed: {diff}")
+    check(diff["differing"] == 0,
+          f"{what}: {diff['differing']} of {diff['total']} pixels differ")
+
+
+def run_default_volume(args, tmp, driver):
+    """The viewer on a scene whose volume gives only its field."""
+    scene = os.path.join(tmp, "default_volume.yaml")
+    with open(scene, "w") as out:
+        out.write(DEFAULT_VOLUME_SCENE)
+    reference = os.path.join(tmp, "default_volume.png")
+    subprocess.run([args.hpray, "-q", "render", scene, "--set", f"output.png={reference}"],
+                   check=True, timeout=FRAME_SECONDS)
+    with open(reference, "rb") as f:
+        reference_png = f.read()
+    service = HprayService(args.hpray, os.path.join(tmp, "serve_default_volume.log"), scene)
+    try:
+        driver.get(f"{service.url}?token={service.token}")
+        first = wait_settled(driver, 0, "default volume: first frame")
+        same_pixels(driver, png(service, first), reference_png,
+                    "default volume: the first frame against hpray render")
+        # The volume off and on again: its keys are sent, without transfer functions.
+        enabled = driver.find_element(By.ID, "vol-enabled")
+        scroll_to(driver, enabled)
+        sent = viewer(driver, "requestsSent")
+        enabled.click()
+        wait_settled(driver, sent, "default volume: switched off")
+        check(viewer(driver, "lastBody.volume") is None,
+              f"default volume: switched off, the body sends {viewer(driver, 'lastBody.volume')}")
+        sent = viewer(driver, "requestsSent")
+        enabled.click()
+        again = wait_settled(driver, sent, "default volume: switched on again")
+        body = viewer(driver, "lastBody.volume")
+        check(body == {"color_field": "u", "extinction_field": "u", "glow": "williams-max"},
+              f"default volume: switched on again, the body sends {body}")
+        same_pixels(driver, png(service, again), reference_png,
+                    "default volume: switched on again, against hpray render")
+        # The editors show what was rendered: the stats' transfer functions.
+        stats = viewer(driver, "stats.volume")
+        check(len(stats["color_tf"]) > 8 and len(stats["extinction_tf"]) == 2,
+              f"default volume: the stats report {stats}")
+        shown = viewer(driver, "volume")
+        check(shown is not None, "default volume: the viewer has no volume panel state")
+        check(shown["resolved"] == {"color": True, "extinction": True},
+              f"default volume: the panel does not keep the renderer's own ({shown['resolved']})")
+        check([[p["s"], *p["rgb"]] for p in shown["colorStops"]] == stats["color_tf"] and
+              [[p["s"], p["e"]] for p in shown["extinction"]] == stats["extinction_tf"],
+              "default volume: the editors do not show the transfer functions rendered")
+        # An edit: both transfer functions are sent, the reported ones with the edit.
+        sigma = driver.find_element(By.ID, "tf-ext-sigma")
+        driver.execute_script("arguments[0].closest('details').open = true;", sigma)
+        sent = viewer(driver, "requestsSent")
+        type_into(driver, "tf-ext-sigma", "1.5")
+        wait_settled(driver, sent, "default volume: an extinction edited")
+        body = viewer(driver, "lastBody.volume")
+        check(body.get("extinction_tf") == [[stats["extinction_tf"][0][0], 1.5],
+                                            stats["extinction_tf"][1]],
+              f"default volume: edited, the extinction sent is {body.get('extinction_tf')}")
+        sent_colors = body.get("color_tf") or []
+        check(len(sent_colors) == len(stats["color_tf"]) and
+              all(abs(a - b) <= 1e-5 * max(1, abs(b))
+                  for p, q in zip(sent_colors, stats["color_tf"]) for a, b in zip(p, q)),
+              f"default volume: edited, the colours sent are not those rendered: {sent_colors}")
+        code = service.shutdown()
+        check(code == 0, f"hpray serve (default volume) exited {code} after /api/shutdown")
+    finally:
+        service.kill()
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hpray", required=True, help="the hpray executable")
@@ -459,6 +551,8 @@ def main():
         run(args, service, driver)
         code = service.shutdown()
         check(code == 0, f"hpray serve exited {code} after /api/shutdown (log: {log_path})")
+        with tempfile.TemporaryDirectory(prefix="test_viewer_") as tmp:
+            run_default_volume(args, tmp, driver)
     except (Failure, WebDriverException, urllib.error.URLError) as error:
         print(f"FAILED: {error}", file=sys.stderr)
         if driver is not None:

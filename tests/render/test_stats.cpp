@@ -59,6 +59,22 @@ TEST(Stats, JsonHasEveryContractKey) {
     EXPECT_EQ(j["image"], nlohmann::json({64, 32}));
     EXPECT_DOUBLE_EQ(j["iso"]["rms_residual"].get<double>(), 1e-12);
     EXPECT_DOUBLE_EQ(j["iso"]["max_residual_relative"].get<double>(), 0.5e-12);
+    EXPECT_FALSE(j["volume"].contains("color_tf"));  // no volume rendered
+}
+
+TEST(Stats, JsonHasTheVolumeRendered) {
+    RenderStats s;
+    s.hasVolume = true;
+    s.volumeColorField = "u";
+    s.volumeExtinctionField = "v";
+    s.volumeColorTf = {{0.0, 0.1, 0.2, 0.3}, {2.0, 1.0, 0.5, 0.0}};
+    s.volumeExtinctionTf = {{-1.0, 0.0}, {1.0, 2.5}};
+    const auto j = nlohmann::json::parse(StatsToJson(s))["volume"];
+    EXPECT_EQ(j["color_field"], "u");
+    EXPECT_EQ(j["extinction_field"], "v");
+    EXPECT_EQ(j["color_tf"], nlohmann::json::parse("[[0, 0.1, 0.2, 0.3], [2, 1, 0.5, 0]]"));
+    EXPECT_EQ(j["extinction_tf"], nlohmann::json::parse("[[-1, 0], [1, 2.5]]"));
+    EXPECT_TRUE(j.contains("rms_error_estimate"));
 }
 
 }  // namespace

@@ -567,6 +567,82 @@ slices:
     EXPECT_GT(hits, 150);
 }
 
+// cube-tets-N (N even) without the corner octant [0, 1/2]^3: the plane z = 1/2 holds
+// the notch's top boundary faces (x, y < 1/2) and interior faces elsewhere.
+Mesh CubeTetsWithoutCorner(int n) {
+    const Mesh cube = MakeBuiltin("builtin:cube-tets-" + std::to_string(n));
+    Mesh mesh;
+    mesh.points = cube.points;
+    mesh.pointFields = cube.pointFields;
+    for (std::int64_t c = 0; c < cube.CellCount(); ++c) {
+        const std::int64_t* nodes = cube.CellNodes(c);
+        const int count = cube.CellNodeCount(c);
+        bool inCorner = true;
+        for (int d = 0; d < 3; ++d) {
+            double centre = 0;
+            for (int k = 0; k < count; ++k) centre += cube.points[3 * nodes[k] + d];
+            inCorner &= centre / count < 0.5;
+        }
+        if (!inCorner)
+            mesh.AddCell(cube.cellShape[c], cube.cellOrder[c], cube.cellFamily[c], nodes,
+                         count);
+    }
+    mesh.Validate("cube without a corner");
+    return mesh;
+}
+
+// A slice in a plane that holds boundary faces (the notch's top, z = 1/2) is drawn
+// exactly once on every ray that meets the plane in the closed domain: seen from above
+// (the ray leaves the mesh there) and from below (it enters there), like the plane's
+// interior faces (shared by two segments). Half opacity shows a hole (alpha 0) and a
+// double draw (alpha 3/4) alike.
+TEST(VolumeSlices, PlaneThroughBoundaryFacesIsDrawnOnceOnEveryRay) {
+    const Mesh mesh = CubeTetsWithoutCorner(4);
+    for (const char* position : {"[2.3, 1.7, 2.9]", "[-1.3, -0.8, -1.9]"}) {
+        const Scene scene = MakeScene(std::string(R"(
+data: {mesh: "builtin:cube-tets-4"}
+camera: {position: )") + position + R"(, look_at: [0.5, 0.5, 0.5], up: [0, 1, 0],
+         fov_y: 40, width: 96, height: 96}
+slices:
+  - {point: [0.5, 0.5, 0.5], normal: [0, 0, 1], field: u, opacity: 0.5,
+     color_tf: [[0.0, 0.1, 0.2, 0.9], [6.0, 1.0, 0.9, 0.1]]}
+)");
+        RenderStats stats;
+        const Image image = RenderMeshJob(mesh, scene, stats);
+        const Camera camera(scene.camera);
+        const RefTf tf = RefTf::Color(scene.slices[0].colorTf);
+        int onPlane = 0, onBoundaryFaces = 0, bad = 0;
+        for (int j = 0; j < image.height; ++j)
+            for (int i = 0; i < image.width; ++i) {
+                const CameraRay r = camera.PixelRay(i, j);
+                const LD t = (0.5L - LD(r.origin[2])) / LD(r.direction[2]);
+                const LD x = LD(r.origin[0]) + t * LD(r.direction[0]);
+                const LD y = LD(r.origin[1]) + t * LD(r.direction[1]);
+                const LD inside = std::min({x, y, 1 - x, 1 - y});
+                if (std::abs(inside) < 1e-9) continue;  // grazes the outer edge
+                const std::size_t q = std::size_t(j) * image.width + i;
+                if (inside < 0) {
+                    EXPECT_EQ(image.a[q], 0.0) << position << " " << i << "," << j;
+                    continue;
+                }
+                ++onPlane;
+                onBoundaryFaces += x < 0.5L && y < 0.5L;
+                const auto want = tf(x + 2 * y + 1.5L);
+                const bool ok = image.a[q] == 0.5 &&
+                                std::abs(image.r[q] - 0.5 * double(want[0])) < 1e-12 &&
+                                std::abs(image.b[q] - 0.5 * double(want[2])) < 1e-12;
+                bad += !ok;
+                if (!ok && bad <= 5)
+                    ADD_FAILURE() << position << " " << i << "," << j << ": alpha "
+                                  << image.a[q]
+                                  << (x < 0.5L && y < 0.5L ? " (notch)" : "");
+            }
+        EXPECT_EQ(bad, 0) << position << ": pixels of " << onPlane;
+        EXPECT_GT(onPlane, 1000) << position;
+        EXPECT_GT(onBoundaryFaces, 200) << position;
+    }
+}
+
 // A semi-transparent slice inside a volume is composited at its depth.
 TEST(VolumeSlices, SemiTransparentSliceInsideTheVolumeAtItsDepth) {
     const Mesh mesh = CubeTetsTwoFields(4);

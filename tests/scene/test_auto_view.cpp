@@ -15,6 +15,7 @@
 #include "mesh/builtin.h"
 #include "render/render_job.h"
 #include "scene/camera.h"
+#include "scene/colormaps.h"
 #include "scene/scene.h"
 
 namespace hpray {
@@ -152,6 +153,34 @@ TEST(AutoView, DefaultVolumeIsNeitherFaintNorOpaque) {
         EXPECT_GE(most, 0.8) << spec;
         EXPECT_LE(opaque, covered * 35 / 100) << spec;
     }
+}
+
+// The stats report the volume's transfer functions as rendered, the defaults resolved:
+// viridis over the field's range, extinction from 0 to 10 / the data's diagonal (what the
+// browser viewer shows for a volume that gives only its field).
+TEST(AutoView, StatsReportTheDefaultTransferFunctions) {
+    const Mesh mesh = MakeBuiltin("builtin:cube-tets-4");
+    const Scene scene = ParseScene("data: {mesh: \"builtin:cube-tets-4\"}\n"
+                                   "volume: {color_field: u}\n"
+                                   "camera: {width: 8, height: 8}\n",
+                                   "auto_view.yaml");
+    RenderStats stats;
+    RenderMeshJob(mesh, scene, stats);
+    ASSERT_TRUE(stats.hasVolume);
+    EXPECT_EQ(stats.volumeColorField, "u");
+    EXPECT_EQ(stats.volumeExtinctionField, "u");
+    const auto range = mesh.FindPointField("u")->Range();  // x + 2y + 3z: [0, 6]
+    const auto viridis = ExpandColorMap("viridis", range[0], range[1]);
+    ASSERT_EQ(stats.volumeColorTf.size(), viridis.size());
+    for (std::size_t k = 0; k < viridis.size(); ++k)
+        EXPECT_EQ(stats.volumeColorTf[k],
+                  (std::array<double, 4>{viridis[k].scalar, viridis[k].rgb[0],
+                                         viridis[k].rgb[1], viridis[k].rgb[2]}));
+    const std::vector<std::array<double, 2>> extinction = {
+        {range[0], 0.0}, {range[1], 10.0 / mesh.Bounds().Diagonal()}};
+    EXPECT_EQ(stats.volumeExtinctionTf, extinction);
+    EXPECT_EQ(range[0], 0.0);
+    EXPECT_EQ(range[1], 6.0);
 }
 
 }  // namespace

@@ -218,6 +218,8 @@ const view = {
   streaming: null,    // whether the service answered progressively (null: not asked yet)
   passLog: [],        // the last passes received: {request, frame, pass, passes, scale, final}
   lastBody: null,     // the body of the newest request
+  volume: null,       // the volume panel: field, glow, colorStops, extinction, and which
+                      // transfer functions are the renderer's own (`resolved`, not sent)
   error: null,        // the message on screen, if any
   overlay: {enabled: false, channel: 'combined', frame: null, min: null, max: null, pixels: 0},
 };
@@ -532,11 +534,18 @@ function setupVolumePanel() {
   const sv = scene.volume || {};
   const field = sv.color_field || pointFields[0];
   const range = fieldRange(field);
-  const span = vec.length(vec.sub(bounds[1], bounds[0])) || 1;
-  const colorTf = sv.color_tf || [[range[0], 0.23, 0.3, 0.75], [(range[0] + range[1]) / 2, 0.87, 0.87, 0.87],
-                                  [range[1], 0.7, 0.02, 0.15]].map(([s, ...rgb]) => [s, ...rgb.map(srgbToLinear)]);
-  // Default: fully clear at the low end, an optical depth of about 2 across the data at the top.
-  const extinctionTf = sv.extinction_tf || [[range[0], 0], [range[1], tidy(2 / span)]];
+  const diagonal = vec.length(vec.sub(bounds[1], bounds[0])) || 1;
+  // A transfer function the scene does not list (absent, or a colour map by name) is the
+  // renderer's (ResolveColorMaps: viridis over the field's range, an extinction ramp from 0
+  // to 10 / the data's diagonal): it is not sent, so the service resolves it exactly as
+  // `hpray render` does, and the editors show the control points that the frames' stats
+  // report (adoptResolvedVolume) until one of them is edited. Until a frame reports them,
+  // the editors show the same ramps coarsely.
+  const resolved = {color: !Array.isArray(sv.color_tf), extinction: !Array.isArray(sv.extinction_tf)};
+  const colorTf = !resolved.color ? sv.color_tf
+      : [[0, 68, 1, 84], [0.5, 33, 145, 140], [1, 253, 231, 37]].map(
+          ([f, ...rgb]) => [range[0] + f * (range[1] - range[0]), ...rgb.map((c) => srgbToLinear(c / 255))]);
+  const extinctionTf = !resolved.extinction ? sv.extinction_tf : [[range[0], 0], [range[1], 10 / diagonal]];
   // Glow (wilhelms-van-gelder) may exceed 1: the stops hold colours in [0, 1] and the
   // glow scale multiplies them.
   const brightest = Math.max(1, ...colorTf.map((p) => Math.max(p[1], p[2], p[3])));
@@ -549,10 +558,10 @@ function setupVolumePanel() {
     glowScale: brightest,
     colorStops: colorTf.map(([s, r, g, b]) => ({s, rgb: [r, g, b].map((c) => c / brightest)})),
     extinction: extinctionTf.map(([s, e]) => ({s, e})),
+    resolved,
   });
-  const scalars = [...volume.colorStops, ...volume.extinction].map((p) => p.s);
-  volume.domain = [Math.min(range[0], ...scalars), Math.max(range[1], ...scalars)];
-  volume.yMax = niceCeiling(1.15 * Math.max(...volume.extinction.map((p) => p.e)));
+  view.volume = volume;
+  fitVolumeAxes();
 
   $('vol-enabled').checked = volume.enabled;
   fillFieldSelect($('vol-field'), volume.field);
@@ -580,8 +589,41 @@ function setupVolumePanel() {
   });
   $('vol-glow-scale').addEventListener('change', (e) => {
     volume.glowScale = Math.max(0, Number(e.target.value));
+    volume.resolved.color = false;  // scales the colour transfer function: sent from now on
     touch('volume');
   });
+}
+
+/** The editors' field axis (the field's range and every control point) and extinction axis. */
+function fitVolumeAxes() {
+  const range = fieldRange(volume.field);
+  const scalars = [...volume.colorStops, ...volume.extinction].map((p) => p.s);
+  volume.domain = [Math.min(range[0], ...scalars), Math.max(range[1], ...scalars)];
+  volume.yMax = niceCeiling(1.15 * Math.max(...volume.extinction.map((p) => p.e)));
+}
+
+/** A frame's stats report the volume's transfer functions as rendered: while the panel
+ *  shows the renderer's own (`resolved`) for the fields it shows, it takes them over. */
+function adoptResolvedVolume(stats) {
+  const v = stats && stats.volume;
+  if (!volume.resolved || !(volume.resolved.color || volume.resolved.extinction)) return;
+  if (!v || !Array.isArray(v.color_tf) || !Array.isArray(v.extinction_tf)) return;
+  if (v.color_field !== volume.field || v.extinction_field !== volume.extinctionField) return;
+  const scale = volume.glow === 'wilhelms-van-gelder' ? volume.glowScale || 1 : 1;
+  const colorStops = v.color_tf.map(([s, r, g, b]) => ({s, rgb: [r, g, b].map((c) => c / scale)}));
+  const extinction = v.extinction_tf.map(([s, e]) => ({s, e}));
+  let changed = false;
+  if (volume.resolved.color && JSON.stringify(colorStops) !== JSON.stringify(volume.colorStops)) {
+    volume.colorStops = colorStops;
+    changed = true;
+  }
+  if (volume.resolved.extinction && JSON.stringify(extinction) !== JSON.stringify(volume.extinction)) {
+    volume.extinction = extinction;
+    changed = true;
+  }
+  if (!changed) return;
+  fitVolumeAxes();
+  tfEditors.refresh();
 }
 
 function showGlowScale() {
@@ -600,13 +642,11 @@ function niceCeiling(x) {
 function volumeKeys() {
   if (!volume.enabled) return null;
   const scale = volume.glow === 'wilhelms-van-gelder' ? volume.glowScale : 1;
-  return {
-    color_field: volume.field,
-    extinction_field: volume.extinctionField,
-    glow: volume.glow,
-    color_tf: volume.colorStops.map((p) => [p.s, ...p.rgb.map((c) => tidy(c * scale))]),
-    extinction_tf: volume.extinction.map((p) => [p.s, p.e]),
-  };
+  const keys = {color_field: volume.field, extinction_field: volume.extinctionField, glow: volume.glow};
+  // The renderer's own transfer functions (see setupVolumePanel) are left to the service.
+  if (!volume.resolved.color) keys.color_tf = volume.colorStops.map((p) => [p.s, ...p.rgb.map((c) => tidy(c * scale))]);
+  if (!volume.resolved.extinction) keys.extinction_tf = volume.extinction.map((p) => [p.s, p.e]);
+  return keys;
 }
 
 /** Sets up a canvas for drawing in CSS pixels at the screen's resolution; its context,
@@ -811,8 +851,11 @@ const tfEditors = (() => {
     changed(true);
   }
 
-  /** Redraws after an edit, rebuilds the stop rows when `structure` changed, and renders. */
+  /** Redraws after an edit, rebuilds the stop rows when `structure` changed, and renders.
+   *  Both transfer functions are sent from now on, as shown (the renderer's own, as the
+   *  frames reported them, with the edit). */
   function changed(structure) {
+    volume.resolved.color = volume.resolved.extinction = false;
     if (structure) buildStopRows();
     refreshDrawing();
     touch('volume');
@@ -1294,6 +1337,7 @@ async function display(request, pass) {
     layoutStage();
     showStatus();
     showStats(pass.stats);
+    adoptResolvedVolume(pass.stats);
     showCamera();
     refreshOverlay();
   } catch (e) {
