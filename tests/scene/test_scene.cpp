@@ -997,6 +997,31 @@ TEST(ColorMapTest, ExpandedMapsMatchTheirPublishedEnds) {
     EXPECT_NEAR(gray[16].rgb[0], 0.2140, 2e-3);
 }
 
+// Inside the maps: the quarter, half and three-quarter points of the matplotlib tables
+// (their published five-colour palettes, e.g. viridis #440154 #3b528b #21918c #5ec962
+// #fde725), within 2 of 255 (the tables' own rounding differs by 1 between copies).
+TEST(ColorMapTest, ExpandedMapsMatchTheirPublishedQuarterPoints) {
+    struct Points {
+        const char* name;
+        int rgb[3][3];  // at 0.25, 0.5, 0.75
+    };
+    const Points maps[] = {
+        {"viridis", {{0x3b, 0x52, 0x8b}, {0x21, 0x91, 0x8c}, {0x5e, 0xc9, 0x62}}},
+        {"inferno", {{0x57, 0x10, 0x6e}, {0xbc, 0x37, 0x54}, {0xf9, 0x8e, 0x09}}},
+        {"plasma", {{0x7e, 0x03, 0xa8}, {0xcc, 0x47, 0x78}, {0xf8, 0x95, 0x40}}}};
+    for (const Points& m : maps) {
+        const auto tf = ExpandColorMap(m.name, 0.0, 1.0);
+        ASSERT_EQ(tf.size(), 33u);
+        for (int q = 0; q < 3; ++q) {
+            const auto& point = tf[8 * (q + 1)];  // samples at k / 32
+            EXPECT_DOUBLE_EQ(point.scalar, 0.25 * (q + 1));
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(LinearToSrgbValue(point.rgb[c]) * 255, m.rgb[q][c], 2.0)
+                    << m.name << " at " << 0.25 * (q + 1) << " channel " << c;
+        }
+    }
+}
+
 TEST(ColorMapTest, ParsedExplicitOrResolvedFromTheData) {
     const std::string volume =
         std::string(kMinimal) + "volume: {color_field: u, extinction_tf: [[0, 1]], ";
