@@ -32,6 +32,13 @@ constexpr double kKronrodMargin = 0.25;
 /// A bound of the rounding error of a Legendre series evaluated by its recurrence (and
 /// of the sampled field it interpolates), in units of eps times the sum of |c_k|.
 constexpr double kSeriesRounding = 8;
+/// A bound of the rounding error of the field's samples in a cell, in units of eps times
+/// the largest |value| in the cell (measured on nk-sinc's order-8 cells: at most 12).
+constexpr double kSampleRounding = 32;
+/// Trailing Legendre coefficients of an exact series whose sum is below this many eps
+/// times the largest |value| in the cell (half the samples' rounding bound) are dropped,
+/// and their sum counted as field error.
+constexpr double kTruncation = 16;
 
 PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points) {
     std::vector<double> s, v;
@@ -42,7 +49,78 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
     return PiecewiseLinearTf(std::move(s), std::move(v), 1);
 }
 
+/// The root of p - level in [lo, hi], where p - level has the signs of fLo and fHi (opposite,
+/// nonzero) at the ends and p is monotone: Newton's method kept inside the shrinking
+/// bracket (bisection when a step leaves it), to `tol` in t.
+double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
+                    double fHi, double tol) {
+    double t = lo + (hi - lo) * (fLo / (fLo - fHi));
+    for (int it = 0; it < 100; ++it) {
+        double v, dv;
+        p.Eval(t, v, dv);
+        const double f = v - level;
+        if (f == 0) return t;
+        if ((f < 0) == (fLo < 0)) {
+            lo = t;
+            fLo = f;
+        } else {
+            hi = t;
+        }
+        double next = dv != 0 ? t - f / dv : 0.5 * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        if (std::abs(next - t) <= tol || hi - lo <= tol) return next;
+        t = next;
+    }
+    return t;
+}
+
 }  // namespace
+
+void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     std::vector<double>& scratch, std::vector<double>& points,
+                     std::vector<double>& out) {
+    if (count == 0 || !(p.b > p.a)) return;
+    // Split [a, b] at the critical points of p: the roots of p', isolated on its series
+    // (a window is passed over only where |p'| provably exceeds its rounding).
+    points.clear();
+    points.push_back(p.a);
+    if (p.Degree() >= 2) {
+        const LegendreSeries d = p.Derivative();
+        double sum = 0;
+        for (double c : d.c) sum += std::abs(c);
+        const double slopeEps = kSeriesRounding * kEps * sum;
+        if (detail::TailExcluded(d, 0.0) <= slopeEps) {
+            detail::IsolateRoots(d, 0.0, slopeEps, tol, scratch,
+                                 [&](double lo, double hi, int kind, double tStar) {
+                                     double t = tStar;
+                                     if (kind == 1) {
+                                         const double dlo = d(lo), dhi = d(hi);
+                                         t = (dlo < 0) != (dhi < 0) && dlo != 0 && dhi != 0
+                                                 ? detail::PolishSeriesRoot(d, lo, hi, dlo,
+                                                                            dhi, tol)
+                                                 : 0.5 * (lo + hi);
+                                     }
+                                     if (t > points.back() && t < p.b) points.push_back(t);
+                                     return false;
+                                 });
+        }
+    }
+    points.push_back(p.b);
+    // On each interval between them p is monotone: a level strictly between the end
+    // values is crossed once.
+    double vlo = p(points[0]);
+    for (std::size_t k = 0; k + 1 < points.size(); ++k) {
+        const double lo = points[k], hi = points[k + 1], vhi = p(hi);
+        const double vmin = std::min(vlo, vhi), vmax = std::max(vlo, vhi);
+        for (int m = 0; m < count; ++m) {
+            const double level = levels[m];
+            if (!(level > vmin && level < vmax)) continue;
+            const double t = MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, tol);
+            if (t > p.a && t < p.b) out.push_back(t);
+        }
+        vlo = vhi;
+    }
+}
 
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points) {
     std::vector<double> s, v;
@@ -208,6 +286,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             continue;
         }
         SegmentField& sf = field_[f];
+        truncated_[f] = 0;
         if (s.data[f]) {
             sf.Begin(*s.data[f], geometry, sel, seg.cell, ray_, s.inversion);
         } else {
@@ -264,7 +343,14 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             }
             double sum = 0;
             for (double c : line.c) sum += std::abs(c);
-            lineError_[f] = st.constant ? 0.0 : kSeriesRounding * kEps * sum;
+            // Rounding of the field's samples (a few eps of the cell's values, from the
+            // sum-factorised contraction) and of the series' evaluation, and what the
+            // truncation dropped.
+            const Interval& range = (*s.ranges[f])[seg.cell];
+            const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
+            lineError_[f] = st.constant ? 0.0
+                                        : kSampleRounding * kEps * cellScale +
+                                              kSeriesRounding * kEps * sum + truncated_[f];
         }
         haveDepthLine_ = false;
     }
@@ -325,6 +411,20 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     // As ProjectSegment's exact projection: rounding in the samples and the transform.
     piece.eps = 64 * (n + 1) * kEps * scale;
     piece.converged = true;
+    // The trailing coefficients at the level of that rounding (the field is smooth on
+    // the segment: its coefficients fall to the noise of the samples well before the
+    // degree bound) are dropped, their sum kept as an error: every later evaluation of
+    // the series is that much cheaper.
+    std::vector<double>& c = piece.p.c;
+    const Interval& range = (*s.ranges[f])[seg.cell];
+    const double noise =
+        kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+    double dropped = 0;
+    while (c.size() > 2 && dropped + std::abs(c.back()) <= noise) {
+        dropped += std::abs(c.back());
+        c.pop_back();
+    }
+    truncated_[f] = dropped;
 }
 
 void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
@@ -372,13 +472,17 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
     };
     if (st.bySeries) {
         // The series is the field up to its rounding (the interpolant of a polynomial of
-        // its degree): roots are polished on it, which costs no field evaluation.
-        const LegendreSeries& p = pieces_[f][0].p;
-        auto series = [&p](double t) { return p(t); };
-        forEachBreakpoint([&](double b) {
-            counters.rootFailures +=
-                FindRoots(series, pieces_[f], b, s.roots, scratch_, record);
-        });
+        // its degree): its crossings of all the breakpoints at once, found on it, which
+        // costs no field evaluation.
+        levels_.clear();
+        forEachBreakpoint([&](double b) { levels_.push_back(b); });
+        std::sort(levels_.begin(), levels_.end());
+        levels_.erase(std::unique(levels_.begin(), levels_.end()), levels_.end());
+        const double tol =
+            std::max(s.roots.rootTolerance * (seg.tExit - seg.tEnter),
+                     4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
+        SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol, scratch_,
+                        points_, crossings_);
         return;
     }
     forEachBreakpoint([&](double b) {

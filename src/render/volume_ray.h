@@ -59,6 +59,16 @@ struct VolumeSetup {
     InversionOptions inversion;
 };
 
+/// Every t in (p.a, p.b) where the polynomial series p crosses one of the sorted
+/// `levels` (count of them), appended to `out`: p is split at its critical points (the
+/// roots of p', isolated on its series, which misses no sign change of p' larger than
+/// its rounding), and on each monotone interval between them a level strictly between
+/// the end values is crossed once, polished by safeguarded Newton to `tol` in t.
+/// `scratch` and `points` are caller-owned buffers.
+void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     std::vector<double>& scratch, std::vector<double>& points,
+                     std::vector<double>& out);
+
 /// The colour transfer function of a scene (`volume.color_tf`, `slices.#.color_tf`).
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
 
@@ -164,6 +174,7 @@ class VolumeRayMarcher {
     /// antiderivative (built when first needed).
     LegendreSeries line_[2];
     double lineError_[2] = {0, 0};
+    double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
     LegendreSeries depthLine_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
@@ -181,6 +192,7 @@ class VolumeRayMarcher {
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
+    std::vector<double> levels_, points_;
     std::vector<double> bounds_;
     struct Work {
         double lo, hi;
