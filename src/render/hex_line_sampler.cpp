@@ -2,6 +2,7 @@
 #include "render/hex_line_sampler.h"
 
 #include <algorithm>
+#include <cmath>
 
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
@@ -38,16 +39,16 @@ void LagrangeRows(int p, const double* x, int S, double* L, double* a) {
     }
 }
 
-/// out[s] = sum_k L2[k][s] sum_j L1[j][s] sum_i u[i + N (j + N k)] L0[i][s] for s < S
+/// out[s] = sum_k L2[k][s] sum_j L1[j][s] sum_i u[i + N (j + N k)] L0[i][s] for s < count
 /// (a multiple of 4; L rows have stride S). The first contraction, which holds almost all
 /// the work, is a small matrix product: tiles of 4 rows of u times 3 vectors of samples
 /// (12 accumulators, the 3 sample vectors and a broadcast fill the 16 registers), then
 /// a tail block of one vector.
 template <int N>
-void Contract(const double* u, const double* L0, const double* L1, const double* L2, int S,
-              double* out) {
+void Contract(const double* u, const double* L0, const double* L1, const double* L2,
+              int count, int S, double* out) {
     int b = 0;
-    for (; b + 12 <= S; b += 12) {
+    for (; b + 12 <= count; b += 12) {
         __m256d o0 = _mm256_setzero_pd(), o1 = o0, o2 = o0;
         for (int k = 0; k < N; ++k) {
             __m256d g0 = _mm256_setzero_pd(), g1 = g0, g2 = g0;
@@ -119,7 +120,7 @@ void Contract(const double* u, const double* L0, const double* L1, const double*
         _mm256_storeu_pd(out + b + 4, o1);
         _mm256_storeu_pd(out + b + 8, o2);
     }
-    for (; b < S; b += 4) {
+    for (; b < count; b += 4) {
         __m256d o = _mm256_setzero_pd();
         for (int k = 0; k < N; ++k) {
             __m256d g = _mm256_setzero_pd();
@@ -154,12 +155,48 @@ void Contract(const double* u, const double* L0, const double* L1, const double*
     }
 }
 
-using Kernel = void (*)(const double*, const double*, const double*, const double*, int,
+/// The same for the one sample s (column s of the L rows): the first two contractions
+/// swapped, G[i] = sum_jk u[i + N (j + N k)] L1[j] L2[k] vectorised over i, then
+/// sum_i G[i] L0[i]. A few hundred cycles where a block of four lanes for one sample costs
+/// as much as four.
+template <int N>
+double ContractOne(const double* u, const double* L0, const double* L1, const double* L2,
+                   int S, int s) {
+    constexpr int V = N / 4;  // whole vectors of i; the rest scalar
+    __m256d g[V > 0 ? V : 1];
+    for (int v = 0; v < V; ++v) g[v] = _mm256_setzero_pd();
+    double rest[4] = {0, 0, 0, 0};
+    for (int k = 0; k < N; ++k) {
+        const double l2 = L2[k * S + s];
+        for (int j = 0; j < N; ++j) {
+            const double w = L1[j * S + s] * l2;
+            const double* row = u + N * (j + N * k);
+            const __m256d wv = _mm256_set1_pd(w);
+            for (int v = 0; v < V; ++v)
+                g[v] = _mm256_fmadd_pd(_mm256_loadu_pd(row + 4 * v), wv, g[v]);
+            for (int i = 4 * V; i < N; ++i) rest[i - 4 * V] = std::fma(row[i], w, rest[i - 4 * V]);
+        }
+    }
+    alignas(32) double gi[4 * (V > 0 ? V : 1)];
+    for (int v = 0; v < V; ++v) _mm256_store_pd(gi + 4 * v, g[v]);
+    double f = 0;
+    for (int i = 0; i < 4 * V; ++i) f = std::fma(gi[i], L0[i * S + s], f);
+    for (int i = 4 * V; i < N; ++i) f = std::fma(rest[i - 4 * V], L0[i * S + s], f);
+    return f;
+}
+
+using Kernel = void (*)(const double*, const double*, const double*, const double*, int, int,
                         double*);
+using OneKernel = double (*)(const double*, const double*, const double*, const double*, int,
+                             int);
 constexpr int kMaxKernelOrder = 10;
 constexpr Kernel kKernels[kMaxKernelOrder + 1] = {
     nullptr,      &Contract<2>, &Contract<3>, &Contract<4>, &Contract<5>,  &Contract<6>,
     &Contract<7>, &Contract<8>, &Contract<9>, &Contract<10>, &Contract<11>};
+constexpr OneKernel kOneKernels[kMaxKernelOrder + 1] = {
+    nullptr,         &ContractOne<2>, &ContractOne<3>, &ContractOne<4>,
+    &ContractOne<5>, &ContractOne<6>, &ContractOne<7>, &ContractOne<8>,
+    &ContractOne<9>, &ContractOne<10>, &ContractOne<11>};
 
 }  // namespace
 
@@ -177,7 +214,11 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const dou
         for (int s = 0; s < S; ++s) x[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
         LagrangeRows(p, x, S, L + d * n * S, a);
     }
-    kKernels[p](u, L, L + n * S, L + 2 * n * S, S, result);
+    // Whole vectors of samples by the blocked kernel, the last count % 4 one by one.
+    const int blocked = count / 4 * 4;
+    if (blocked > 0) kKernels[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
+    for (int s = blocked; s < count; ++s)
+        result[s] = kOneKernels[p](u, L, L + n * S, L + 2 * n * S, S, s);
     for (int s = 0; s < count; ++s) out[s] = result[s];
     return true;
 }

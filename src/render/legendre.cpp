@@ -160,6 +160,45 @@ void LegendreSeries::EvalMany(const double* t, int count, double* out) const {
     }
 }
 
+void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t, int count,
+              double* outP, double* outQ) {
+    HPRAY_CHECK(p.a == q.a && p.b == q.b);
+    const int np = p.Degree(), nq = q.Degree(), n = std::max(np, nq);
+    HPRAY_CHECK(n < kRecurrenceSize);
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    constexpr int kBlock = 8;
+    for (int s0 = 0; s0 < count; s0 += kBlock) {
+        const int m = std::min(kBlock, count - s0);
+        double x[kBlock], p0[kBlock], p1[kBlock], v[kBlock], w[kBlock];
+        for (int s = 0; s < kBlock; ++s) {
+            x[s] = (s < m ? t[s0 + s] : t[s0]) * scale - shift;
+            p0[s] = 1;
+            p1[s] = x[s];
+            v[s] = p.c[0];
+            w[s] = q.c[0];
+        }
+        if (np >= 1)
+            for (int s = 0; s < kBlock; ++s) v[s] += p.c[1] * x[s];
+        if (nq >= 1)
+            for (int s = 0; s < kBlock; ++s) w[s] += q.c[1] * x[s];
+        for (int k = 2; k <= n; ++k) {
+            const double ak = kRec.a[k], bk = kRec.b[k];
+            const double ck = k <= np ? p.c[k] : 0.0, dk = k <= nq ? q.c[k] : 0.0;
+            for (int s = 0; s < kBlock; ++s) {
+                const double p2 = ak * x[s] * p1[s] - bk * p0[s];
+                v[s] += ck * p2;
+                w[s] += dk * p2;
+                p0[s] = p1[s];
+                p1[s] = p2;
+            }
+        }
+        for (int s = 0; s < m; ++s) {
+            outP[s0 + s] = v[s];
+            outQ[s0 + s] = w[s];
+        }
+    }
+}
+
 void LegendreSeries::Eval(double t, double& value, double& derivative) const {
     const double x = (2 * t - a - b) / (b - a);
     // Forward recurrence for P_k and P_k' together: stable for |x| <= 1.

@@ -41,6 +41,11 @@ struct LegendreSeries {
     LegendreSeries Antiderivative() const;
 };
 
+/// p(t[s]) into outP[s] and q(t[s]) into outQ[s] for s < count, for two series on the same
+/// interval (any degrees): the Legendre polynomials are computed once for both.
+void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t, int count,
+              double* outP, double* outQ);
+
 /// Interpolates `values` at the n + 1 LGL nodes of [a, b] (values[i] at node i) exactly by
 /// the degree-n Legendre series (discrete Legendre transform with the Lobatto correction
 /// of the last coefficient).

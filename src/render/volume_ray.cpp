@@ -53,8 +53,8 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
 /// nonzero) at the ends and p is monotone: Newton's method kept inside the shrinking
 /// bracket (bisection when a step leaves it), to `tol` in t.
 double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
-                    double fHi, double tol) {
-    double t = lo + (hi - lo) * (fLo / (fLo - fHi));
+                    double fHi, double guess, double tol) {
+    double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
     for (int it = 0; it < 100; ++it) {
         double v, dv;
         p.Eval(t, v, dv);
@@ -77,6 +77,7 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
 }  // namespace
 
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
                      std::vector<double>& out) {
     if (count == 0 || !(p.b > p.a)) return;
@@ -115,7 +116,18 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
         for (int m = 0; m < count; ++m) {
             const double level = levels[m];
             if (!(level > vmin && level < vmax)) continue;
-            const double t = MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, tol);
+            // Newton's start: where the samples inside [lo, hi] change sides, linearly.
+            double guess = std::numeric_limits<double>::quiet_NaN();
+            for (int i = 0; i + 1 < samples; ++i) {
+                if (sampleT[i + 1] < lo || sampleT[i] > hi) continue;
+                const double fa = sampleV[i] - level, fb = sampleV[i + 1] - level;
+                if ((fa < 0) != (fb < 0)) {
+                    guess = sampleT[i] + (sampleT[i + 1] - sampleT[i]) * (fa / (fa - fb));
+                    break;
+                }
+            }
+            const double t =
+                MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess, tol);
             if (t > p.a && t < p.b) out.push_back(t);
         }
         vlo = vhi;
@@ -287,6 +299,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         }
         SegmentField& sf = field_[f];
         truncated_[f] = 0;
+        sampleV_[f].clear();
         if (s.data[f]) {
             sf.Begin(*s.data[f], geometry, sel, seg.cell, ray_, s.inversion);
         } else {
@@ -405,6 +418,8 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     if (!sampled) sf.SampleBatch(ts, n + 1, scratch_.data());
     double scale = 0;
     for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(scratch_[i]));
+    sampleT_.assign(ts, ts + n + 1);
+    sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
     pieces_[f].resize(1);
     ProjectedPiece& piece = pieces_[f][0];
     piece.p = InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit);
@@ -481,8 +496,9 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         const double tol =
             std::max(s.roots.rootTolerance * (seg.tExit - seg.tEnter),
                      4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
-        SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol, scratch_,
-                        points_, crossings_);
+        SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol,
+                        sampleT_.data(), sampleV_[f].data(), int(sampleV_[f].size()),
+                        scratch_, points_, crossings_);
         return;
     }
     forEachBreakpoint([&](double b) {
@@ -601,10 +617,14 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             for (double c : depthLine_.c) sum += std::abs(c);
             depthLineError_ = kSeriesRounding * kEps * sum;
             haveDepthLine_ = true;
+            depthLineT_ = std::numeric_limits<double>::quiet_NaN();
         }
         tauM = ae + be * ue.c[0];
-        v0 = depthLine_(p0);
+        // Pieces follow each other along the segment: the last end is this start.
+        v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_(p0);
         v1 = depthLine_(p1);
+        depthLineT_ = p1;
+        depthLineV_ = v1;
     }
     const double depth = std::max(0.0, tauM * length + be * (v1 - v0));
     const double opacity = -std::expm1(-depth);
@@ -643,13 +663,16 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             nodeU_[1].resize(n);
             nodeDepth_.resize(n);
             for (int i = 0; i < n; ++i) nodeT_[i] = m + half * rule.nodes[i];
-            uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
             const double* ueAt = nodeU_[0].data();
-            if (fe == 1 && be != 0) {
-                ue.EvalMany(nodeT_.data(), n, nodeU_[1].data());
+            if (be == 0) {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+            } else if (fe == 0) {
+                EvalPair(uc, depthLine_, nodeT_.data(), n, nodeU_[0].data(), nodeDepth_.data());
+            } else {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+                EvalPair(ue, depthLine_, nodeT_.data(), n, nodeU_[1].data(), nodeDepth_.data());
                 ueAt = nodeU_[1].data();
             }
-            if (be != 0) depthLine_.EvalMany(nodeT_.data(), n, nodeDepth_.data());
             quadratureNodes_ += n;
             double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0, jAbs = 0;
             for (int i = 0; i < n; ++i) {

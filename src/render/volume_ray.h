@@ -63,9 +63,11 @@ struct VolumeSetup {
 /// `levels` (count of them), appended to `out`: p is split at its critical points (the
 /// roots of p', isolated on its series, which misses no sign change of p' larger than
 /// its rounding), and on each monotone interval between them a level strictly between
-/// the end values is crossed once, polished by safeguarded Newton to `tol` in t.
-/// `scratch` and `points` are caller-owned buffers.
+/// the end values is crossed once, polished by safeguarded Newton to `tol` in t, started
+/// from the samples (sampleT ascending, sampleV of the field there; samples may be 0)
+/// where they change sides. `scratch` and `points` are caller-owned buffers.
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
                      std::vector<double>& out);
 
@@ -178,6 +180,7 @@ class VolumeRayMarcher {
     LegendreSeries depthLine_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
+    double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
     /// Gauss-Kronrod level that sufficed last (the start of the next piece's ladder).
     int levelHint_ = 0;
     double quadratureNodes_ = 0;  ///< integrand samples not yet counted
@@ -193,6 +196,7 @@ class VolumeRayMarcher {
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
     std::vector<double> levels_, points_;
+    std::vector<double> sampleT_, sampleV_[2];  ///< the exact series' samples
     std::vector<double> bounds_;
     struct Work {
         double lo, hi;
