@@ -77,11 +77,14 @@ LglRule BuildRule(int n) {
     }
     // Discrete norms: 2 / (2k + 1), except 2 / n for k = n under Lobatto quadrature.
     r.transform.resize((n + 1) * (n + 1));
+    r.transformByNode.resize((n + 1) * (n + 1));
     for (int k = 0; k <= n; ++k) {
         const double norm = (k < n) ? 2.0 / (2 * k + 1) : 2.0 / n;
-        for (int i = 0; i <= n; ++i)
-            r.transform[k * (n + 1) + i] =
-                r.weights[i] * r.legendreAtNodes[i * (n + 1) + k] / norm;
+        for (int i = 0; i <= n; ++i) {
+            const double v = r.weights[i] * r.legendreAtNodes[i * (n + 1) + k] / norm;
+            r.transform[k * (n + 1) + i] = v;
+            r.transformByNode[i * (n + 1) + k] = v;
+        }
     }
     return r;
 }
@@ -122,8 +125,8 @@ double LegendreSeries::operator()(double t) const {
     if (n >= 1) v += c[1] * x;
     double p0 = 1, p1 = x;
     for (int k = 2; k <= n; ++k) {
-        const double p2 = kRec.a[k] * x * p1 - kRec.b[k] * p0;
-        v += c[k] * p2;
+        const double p2 = std::fma(kRec.a[k] * x, p1, -kRec.b[k] * p0);
+        v = std::fma(c[k], p2, v);
         p0 = p1;
         p1 = p2;
     }
@@ -150,8 +153,8 @@ void LegendreSeries::EvalMany(const double* t, int count, double* out) const {
         for (int k = 2; k <= n; ++k) {
             const double ak = kRec.a[k], bk = kRec.b[k], ck = c[k];
             for (int s = 0; s < kBlock; ++s) {
-                const double p2 = ak * x[s] * p1[s] - bk * p0[s];
-                v[s] += ck * p2;
+                const double p2 = std::fma(ak * x[s], p1[s], -bk * p0[s]);
+                v[s] = std::fma(ck, p2, v[s]);
                 p0[s] = p1[s];
                 p1[s] = p2;
             }
@@ -185,9 +188,9 @@ void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t,
             const double ak = kRec.a[k], bk = kRec.b[k];
             const double ck = k <= np ? p.c[k] : 0.0, dk = k <= nq ? q.c[k] : 0.0;
             for (int s = 0; s < kBlock; ++s) {
-                const double p2 = ak * x[s] * p1[s] - bk * p0[s];
-                v[s] += ck * p2;
-                w[s] += dk * p2;
+                const double p2 = std::fma(ak * x[s], p1[s], -bk * p0[s]);
+                v[s] = std::fma(ck, p2, v[s]);
+                w[s] = std::fma(dk, p2, w[s]);
                 p0[s] = p1[s];
                 p1[s] = p2;
             }
@@ -211,10 +214,10 @@ void LegendreSeries::Eval(double t, double& value, double& derivative) const {
         dv += c[1];
     }
     for (int k = 2; k <= n; ++k) {
-        const double p2 = kRec.a[k] * x * p1 - kRec.b[k] * p0;
-        const double d2 = d0 + (2 * k - 1) * p1;  // P_k' = P_{k-2}' + (2k-1) P_{k-1}
-        v += c[k] * p2;
-        dv += c[k] * d2;
+        const double p2 = std::fma(kRec.a[k] * x, p1, -kRec.b[k] * p0);
+        const double d2 = std::fma(2 * k - 1, p1, d0);  // P_k' = P_{k-2}' + (2k-1) P_{k-1}
+        v = std::fma(c[k], p2, v);
+        dv = std::fma(c[k], d2, dv);
         p0 = p1;
         p1 = p2;
         d0 = d1;
@@ -273,12 +276,13 @@ LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
     LegendreSeries s;
     s.a = a;
     s.b = b;
-    s.c.resize(n + 1);
-    const double* m = rule.transform.data();
-    for (int k = 0; k <= n; ++k, m += n + 1) {
-        double sum = 0;
-        for (int i = 0; i <= n; ++i) sum += m[i] * values[i];
-        s.c[k] = sum;
+    s.c.assign(n + 1, 0.0);
+    // c += value_i * column i of the transform (vectorised over k).
+    double* c = s.c.data();
+    const double* m = rule.transformByNode.data();
+    for (int i = 0; i <= n; ++i, m += n + 1) {
+        const double v = values[i];
+        for (int k = 0; k <= n; ++k) c[k] = std::fma(m[k], v, c[k]);
     }
     return s;
 }

@@ -15,6 +15,7 @@ struct LglRule {
     /// transform[k * (n + 1) + i] = weights[i] P_k(nodes[i]) / (discrete norm of P_k): the
     /// interpolation transform, coefficient k = sum_i transform[k][i] value_i.
     std::vector<double> transform;
+    std::vector<double> transformByNode;  ///< the same transposed: [i * (n + 1) + k]
 };
 inline constexpr int kMaxLegendreDegree = 64;
 const LglRule& LglNodes(int n);
@@ -26,7 +27,8 @@ struct LegendreSeries {
     std::vector<double> c;
 
     int Degree() const { return static_cast<int>(c.size()) - 1; }
-    /// p(t) by the three-term recurrence (any t; accurate on [a, b]).
+    /// p(t) by the three-term recurrence (any t; accurate on [a, b]). The evaluations use
+    /// explicit fused multiply-adds.
     double operator()(double t) const;
     /// p(t[s]) into out[s] for s < count, the points evaluated together (vectorised).
     void EvalMany(const double* t, int count, double* out) const;
