@@ -506,6 +506,7 @@ int RunServe(const ServeArgs& args) {
             out.output.rgba = (dir / "rgba.npy").string();
             out.output.hits = (dir / "hits.npy").string();
             out.output.stats.clear();
+            out.output.errors.clear();  // written below as errors.npy
             frameJob.AddWarnings(frameJob.GetScene(), image, stats);
             // Answered before the files are written: the stats say so (timing_s.write 0).
             json statsJson = json::parse(StatsToJson(stats));

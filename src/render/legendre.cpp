@@ -1,6 +1,7 @@
 // Legendre–Gauss–Lobatto rules and Legendre series arithmetic.
 #include "render/legendre.h"
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -74,6 +75,17 @@ LglRule BuildRule(int n) {
             p1 = p2;
         }
     }
+    // Discrete norms: 2 / (2k + 1), except 2 / n for k = n under Lobatto quadrature.
+    r.transform.resize((n + 1) * (n + 1));
+    r.transformByNode.resize((n + 1) * (n + 1));
+    for (int k = 0; k <= n; ++k) {
+        const double norm = (k < n) ? 2.0 / (2 * k + 1) : 2.0 / n;
+        for (int i = 0; i <= n; ++i) {
+            const double v = r.weights[i] * r.legendreAtNodes[i * (n + 1) + k] / norm;
+            r.transform[k * (n + 1) + i] = v;
+            r.transformByNode[i * (n + 1) + k] = v;
+        }
+    }
     return r;
 }
 
@@ -87,10 +99,107 @@ const LglRule& LglNodes(int n) {
     return *rules[n];
 }
 
+namespace {
+
+/// The three-term recurrence P_k = A_k x P_{k-1} - B_k P_{k-2} with A_k = (2k - 1) / k and
+/// B_k = (k - 1) / k as products (no division per term).
+constexpr int kRecurrenceSize = 2 * kMaxLegendreDegree + 4;
+struct Recurrence {
+    double a[kRecurrenceSize] = {}, b[kRecurrenceSize] = {};
+    constexpr Recurrence() {
+        for (int k = 2; k < kRecurrenceSize; ++k) {
+            a[k] = double(2 * k - 1) / k;
+            b[k] = double(k - 1) / k;
+        }
+    }
+};
+constexpr Recurrence kRec{};
+
+}  // namespace
+
 double LegendreSeries::operator()(double t) const {
-    double v, d;
-    Eval(t, v, d);
+    const double x = (2 * t - a - b) / (b - a);
+    const int n = Degree();
+    HPRAY_CHECK(n < kRecurrenceSize);
+    double v = c[0];
+    if (n >= 1) v += c[1] * x;
+    double p0 = 1, p1 = x;
+    for (int k = 2; k <= n; ++k) {
+        const double p2 = std::fma(kRec.a[k] * x, p1, -kRec.b[k] * p0);
+        v = std::fma(c[k], p2, v);
+        p0 = p1;
+        p1 = p2;
+    }
     return v;
+}
+
+void LegendreSeries::EvalMany(const double* t, int count, double* out) const {
+    const int n = Degree();
+    HPRAY_CHECK(n < kRecurrenceSize);
+    const double scale = 2 / (b - a), shift = (a + b) / (b - a);
+    constexpr int kBlock = 8;
+    for (int s0 = 0; s0 < count; s0 += kBlock) {
+        const int m = std::min(kBlock, count - s0);
+        double x[kBlock], p0[kBlock], p1[kBlock], v[kBlock];
+        for (int s = 0; s < kBlock; ++s) {
+            // Padding lanes repeat the block's first point.
+            x[s] = (s < m ? t[s0 + s] : t[s0]) * scale - shift;
+            p0[s] = 1;
+            p1[s] = x[s];
+            v[s] = c[0];
+        }
+        if (n >= 1)
+            for (int s = 0; s < kBlock; ++s) v[s] += c[1] * x[s];
+        for (int k = 2; k <= n; ++k) {
+            const double ak = kRec.a[k], bk = kRec.b[k], ck = c[k];
+            for (int s = 0; s < kBlock; ++s) {
+                const double p2 = std::fma(ak * x[s], p1[s], -bk * p0[s]);
+                v[s] = std::fma(ck, p2, v[s]);
+                p0[s] = p1[s];
+                p1[s] = p2;
+            }
+        }
+        for (int s = 0; s < m; ++s) out[s0 + s] = v[s];
+    }
+}
+
+void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t, int count,
+              double* outP, double* outQ) {
+    HPRAY_CHECK(p.a == q.a && p.b == q.b);
+    const int np = p.Degree(), nq = q.Degree(), n = std::max(np, nq);
+    HPRAY_CHECK(n < kRecurrenceSize);
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    constexpr int kBlock = 8;
+    for (int s0 = 0; s0 < count; s0 += kBlock) {
+        const int m = std::min(kBlock, count - s0);
+        double x[kBlock], p0[kBlock], p1[kBlock], v[kBlock], w[kBlock];
+        for (int s = 0; s < kBlock; ++s) {
+            x[s] = (s < m ? t[s0 + s] : t[s0]) * scale - shift;
+            p0[s] = 1;
+            p1[s] = x[s];
+            v[s] = p.c[0];
+            w[s] = q.c[0];
+        }
+        if (np >= 1)
+            for (int s = 0; s < kBlock; ++s) v[s] += p.c[1] * x[s];
+        if (nq >= 1)
+            for (int s = 0; s < kBlock; ++s) w[s] += q.c[1] * x[s];
+        for (int k = 2; k <= n; ++k) {
+            const double ak = kRec.a[k], bk = kRec.b[k];
+            const double ck = k <= np ? p.c[k] : 0.0, dk = k <= nq ? q.c[k] : 0.0;
+            for (int s = 0; s < kBlock; ++s) {
+                const double p2 = std::fma(ak * x[s], p1[s], -bk * p0[s]);
+                v[s] = std::fma(ck, p2, v[s]);
+                w[s] = std::fma(dk, p2, w[s]);
+                p0[s] = p1[s];
+                p1[s] = p2;
+            }
+        }
+        for (int s = 0; s < m; ++s) {
+            outP[s0 + s] = v[s];
+            outQ[s0 + s] = w[s];
+        }
+    }
 }
 
 void LegendreSeries::Eval(double t, double& value, double& derivative) const {
@@ -99,15 +208,16 @@ void LegendreSeries::Eval(double t, double& value, double& derivative) const {
     double p0 = 1, p1 = x, d0 = 0, d1 = 1;
     double v = c[0], dv = 0;
     const int n = Degree();
+    HPRAY_CHECK(n < kRecurrenceSize);
     if (n >= 1) {
         v += c[1] * x;
         dv += c[1];
     }
     for (int k = 2; k <= n; ++k) {
-        const double p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
-        const double d2 = d0 + (2 * k - 1) * p1;  // P_k' = P_{k-2}' + (2k-1) P_{k-1}
-        v += c[k] * p2;
-        dv += c[k] * d2;
+        const double p2 = std::fma(kRec.a[k] * x, p1, -kRec.b[k] * p0);
+        const double d2 = std::fma(2 * k - 1, p1, d0);  // P_k' = P_{k-2}' + (2k-1) P_{k-1}
+        v = std::fma(c[k], p2, v);
+        dv = std::fma(c[k], d2, dv);
         p0 = p1;
         p1 = p2;
         d0 = d1;
@@ -142,19 +252,37 @@ LegendreSeries LegendreSeries::Derivative() const {
     return d;
 }
 
+LegendreSeries LegendreSeries::Antiderivative() const {
+    // integral_{-1}^x P_0 = P_1 + P_0; integral_{-1}^x P_k = (P_{k+1} - P_{k-1}) / (2k + 1)
+    // for k >= 1 (zero at -1); times dt/dx = (b - a) / 2.
+    LegendreSeries r;
+    r.a = a;
+    r.b = b;
+    const int n = Degree();
+    r.c.assign(n + 2, 0.0);
+    const double h = 0.5 * (b - a);
+    r.c[0] += h * c[0];
+    r.c[1] += h * c[0];
+    for (int k = 1; k <= n; ++k) {
+        const double q = h * c[k] / (2 * k + 1);
+        r.c[k + 1] += q;
+        r.c[k - 1] -= q;
+    }
+    return r;
+}
+
 LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
     const LglRule& rule = LglNodes(n);
     LegendreSeries s;
     s.a = a;
     s.b = b;
     s.c.assign(n + 1, 0.0);
-    for (int k = 0; k <= n; ++k) {
-        double sum = 0;
-        for (int i = 0; i <= n; ++i)
-            sum += rule.weights[i] * values[i] * rule.legendreAtNodes[i * (n + 1) + k];
-        // Discrete norms: 2 / (2k + 1), except 2 / n for k = n under Lobatto quadrature.
-        const double norm = (k < n) ? 2.0 / (2 * k + 1) : 2.0 / n;
-        s.c[k] = sum / norm;
+    // c += value_i * column i of the transform (vectorised over k).
+    double* c = s.c.data();
+    const double* m = rule.transformByNode.data();
+    for (int i = 0; i <= n; ++i, m += n + 1) {
+        const double v = values[i];
+        for (int k = 0; k <= n; ++k) c[k] = std::fma(m[k], v, c[k]);
     }
     return s;
 }
@@ -163,9 +291,10 @@ LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,
                         std::vector<double>& scratch) {
     const int n = std::max(p.Degree(), 1);
     const LglRule& rule = LglNodes(n);
-    scratch.resize(n + 1);
-    for (int i = 0; i <= n; ++i)
-        scratch[i] = p(0.5 * (lo + hi) + 0.5 * (hi - lo) * rule.nodes[i]);
+    scratch.resize(2 * (n + 1));
+    double* ts = scratch.data() + n + 1;
+    for (int i = 0; i <= n; ++i) ts[i] = 0.5 * (lo + hi) + 0.5 * (hi - lo) * rule.nodes[i];
+    p.EvalMany(ts, n + 1, scratch.data());
     return InterpolateLgl(scratch.data(), n, lo, hi);
 }
 

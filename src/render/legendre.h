@@ -12,6 +12,10 @@ struct LglRule {
     std::vector<double> weights;
     /// pk[i * (n + 1) + k] = P_k(nodes[i]): the interpolation transform's matrix.
     std::vector<double> legendreAtNodes;
+    /// transform[k * (n + 1) + i] = weights[i] P_k(nodes[i]) / (discrete norm of P_k): the
+    /// interpolation transform, coefficient k = sum_i transform[k][i] value_i.
+    std::vector<double> transform;
+    std::vector<double> transformByNode;  ///< the same transposed: [i * (n + 1) + k]
 };
 inline constexpr int kMaxLegendreDegree = 64;
 const LglRule& LglNodes(int n);
@@ -23,15 +27,26 @@ struct LegendreSeries {
     std::vector<double> c;
 
     int Degree() const { return static_cast<int>(c.size()) - 1; }
-    /// Clenshaw evaluation at t (any t; accurate on [a, b]).
+    /// p(t) by the three-term recurrence (any t; accurate on [a, b]). The evaluations use
+    /// explicit fused multiply-adds.
     double operator()(double t) const;
+    /// p(t[s]) into out[s] for s < count, the points evaluated together (vectorised).
+    void EvalMany(const double* t, int count, double* out) const;
     /// p(t) and dp/dt.
     void Eval(double t, double& value, double& derivative) const;
     /// sum_{k>=1} |c_k|: |p(t) - c_0| <= Tail() on [a, b] since |P_k| <= 1 there.
     double Tail() const;
     /// The derivative dp/dt as a series of degree n - 1 on the same interval.
     LegendreSeries Derivative() const;
+    /// The antiderivative integral_a^t p as a series of degree n + 1 on the same interval
+    /// (zero at t = a).
+    LegendreSeries Antiderivative() const;
 };
+
+/// p(t[s]) into outP[s] and q(t[s]) into outQ[s] for s < count, for two series on the same
+/// interval (any degrees): the Legendre polynomials are computed once for both.
+void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t, int count,
+              double* outP, double* outQ);
 
 /// Interpolates `values` at the n + 1 LGL nodes of [a, b] (values[i] at node i) exactly by
 /// the degree-n Legendre series (discrete Legendre transform with the Lobatto correction

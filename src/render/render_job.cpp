@@ -240,7 +240,7 @@ void CheckJobOutputs(const Scene& scene) {
         const char* extension;
     } outputs[] = {{"output.exr", &o.exr, ".exr"},     {"output.png", &o.png, ".png"},
                    {"output.stats", &o.stats, ".json"}, {"output.hits", &o.hits, ".npy"},
-                   {"output.rgba", &o.rgba, ".npy"}};
+                   {"output.rgba", &o.rgba, ".npy"}, {"output.errors", &o.errors, ".npy"}};
     const std::set<std::string> known = {".exr",  ".png", ".jpg", ".jpeg", ".tif", ".tiff",
                                          ".bmp",  ".gif", ".webp", ".ppm", ".npy", ".npz",
                                          ".json", ".vtk", ".vtu", ".vti"};
@@ -297,6 +297,8 @@ void WriteJobOutputs(const Scene& scene, const Image& image, const Box& dataBoun
         writers.run([&] { WriteNpy(out.hits, HitsArray(image), {H, W, 5}); });
     if (!out.rgba.empty())
         writers.run([&] { WriteNpy(out.rgba, RgbaArray(image), {H, W, 4}); });
+    if (!out.errors.empty())
+        writers.run([&] { WriteNpyFloat32(out.errors, ErrorArray(image), {H, W, 2}); });
     writers.wait();
     stats.timing.write = Seconds(t0);
     stats.timing.total += stats.timing.write;

@@ -35,7 +35,8 @@ std::array<double, RenderCounters::kSize> RenderCounters::ToArray() const {
             inversionFailures,
             volumeErrorSqSum,
             volumePixels,
-            volumeErrorMax};
+            volumeErrorMax,
+            volumeNodes};
 }
 
 RenderCounters RenderCounters::FromArray(const std::array<double, kSize>& a) {
@@ -59,6 +60,7 @@ RenderCounters RenderCounters::FromArray(const std::array<double, kSize>& a) {
     c.volumeErrorSqSum = a[16];
     c.volumePixels = a[17];
     c.volumeErrorMax = a[18];
+    c.volumeNodes = a[19];
     return c;
 }
 
@@ -121,7 +123,8 @@ std::string StatsToJson(const RenderStats& s) {
                     {"mean_iterations", safeDiv(c.inversionIterations, c.inversions)},
                     {"failures", c.inversionFailures}};
     j["volume"] = {{"rms_error_estimate", std::sqrt(safeDiv(c.volumeErrorSqSum, c.volumePixels))},
-                   {"max_error_estimate", c.volumeErrorMax}};
+                   {"max_error_estimate", c.volumeErrorMax},
+                   {"quadrature_nodes", c.volumeNodes}};
     if (s.hasVolume) {
         json& v = j["volume"];
         v["color_field"] = s.volumeColorField;

@@ -42,8 +42,9 @@ struct RenderCounters {
     double volumeErrorSqSum = 0;
     double volumeErrorMax = 0;          ///< reduced with max
     double volumePixels = 0;
+    double volumeNodes = 0;  ///< integrand samples of the volume quadratures
 
-    static constexpr int kSize = 19;
+    static constexpr int kSize = 20;
     /// Indices of the fields reduced with max rather than sum.
     static bool IsMax(int index);
     std::array<double, kSize> ToArray() const;

@@ -46,6 +46,27 @@ void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
     for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
 }
 
+void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) {
+        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
+        for (int c = 0; c < channels_; ++c) {
+            offset[c] = v[c];
+            slope[c] = 0;
+        }
+        return;
+    }
+    const double s0 = scalars_[k], s1 = scalars_[k + 1];
+    const double* v0 = values_.data() + std::size_t(k) * channels_;
+    const double* v1 = v0 + channels_;
+    for (int c = 0; c < channels_; ++c) {
+        slope[c] = (v1[c] - v0[c]) / (s1 - s0);
+        // Anchored at the end nearer zero, so the offset carries no large cancellation.
+        offset[c] = std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0
+                                                 : v1[c] - slope[c] * s1;
+    }
+}
+
 void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut,
                                   double* maxOut) const {
     double v[3];
@@ -272,6 +293,50 @@ const KronrodRule& GetKronrodRule() {
         return r;
     }();
     return rule;
+}
+
+namespace {
+
+template <unsigned N>
+GaussKronrodPair MakeGaussKronrodPair() {
+    using LD = long double;
+    using GK = boost::math::quadrature::gauss_kronrod<LD, N>;
+    using G = boost::math::quadrature::gauss<LD, (N - 1) / 2>;
+    GaussKronrodPair r;
+    r.gaussPoints = (N - 1) / 2;
+    r.size = N;
+    const int half = N / 2;
+    r.nodes.assign(N, 0.0);
+    r.kronrodWeights.assign(N, 0.0);
+    r.gaussWeights.assign(N, 0.0);
+    const auto& x = GK::abscissa();  // 0, then the positive nodes ascending
+    const auto& w = GK::weights();
+    for (int i = 0; i <= half; ++i) {
+        r.nodes[half + i] = double(x[i]);
+        r.nodes[half - i] = -double(x[i]);
+        r.kronrodWeights[half + i] = r.kronrodWeights[half - i] = double(w[i]);
+    }
+    // The Gauss nodes are among the Kronrod nodes: match each to the nearest.
+    const auto& gx = G::abscissa();
+    const auto& gw = G::weights();
+    for (std::size_t j = 0; j < gx.size(); ++j) {
+        int best = 0;
+        for (int i = 1; i <= half; ++i)
+            if (std::abs(x[i] - gx[j]) < std::abs(x[best] - gx[j])) best = i;
+        HPRAY_CHECK(std::abs(x[best] - gx[j]) < 1e-15L);
+        r.gaussWeights[half + best] = r.gaussWeights[half - best] = double(gw[j]);
+    }
+    return r;
+}
+
+}  // namespace
+
+const GaussKronrodPair& GetGaussKronrodPair(int level) {
+    static const std::array<GaussKronrodPair, kGaussKronrodLevels> pairs = {
+        MakeGaussKronrodPair<3>(), MakeGaussKronrodPair<7>(), MakeGaussKronrodPair<15>(),
+        MakeGaussKronrodPair<31>(), MakeGaussKronrodPair<61>()};
+    HPRAY_CHECK(level >= 0 && level < kGaussKronrodLevels);
+    return pairs[level];
 }
 
 }  // namespace hpray

@@ -31,6 +31,9 @@ class PiecewiseLinearTf {
     /// Channels() values.
     void EvalOn(int k, double s, double* out) const;
     void Eval(double s, double* out) const { EvalOn(IntervalOf(s), s, out); }
+    /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
+    /// pieces): `offset`, `slope` get Channels() values.
+    void AffineOn(int k, double* offset, double* slope) const;
 
     /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the
     /// ends or at control points inside). `minOut`, `maxOut` get Channels() values.
@@ -92,5 +95,18 @@ struct KronrodRule {
     std::array<std::array<double, kNodes>, kNodes> cumulative{};
 };
 const KronrodRule& GetKronrodRule();
+
+/// Gauss-Kronrod pairs on [-1, 1] for the integrals of volume pieces: level L holds the
+/// Kronrod rule of 2n + 1 nodes (ascending) extending the n-point Gauss rule, n = 1, 3, 7,
+/// 15, 30 for L = 0..4 (the 3-point Kronrod extension of the midpoint rule is the 3-point
+/// Gauss rule). gaussWeights is 0 at the Kronrod-only nodes. Built once (thread-safe),
+/// in long double.
+struct GaussKronrodPair {
+    int gaussPoints = 0;
+    int size = 0;  ///< 2 gaussPoints + 1
+    std::vector<double> nodes, kronrodWeights, gaussWeights;
+};
+inline constexpr int kGaussKronrodLevels = 5;
+const GaussKronrodPair& GetGaussKronrodPair(int level);
 
 }  // namespace hpray

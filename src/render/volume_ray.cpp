@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "render/hex_line_sampler.h"
 #include "util/check.h"
 #include "util/error.h"
 
@@ -19,6 +20,25 @@ constexpr int kMaxKronrodDepth = 40;
 /// (their error estimates still go into vol.error): a cap on the work of integrands whose
 /// estimated error does not shrink with the interval (noise at the tolerance's level).
 constexpr int kMaxKronrodEvaluations = 4096;
+/// Series mode: the highest Gauss-Kronrod level raised to before an interval is bisected,
+/// and the level each ray starts with.
+constexpr int kTopLevel = 3;
+constexpr int kStartLevel = 1;
+/// Series mode: an interval's result is its Gauss rule, whose error is estimated by the
+/// Kronrod rule's difference s (truth - Gauss = s + the Kronrod rule's own error). The
+/// Kronrod rule's error is taken as at most this fraction of |s| (it converges at
+/// 3n + 2 against the Gauss rule's 2n), and goes into the error as an absolute term.
+constexpr double kKronrodMargin = 0.25;
+/// A bound of the rounding error of a Legendre series evaluated by its recurrence (and
+/// of the sampled field it interpolates), in units of eps times the sum of |c_k|.
+constexpr double kSeriesRounding = 8;
+/// A bound of the rounding error of the field's samples in a cell, in units of eps times
+/// the largest |value| in the cell (measured on nk-sinc's order-8 cells: at most 12).
+constexpr double kSampleRounding = 32;
+/// Trailing Legendre coefficients of an exact series whose sum is below this many eps
+/// times the largest |value| in the cell (half the samples' rounding bound) are dropped,
+/// and their sum counted as field error.
+constexpr double kTruncation = 16;
 
 PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points) {
     std::vector<double> s, v;
@@ -29,7 +49,90 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
     return PiecewiseLinearTf(std::move(s), std::move(v), 1);
 }
 
+/// The root of p - level in [lo, hi], where p - level has the signs of fLo and fHi (opposite,
+/// nonzero) at the ends and p is monotone: Newton's method kept inside the shrinking
+/// bracket (bisection when a step leaves it), to `tol` in t.
+double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
+                    double fHi, double guess, double tol) {
+    double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
+    for (int it = 0; it < 100; ++it) {
+        double v, dv;
+        p.Eval(t, v, dv);
+        const double f = v - level;
+        if (f == 0) return t;
+        if ((f < 0) == (fLo < 0)) {
+            lo = t;
+            fLo = f;
+        } else {
+            hi = t;
+        }
+        double next = dv != 0 ? t - f / dv : 0.5 * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        if (std::abs(next - t) <= tol || hi - lo <= tol) return next;
+        t = next;
+    }
+    return t;
+}
+
 }  // namespace
+
+void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     const double* sampleT, const double* sampleV, int samples,
+                     std::vector<double>& scratch, std::vector<double>& points,
+                     std::vector<double>& out) {
+    if (count == 0 || !(p.b > p.a)) return;
+    // Split [a, b] at the critical points of p: the roots of p', isolated on its series
+    // (a window is passed over only where |p'| provably exceeds its rounding).
+    points.clear();
+    points.push_back(p.a);
+    if (p.Degree() >= 2) {
+        const LegendreSeries d = p.Derivative();
+        double sum = 0;
+        for (double c : d.c) sum += std::abs(c);
+        const double slopeEps = kSeriesRounding * kEps * sum;
+        if (detail::TailExcluded(d, 0.0) <= slopeEps) {
+            detail::IsolateRoots(d, 0.0, slopeEps, tol, scratch,
+                                 [&](double lo, double hi, int kind, double tStar) {
+                                     double t = tStar;
+                                     if (kind == 1) {
+                                         const double dlo = d(lo), dhi = d(hi);
+                                         t = (dlo < 0) != (dhi < 0) && dlo != 0 && dhi != 0
+                                                 ? detail::PolishSeriesRoot(d, lo, hi, dlo,
+                                                                            dhi, tol)
+                                                 : 0.5 * (lo + hi);
+                                     }
+                                     if (t > points.back() && t < p.b) points.push_back(t);
+                                     return false;
+                                 });
+        }
+    }
+    points.push_back(p.b);
+    // On each interval between them p is monotone: a level strictly between the end
+    // values is crossed once.
+    double vlo = p(points[0]);
+    for (std::size_t k = 0; k + 1 < points.size(); ++k) {
+        const double lo = points[k], hi = points[k + 1], vhi = p(hi);
+        const double vmin = std::min(vlo, vhi), vmax = std::max(vlo, vhi);
+        for (int m = 0; m < count; ++m) {
+            const double level = levels[m];
+            if (!(level > vmin && level < vmax)) continue;
+            // Newton's start: where the samples inside [lo, hi] change sides, linearly.
+            double guess = std::numeric_limits<double>::quiet_NaN();
+            for (int i = 0; i + 1 < samples; ++i) {
+                if (sampleT[i + 1] < lo || sampleT[i] > hi) continue;
+                const double fa = sampleV[i] - level, fb = sampleV[i + 1] - level;
+                if ((fa < 0) != (fb < 0)) {
+                    guess = sampleT[i] + (sampleT[i + 1] - sampleT[i]) * (fa / (fa - fb));
+                    break;
+                }
+            }
+            const double t =
+                MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess, tol);
+            if (t > p.a && t < p.b) out.push_back(t);
+        }
+        vlo = vhi;
+    }
+}
 
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points) {
     std::vector<double> s, v;
@@ -66,6 +169,8 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
     for (int f = 0; f < count; ++f) {
         const ScalarSelector sel = s.fields[f];
         s.ranges.push_back(cache.Ranges(sel));
+        s.data.push_back(sel.field->association == Association::Point ? cache.Data(sel)
+                                                                       : nullptr);
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
     }
@@ -112,6 +217,9 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     tEnd_ = tEnd;
     pathLength_ = std::max(tEnd - tStart, std::numeric_limits<double>::min());
     kronrodIntervals_ = 0;
+    // Each ray starts from the same state: its pixel must not depend on the rays the
+    // thread integrated before (tiles and threads may take any rays).
+    levelHint_ = kStartLevel;
     startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
 }
@@ -133,18 +241,19 @@ void VolumeRayMarcher::FinishRay(RayComposite& composite) const {
     // d pixel / d tStart = -E(tStart) + tau(tStart) * pixel (everything behind is
     // attenuated); d pixel / d tEnd = T(tEnd) E(tEnd). The ends carry a few ulps of t.
     const double dStart = 4 * kEps * std::abs(tStart_), dEnd = 4 * kEps * std::abs(tEnd_);
-    for (int c = 0; c < 3; ++c)
+    for (int c = 0; c < 3; ++c) {
         composite.error[c] +=
             dStart * std::abs(startTau_ * composite.rgba[c] - startEmission_[c]) +
-            dEnd * endEmission_[c];
+            dEnd * endEmission_[c] + std::abs(composite.signedError[c]);
+        composite.signedError[c] = 0;
+    }
 }
 
 void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin, double T,
+                                     double colorError, double tauError,
                                      RayComposite& composite) const {
     if (kind_ != VolumeSetup::kVarying) return;
     const VolumeSetup& s = *setup_;
-    const double colorError = s.colorSlope * state_[0].error;
-    const double tauError = s.extinctionSlope * state_[fieldCount_ - 1].error;
     // Emission happens within lambda of the piece's start: integral_0^l exp(-phi) <=
     // lambda. First-order effects of a colour error dc and an extinction error dtau:
     // Williams-Max dc (1 - e^-D) + 2 kappa_max dtau lambda; Wilhelms-Van Gelder
@@ -165,6 +274,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     seg_ = seg;
     kind_ = s.cellKind[seg.cell];
     crossings_.clear();
+    mode_ = Mode::kClosed;
     if (kind_ == VolumeSetup::kEmpty) return false;
     if (kind_ == VolumeSetup::kConstant) {
         // Both transfer functions are constant over the guaranteed ranges: any value in
@@ -177,6 +287,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         return true;
     }
     fieldCount_ = s.sameField ? 1 : 2;
+    bool allLinear = true, allSeries = true;
     for (int f = 0; f < fieldCount_; ++f) {
         FieldState& st = state_[f];
         st = FieldState{};
@@ -187,7 +298,13 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             continue;
         }
         SegmentField& sf = field_[f];
-        sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
+        truncated_[f] = 0;
+        sampleV_[f].clear();
+        if (s.data[f]) {
+            sf.Begin(*s.data[f], geometry, sel, seg.cell, ray_, s.inversion);
+        } else {
+            sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
+        }
         pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
         // (reference units) times the field's variation over the cell.
@@ -201,12 +318,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             st.valueExit = sf(seg.tExit);
         } else if (sf.ExactAlongLine()) {
             // A polynomial of known degree along the ray: its interpolant is the field.
-            ProjectionOptions projection = s.projection;
-            projection.scaleFloor = s.fieldScale[f];
-            projection.exactDegree = sf.LineDegree();
-            projectionStats_ = ProjectionStats{};
-            ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
-                           projectionStats_, scratch_);
+            ProjectExact(f, geometry, seg);
             st.bySeries = pieces_[f].size() == 1;
             if (st.bySeries) st.error = std::max(st.error, pieces_[f][0].eps);
             if (st.bySeries) {
@@ -222,12 +334,112 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
                 }
             }
         }
+        allLinear = allLinear && st.linear;
+        allSeries = allSeries && (st.linear || st.bySeries);
         FindCrossings(f, seg, counters);
         sf.AddCountersTo(counters);
     }
+    mode_ = allLinear ? Mode::kClosed : allSeries ? Mode::kSeries : Mode::kGeneric;
+    if (mode_ == Mode::kSeries) {
+        for (int f = 0; f < fieldCount_; ++f) {
+            const FieldState& st = state_[f];
+            LegendreSeries& line = line_[f];
+            if (st.bySeries) {
+                line = pieces_[f][0].p;
+            } else {
+                // Constant or linear on the segment.
+                line.a = seg.tEnter;
+                line.b = seg.tExit;
+                line.c.assign(st.constant ? 1 : 2, 0.0);
+                line.c[0] = 0.5 * (st.valueEnter + st.valueExit);
+                if (!st.constant) line.c[1] = 0.5 * (st.valueExit - st.valueEnter);
+            }
+            double sum = 0;
+            for (double c : line.c) sum += std::abs(c);
+            // Rounding of the field's samples (a few eps of the cell's values, from the
+            // sum-factorised contraction) and of the series' evaluation, and what the
+            // truncation dropped.
+            const Interval& range = (*s.ranges[f])[seg.cell];
+            const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
+            lineError_[f] = st.constant ? 0.0
+                                        : kSampleRounding * kEps * cellScale +
+                                              kSeriesRounding * kEps * sum + truncated_[f];
+        }
+        haveDepthLine_ = false;
+    }
     std::sort(crossings_.begin(), crossings_.end());
     crossings_.erase(std::unique(crossings_.begin(), crossings_.end()), crossings_.end());
+    counters.fieldEvaluations += fieldSamples_;
+    fieldSamples_ = 0;
     return true;
+}
+
+void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
+                                    const Segment& seg) {
+    const VolumeSetup& s = *setup_;
+    SegmentField& sf = field_[f];
+    ProjectionOptions projection = s.projection;
+    projection.scaleFloor = s.fieldScale[f];
+    projection.exactDegree = sf.LineDegree();
+    const int n = std::min(sf.LineDegree(), kMaxLegendreDegree);
+    if (projection.startDegree == projection.maxDegree || n < 1) {
+        // A pinned projection order (order studies): as the isosurfaces do.
+        projectionStats_ = ProjectionStats{};
+        ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
+                       projectionStats_, scratch_);
+        return;
+    }
+    // The interpolant at the n + 1 Legendre-Gauss-Lobatto nodes, sampled together.
+    const LglRule& rule = LglNodes(n);
+    const double mid = 0.5 * (seg.tEnter + seg.tExit), half = 0.5 * (seg.tExit - seg.tEnter);
+    scratch_.resize(2 * (n + 1));
+    double* ts = scratch_.data() + n + 1;
+    for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
+    // Affine Lagrange hexahedra: the register-blocked kernel on the gathered values.
+    const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
+    bool sampled = false;
+    if (s.data[f] && cell.affine && cell.linearInvertible &&
+        cell.basis->kind == BasisKind::HexLagrange && cell.basis->polynomial) {
+        // ref(t) = L^-1 (o + t d - origin).
+        const auto& inv = cell.inverseLinear;
+        double rel[3], ref0[3], dref[3];
+        for (int i = 0; i < 3; ++i) rel[i] = ray_.origin[i] - cell.origin[i];
+        for (int i = 0; i < 3; ++i) {
+            ref0[i] = inv[3 * i] * rel[0] + inv[3 * i + 1] * rel[1] + inv[3 * i + 2] * rel[2];
+            dref[i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
+                      inv[3 * i + 2] * ray_.dir[2];
+        }
+        const FieldCellData& data = *s.data[f];
+        sampled = SampleAffineHexLine(cell.basis->order,
+                                      data.values.data() + data.mesh->cellOffsets[seg.cell],
+                                      ref0, dref, ts, n + 1, scratch_.data());
+        if (sampled) fieldSamples_ += n + 1;
+    }
+    if (!sampled) sf.SampleBatch(ts, n + 1, scratch_.data());
+    double scale = 0;
+    for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(scratch_[i]));
+    sampleT_.assign(ts, ts + n + 1);
+    sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
+    pieces_[f].resize(1);
+    ProjectedPiece& piece = pieces_[f][0];
+    piece.p = InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit);
+    // As ProjectSegment's exact projection: rounding in the samples and the transform.
+    piece.eps = 64 * (n + 1) * kEps * scale;
+    piece.converged = true;
+    // The trailing coefficients at the level of that rounding (the field is smooth on
+    // the segment: its coefficients fall to the noise of the samples well before the
+    // degree bound) are dropped, their sum kept as an error: every later evaluation of
+    // the series is that much cheaper.
+    std::vector<double>& c = piece.p.c;
+    const Interval& range = (*s.ranges[f])[seg.cell];
+    const double noise =
+        kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+    double dropped = 0;
+    while (c.size() > 2 && dropped + std::abs(c.back()) <= noise) {
+        dropped += std::abs(c.back());
+        c.pop_back();
+    }
+    truncated_[f] = dropped;
 }
 
 void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
@@ -269,12 +481,28 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
                        projectionStats_, scratch_);
     }
+    auto record = [&](const RootResult& r) {
+        if (r.t > seg.tEnter && r.t < seg.tExit) crossings_.push_back(r.t);
+        return false;
+    };
+    if (st.bySeries) {
+        // The series is the field up to its rounding (the interpolant of a polynomial of
+        // its degree): its crossings of all the breakpoints at once, found on it, which
+        // costs no field evaluation.
+        levels_.clear();
+        forEachBreakpoint([&](double b) { levels_.push_back(b); });
+        std::sort(levels_.begin(), levels_.end());
+        levels_.erase(std::unique(levels_.begin(), levels_.end()), levels_.end());
+        const double tol =
+            std::max(s.roots.rootTolerance * (seg.tExit - seg.tEnter),
+                     4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
+        SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol,
+                        sampleT_.data(), sampleV_[f].data(), int(sampleV_[f].size()),
+                        scratch_, points_, crossings_);
+        return;
+    }
     forEachBreakpoint([&](double b) {
-        counters.rootFailures +=
-            FindRoots(sf, pieces_[f], b, s.roots, scratch_, [&](const RootResult& r) {
-                if (r.t > seg.tEnter && r.t < seg.tExit) crossings_.push_back(r.t);
-                return false;
-            });
+        counters.rootFailures += FindRoots(sf, pieces_[f], b, s.roots, scratch_, record);
     });
 }
 
@@ -306,6 +534,7 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
     const VolumeSetup& s = *setup_;
     double tau0, tau1, c0[3], c1[3];
     const double length = p1 - p0;
+    double colorSlope = 0, tauSlope = 0;
     if (kind_ == VolumeSetup::kConstant) {
         tau0 = tau1 = constTau_;
         for (int c = 0; c < 3; ++c) c0[c] = c1[c] = constColor_[c];
@@ -325,6 +554,12 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
         const int ke = s.extinctionTf.IntervalOf(vem);
         s.extinctionTf.EvalOn(ke, ve0, &tau0);
         s.extinctionTf.EvalOn(ke, ve1, &tau1);
+        // The slopes of the pieces in use turn field errors into value errors.
+        double offset[3], slope[3];
+        s.colorTf.AffineOn(kc, offset, slope);
+        colorSlope = std::max({std::abs(slope[0]), std::abs(slope[1]), std::abs(slope[2])});
+        s.extinctionTf.AffineOn(ke, offset, slope);
+        tauSlope = std::abs(slope[0]);
     }
     tau0 = std::max(0.0, tau0);
     tau1 = std::max(0.0, tau1);
@@ -340,18 +575,199 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
         rgb[c] = T * e;
         // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of the
         // compositing.
-        composite.error[c] += 256 * kEps * rgb[c];
+        composite.error[c] += 16 * kEps * rgb[c];
         e0[c] = wm ? c0[c] * tau0 : c0[c];
         e1[c] = wm ? c1[c] * tau1 : c1[c];
     }
     // The piece's own colour first: the depth errors below affect only what lies behind.
     composite.AddColor(rgb);
     AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T,
+                  colorSlope * state_[0].error, tauSlope * state_[fieldCount_ - 1].error,
                   composite);
     composite.rgba[3] += T * q.opacity;
     composite.transmittance = T * q.transmittance;
     composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
     RecordEnds(p0, p1, tau0, e0, tau1, e1, composite.transmittance);
+}
+
+void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    const bool wm = s.glow == GlowModel::WilliamsMax;
+    const int fe = fieldCount_ - 1;
+    const LegendreSeries& uc = line_[0];
+    const LegendreSeries& ue = line_[fe];
+    const double length = p1 - p0, mid = 0.5 * (p0 + p1);
+    // Each transfer function is affine on the piece (its ends are breakpoints up to
+    // rounding): the piece holding the field at the midpoint, extended to both ends.
+    const double c0 = uc(mid);
+    const double em = fe == 0 ? c0 : ue(mid);
+    double ac[3], bc[3], ae, be;
+    s.colorTf.AffineOn(s.colorTf.IntervalOf(c0), ac, bc);
+    s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(em), &ae, &be);
+    // Optical depth from p0, exact for the polynomial field: with ue = m + w (m its mean
+    // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
+    // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
+    double tauM = ae, v0 = 0, v1 = 0;
+    if (be != 0) {
+        if (!haveDepthLine_) {
+            LegendreSeries w = ue;
+            w.c[0] = 0;
+            depthLine_ = w.Antiderivative();
+            double sum = 0;
+            for (double c : depthLine_.c) sum += std::abs(c);
+            depthLineError_ = kSeriesRounding * kEps * sum;
+            haveDepthLine_ = true;
+            depthLineT_ = std::numeric_limits<double>::quiet_NaN();
+        }
+        tauM = ae + be * ue.c[0];
+        // Pieces follow each other along the segment: the last end is this start.
+        v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_(p0);
+        v1 = depthLine_(p1);
+        depthLineT_ = p1;
+        depthLineV_ = v1;
+    }
+    const double depth = std::max(0.0, tauM * length + be * (v1 - v0));
+    const double opacity = -std::expm1(-depth);
+    // Williams-Max: E_c = (ac + bc c0) (1 - e^-D) + bc Q with Q = integral (uc - c0) tau
+    // e^-phi, since integral tau e^-phi = 1 - e^-D. Wilhelms-Van Gelder: E_c = (ac + bc
+    // c0) J + bc Q with J = integral e^-phi (closed form when tau is constant) and Q =
+    // integral (uc - c0) e^-phi. Q and J by Gauss-Kronrod pairs.
+    double wJ[3], wQmax = 0, wJmax = 0;
+    for (int c = 0; c < 3; ++c) {
+        wJ[c] = ac[c] + bc[c] * c0;
+        wQmax = std::max(wQmax, std::abs(bc[c]));
+        wJmax = std::max(wJmax, std::abs(wJ[c]));
+    }
+    const bool absorbs = tauM != 0 || be != 0;
+    const bool needQ = wQmax > 0 && (absorbs || !wm);
+    const bool needJ = !wm && be != 0 && wJmax > 0;
+    if (!needQ) wQmax = 0;
+    if (!needJ) wJmax = 0;
+    const double T = composite.transmittance;
+    double Q = 0, J = 0, sigQ = 0, sigJ = 0, absQ = 0, absJ = 0, magQ = 0, magJ = 0;
+    double tauMin = std::numeric_limits<double>::infinity();
+    if (needQ || needJ) {
+        const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
+        stack_.clear();
+        stack_.push_back({p0, p1, 0, levelHint_});
+        int evaluations = 0;
+        while (!stack_.empty()) {
+            const Work w = stack_.back();
+            stack_.pop_back();
+            ++evaluations;
+            const GaussKronrodPair& rule = GetGaussKronrodPair(w.level);
+            const int n = rule.size;
+            const double half = 0.5 * (w.hi - w.lo), m = 0.5 * (w.lo + w.hi);
+            nodeT_.resize(n);
+            nodeU_[0].resize(n);
+            nodeU_[1].resize(n);
+            nodeDepth_.resize(n);
+            for (int i = 0; i < n; ++i) nodeT_[i] = m + half * rule.nodes[i];
+            const double* ueAt = nodeU_[0].data();
+            if (be == 0) {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+            } else if (fe == 0) {
+                EvalPair(uc, depthLine_, nodeT_.data(), n, nodeU_[0].data(), nodeDepth_.data());
+            } else {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+                EvalPair(ue, depthLine_, nodeT_.data(), n, nodeU_[1].data(), nodeDepth_.data());
+                ueAt = nodeU_[1].data();
+            }
+            quadratureNodes_ += n;
+            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0, jAbs = 0;
+            for (int i = 0; i < n; ++i) {
+                const double dt = nodeT_[i] - p0;
+                const double phi =
+                    be != 0 ? tauM * dt + be * (nodeDepth_[i] - v0) : tauM * dt;
+                const double att = std::exp(-std::max(0.0, phi));
+                const double tau = be != 0 ? ae + be * ueAt[i] : ae;
+                tauMin = std::min(tauMin, tau);
+                const double gq = (nodeU_[0][i] - c0) * (wm ? tau : 1.0) * att;
+                qK += rule.kronrodWeights[i] * gq;
+                qG += rule.gaussWeights[i] * gq;
+                qAbs += rule.kronrodWeights[i] * std::abs(gq);
+                jK += rule.kronrodWeights[i] * att;
+                jG += rule.gaussWeights[i] * att;
+                jAbs += rule.kronrodWeights[i] * att;
+            }
+            const double sQ = half * (qK - qG), sJ = half * (jK - jG);
+            const double estimate =
+                T * (1 + kKronrodMargin) * (wQmax * std::abs(sQ) + wJmax * std::abs(sJ));
+            const double allowed = budgetPerLength * (w.hi - w.lo);
+            if (estimate > allowed && w.depth < kMaxKronrodDepth &&
+                evaluations < kMaxKronrodEvaluations) {
+                if (w.level < kTopLevel) {
+                    // Far from the budget: skip a level.
+                    const int step = estimate > 1e6 * allowed ? 2 : 1;
+                    stack_.push_back({w.lo, w.hi, w.depth, std::min(kTopLevel, w.level + step)});
+                } else {
+                    stack_.push_back({m, w.hi, w.depth + 1, kTopLevel - 1});
+                    stack_.push_back({w.lo, m, w.depth + 1, kTopLevel - 1});
+                }
+                continue;
+            }
+            ++kronrodIntervals_;
+            Q += half * qG;
+            J += half * jG;
+            sigQ += sQ;
+            sigJ += sJ;
+            absQ += std::abs(sQ);
+            absJ += std::abs(sJ);
+            magQ += half * qAbs;
+            magJ += half * jAbs;
+            if (w.depth == 0)
+                levelHint_ = (estimate < 1e-6 * allowed && w.level > 0) ? w.level - 1
+                                                                        : w.level;
+        }
+    }
+    if (!wm && !needJ) {
+        // tau constant on the piece: J = (1 - e^-D) / tau.
+        J = depth > 0 ? length * opacity / depth : length;
+        magJ = J;
+    }
+    if (!std::isfinite(tauMin)) tauMin = std::max(0.0, std::min(ae + be * em, tauM));
+    double rgb[3];
+    for (int c = 0; c < 3; ++c) {
+        double e, sig = 0, unsure = 0, rounding;
+        if (wm) {
+            e = wJ[c] * opacity + bc[c] * Q;
+            sig = bc[c] * sigQ;
+            unsure = std::abs(bc[c]) * absQ;
+            rounding = std::abs(wJ[c]) * opacity + std::abs(bc[c]) * magQ;
+        } else {
+            e = wJ[c] * J + bc[c] * Q;
+            sig = wJ[c] * sigJ + bc[c] * sigQ;
+            unsure = std::abs(wJ[c]) * absJ + std::abs(bc[c]) * absQ;
+            rounding = std::abs(wJ[c]) * magJ + std::abs(bc[c]) * magQ;
+        }
+        rgb[c] = T * e;
+        composite.signedError[c] += T * sig;
+        composite.error[c] += T * (kKronrodMargin * unsure + 16 * kEps * rounding);
+    }
+    composite.AddColor(rgb);
+    // Field errors through the slopes of the pieces in use.
+    double colorError = 0;
+    for (int c = 0; c < 3; ++c) colorError = std::max(colorError, std::abs(bc[c]));
+    colorError *= lineError_[0];
+    const double tauError = std::abs(be) * lineError_[fe];
+    AddFieldError(length, depth, std::max(0.0, tauMin), T, colorError, tauError, composite);
+    composite.rgba[3] += T * opacity;
+    composite.transmittance = T * std::exp(-depth);
+    // Rounding of the depth: the antiderivative's evaluations and the sums.
+    composite.depthError += 2 * std::abs(be) * depthLineError_ +
+                            4 * kEps * (std::abs(tauM) * length + std::abs(be * (v1 - v0)));
+    if (p0 == tStart_ || p1 == tEnd_) {
+        double tau[2], emission[2][3];
+        const double ends[2] = {p0, p1};
+        for (int k = 0; k < 2; ++k) {
+            const double vc = uc(ends[k]), ve = fe == 0 ? vc : ue(ends[k]);
+            tau[k] = std::max(0.0, ae + be * ve);
+            for (int c = 0; c < 3; ++c)
+                emission[k][c] = std::max(0.0, ac[c] + bc[c] * vc) * (wm ? tau[k] : 1.0);
+        }
+        RecordEnds(p0, p1, tau[0], emission[0], tau[1], emission[1],
+                   composite.transmittance);
+    }
 }
 
 void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composite) {
@@ -370,6 +786,7 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
         double tau[n], emission[n][3];
         for (int i = 0; i < n; ++i)
             Sample(mid + half * rule.nodes[i], tau[i], emission[i]);
+        quadratureNodes_ += n;
         double dK = 0, dG = 0, cK[3] = {0, 0, 0}, cG[3] = {0, 0, 0};
         for (int i = 0; i < n; ++i) {
             dK += rule.kronrodWeights[i] * tau[i];
@@ -415,7 +832,8 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
             composite.error[c] += T * errC + 64 * kEps * std::abs(rgb[c]);
         }
         composite.AddColor(rgb);
-        AddFieldError(w.hi - w.lo, dK, tauMin, T, composite);
+        AddFieldError(w.hi - w.lo, dK, tauMin, T, s.colorSlope * state_[0].error,
+                      s.extinctionSlope * state_[fieldCount_ - 1].error, composite);
         composite.rgba[3] += T * -std::expm1(-dK);
         composite.transmittance = T * std::exp(-dK);
         composite.depthError += errD + 16 * kEps * std::abs(dK);
@@ -435,6 +853,13 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
                               : 1.0 + s.colorMax * std::max(0.0, tEnd_ - t);
     const double bound = composite.transmittance * behind;
     if (bound > 0.1 * s.tolerance) return false;
+    // The bound is an upper one (what lies behind may be transparent): stop only when it
+    // is no larger than the error estimated so far (or a floor near rounding), so that
+    // the estimate stays close to the true error.
+    double sofar = 1e-14;
+    for (int c = 0; c < 3; ++c)
+        sofar = std::max(sofar, composite.error[c] + std::abs(composite.signedError[c]));
+    if (bound > sofar) return false;
     for (double& e : composite.error) e += bound;
     return true;
 }
@@ -447,15 +872,14 @@ bool VolumeRayMarcher::Integrate(double a, double b, RayComposite& composite,
     for (double t : crossings_)
         if (t > a && t < b) bounds_.push_back(t);
     bounds_.push_back(b);
-    bool linear = kind_ == VolumeSetup::kConstant;
-    if (!linear) {
-        linear = state_[0].linear && (fieldCount_ == 1 || state_[1].linear);
-    }
+    const bool closed = kind_ == VolumeSetup::kConstant || mode_ == Mode::kClosed;
     bool stop = false;
     for (std::size_t k = 0; k + 1 < bounds_.size(); ++k) {
         const double p0 = bounds_[k], p1 = bounds_[k + 1];
-        if (linear) {
+        if (closed) {
             LinearPiece(p0, p1, composite);
+        } else if (mode_ == Mode::kSeries) {
+            SeriesPiece(p0, p1, composite);
         } else {
             KronrodPiece(p0, p1, composite);
         }
@@ -467,6 +891,8 @@ bool VolumeRayMarcher::Integrate(double a, double b, RayComposite& composite,
     if (kind_ == VolumeSetup::kVarying)
         for (int f = 0; f < fieldCount_; ++f)
             if (!state_[f].constant) field_[f].AddCountersTo(counters);
+    counters.volumeNodes += quadratureNodes_;
+    quadratureNodes_ = 0;
     return stop;
 }
 

@@ -1,7 +1,9 @@
 // Volume integration along one ray: per-cell classification (empty / constant / varying)
 // from guaranteed field ranges, transfer-function breakpoints found on the true field,
-// closed forms where the fields are linear along the ray and adaptive Gauss-Kronrod with
-// an error estimate elsewhere, early ray termination.
+// closed forms where the fields are linear along the ray; where they are polynomials
+// along the ray (affine cells), the optical depth in closed form from the Legendre series
+// and the emission by adaptive Gauss-Kronrod pairs to the tolerance; elsewhere adaptive
+// Gauss-Kronrod on the true field; a per-pixel error estimate; early ray termination.
 #pragma once
 
 #include <cmath>
@@ -32,6 +34,9 @@ struct VolumeSetup {
     /// Guaranteed range of each field per cell ([field][cell]; one entry when sameField),
     /// shared with the FieldCache.
     std::vector<std::shared_ptr<const std::vector<Interval>>> ranges;
+    /// Nodal values of each field gathered per cell (point fields; null for cell
+    /// fields), shared with the FieldCache.
+    std::vector<std::shared_ptr<const FieldCellData>> data;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
@@ -54,6 +59,18 @@ struct VolumeSetup {
     InversionOptions inversion;
 };
 
+/// Every t in (p.a, p.b) where the polynomial series p crosses one of the sorted
+/// `levels` (count of them), appended to `out`: p is split at its critical points (the
+/// roots of p', isolated on its series, which misses no sign change of p' larger than
+/// its rounding), and on each monotone interval between them a level strictly between
+/// the end values is crossed once, polished by safeguarded Newton to `tol` in t, started
+/// from the samples (sampleT ascending, sampleV of the field there; samples may be 0)
+/// where they change sides. `scratch` and `points` are caller-owned buffers.
+void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
+                     const double* sampleT, const double* sampleV, int samples,
+                     std::vector<double>& scratch, std::vector<double>& points,
+                     std::vector<double>& out);
+
 /// The colour transfer function of a scene (`volume.color_tf`, `slices.#.color_tf`).
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
 
@@ -69,6 +86,11 @@ struct RayComposite {
     double* rgba = nullptr;  ///< the pixel's premultiplied RGBA, updated in place
     double transmittance = 1;
     double error[3] = {0, 0, 0};  ///< estimated absolute error of R, G, B so far
+    /// Signed estimates of quadrature errors (truth minus result) of R, G, B so far, whose
+    /// magnitude VolumeRayMarcher::FinishRay adds to `error` (their uncertainty is in
+    /// `error` already): errors of opposite signs along the ray cancel in the estimate
+    /// as they do in the pixel.
+    double signedError[3] = {0, 0, 0};
     /// Estimated absolute error of the optical depth integrated so far: every later
     /// contribution c carries an error of about |c| times this.
     double depthError = 0;
@@ -101,8 +123,9 @@ class VolumeRayMarcher {
     /// pixel by less than a tenth of the tolerance (that bound is added to the error).
     bool Integrate(double a, double b, RayComposite& composite, RenderCounters& counters);
 
-    /// Ends the ray: adds to the error the first-order effect of rounding in the ray's
-    /// entry and exit parameters (a few ulps of t).
+    /// Ends the ray: adds to the error the signed quadrature estimates and the
+    /// first-order effect of rounding in the ray's entry and exit parameters (a few ulps
+    /// of t).
     void FinishRay(RayComposite& composite) const;
 
     /// Statistics of the last ray.
@@ -116,11 +139,18 @@ class VolumeRayMarcher {
         double valueEnter = 0, valueExit = 0;  ///< at tEnter and tExit (linear fields)
         double error = 0;  ///< bound of the absolute error of the values on the segment
     };
+    /// How the pieces of the current segment are integrated.
+    enum class Mode : std::uint8_t {
+        kClosed,  ///< transfer functions constant, or every field linear: closed form
+        kSeries,  ///< every field a polynomial along the ray, held as a series
+        kGeneric  ///< adaptive Gauss-Kronrod on the true field
+    };
     /// Error terms of a piece of length `length` and optical depth `depth` at
     /// transmittance T, extinction >= tauMin on it: the field errors through the transfer
-    /// functions' slopes, into the colour error and the depth error.
+    /// functions' slopes (`colorSlope`, `tauSlope`: |d value / d field| on the piece),
+    /// into the colour error and the depth error.
     void AddFieldError(double length, double depth, double tauMin, double T,
-                       RayComposite& composite) const;
+                       double colorSlope, double tauSlope, RayComposite& composite) const;
     /// Records the emission density at the ray's ends (for FinishRay).
     void RecordEnds(double p0, double p1, double tau0, const double e0[3], double tau1,
                     const double e1[3], double transmittanceAtP1);
@@ -128,14 +158,35 @@ class VolumeRayMarcher {
     void Sample(double t, double& tau, double emission[3]);
     void LinearPiece(double p0, double p1, RayComposite& composite);
     void KronrodPiece(double p0, double p1, RayComposite& composite);
+    void SeriesPiece(double p0, double p1, RayComposite& composite);
     bool Terminate(double t, RayComposite& composite);
     void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
+    /// The exact Legendre series of field f (a polynomial along the ray) on the segment
+    /// into pieces_[f].
+    void ProjectExact(int f, const MeshGeometry& geometry, const Segment& seg);
 
     const VolumeSetup* setup_ = nullptr;
     Ray ray_;
     double tStart_ = 0, tEnd_ = 0, pathLength_ = 0;
     Segment seg_;
     std::uint8_t kind_ = 0;
+    Mode mode_ = Mode::kClosed;
+    /// Series mode: each field along the segment (degree 0 for a cell field, 1 for a
+    /// linear one), its bound of evaluation error, and the extinction field's
+    /// antiderivative (built when first needed).
+    LegendreSeries line_[2];
+    double lineError_[2] = {0, 0};
+    double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
+    LegendreSeries depthLine_;
+    bool haveDepthLine_ = false;
+    double depthLineError_ = 0;
+    double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
+    /// Gauss-Kronrod level that sufficed last (the start of the next piece's ladder).
+    int levelHint_ = 0;
+    double quadratureNodes_ = 0;  ///< integrand samples not yet counted
+    double fieldSamples_ = 0;     ///< field samples of the hexahedron kernel, not yet counted
+    CellScratch cellScratch_;
+    std::vector<double> nodeT_, nodeU_[2], nodeDepth_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
     int fieldCount_ = 1;
     FieldState state_[2];
@@ -144,10 +195,13 @@ class VolumeRayMarcher {
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
+    std::vector<double> levels_, points_;
+    std::vector<double> sampleT_, sampleV_[2];  ///< the exact series' samples
     std::vector<double> bounds_;
     struct Work {
         double lo, hi;
         int depth;
+        int level = 0;  ///< series mode: the Gauss-Kronrod level to apply
     };
     std::vector<Work> stack_;
     int kronrodIntervals_ = 0;

@@ -78,7 +78,7 @@ const SchemaNode& Schema() {
                   {"mapping_tolerance", "projection_order", "projection_tolerance",
                    "root_tolerance", "volume_tolerance", "polish", "target_residual"}),
             MapOf("clip", {"near", "far", "box"}),
-            MapOf("output", {"exr", "png", "stats", "hits", "rgba"}),
+            MapOf("output", {"exr", "png", "stats", "hits", "rgba", "errors"}),
             MapOf("outline", {"color", "width"}),
             Leaf("legend"),
             Leaf("threads"),
@@ -995,7 +995,8 @@ void SceneParser::ReadOutput(const YAML::Node& root, Scene& scene) const {
                                                          {"png", &o.png},
                                                          {"stats", &o.stats},
                                                          {"hits", &o.hits},
-                                                         {"rgba", &o.rgba}};
+                                                         {"rgba", &o.rgba},
+                                                         {"errors", &o.errors}};
     for (const auto& [key, target] : keys) {
         if (!Has(out, key)) continue;
         const std::string path = std::string("output.") + key;

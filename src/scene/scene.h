@@ -197,6 +197,7 @@ struct SceneOutput {
     std::string stats;  ///< JSON statistics
     std::string hits;   ///< float64 .npy (H, W, 5): t, N.X, N.Y, N.Z, residual
     std::string rgba;   ///< float64 .npy (H, W, 4): premultiplied R, G, B, A
+    std::string errors; ///< float32 .npy (H, W, 2): iso.residual, vol.error
 };
 
 /// `outline:` the twelve edges of the data's bounding box drawn into the PNG (only: the

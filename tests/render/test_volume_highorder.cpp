@@ -7,7 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <map>
 
 #include "mesh/builtin.h"
 #include "render/brick_renderer.h"
@@ -233,72 +232,10 @@ accuracy: {volume_tolerance: 1e-9}
 
 // ---------------------------------------------------------------------------------------
 // nk-sinc: 5^3 axis-aligned boxes of order 8; the truth is the tensor-product equispaced
-// Lagrange interpolant of u = 2 (y - 0.3) - sinc(|(x, z) - (0.5, 0.5)|) on each box.
+// Lagrange interpolant of u = 2 (y - 0.3) - sinc(|(x, z) - (0.5, 0.5)|) on each box
+// (testing::NkSincTruth).
 
-class NkSincTruth {
-  public:
-    static constexpr double kBreaks[6] = {0.0, 0.27, 0.44, 0.56, 0.73, 1.0};
-    static constexpr int kOrder = 8;
-
-    static double U(double x, double y, double z) {
-        const double pi = std::acos(-1.0);
-        const double r = std::hypot(x - 0.5, z - 0.5);
-        const double sinc = r == 0 ? 1.0 : std::sin(pi * r) / (pi * r);
-        return 2.0 * (y - 0.3) - sinc;
-    }
-    static int Box(double x) {
-        int b = 0;
-        while (b < 4 && x > kBreaks[b + 1]) ++b;
-        return b;
-    }
-    /// The interpolant at (x, y, z) in box (bx, by, bz), in long double.
-    LD Eval(const LD x[3], const int box[3]) {
-        const std::vector<double>& nodal = Nodal(box);
-        LD l[3][kOrder + 1];
-        for (int a = 0; a < 3; ++a) {
-            const LD lo = kBreaks[box[a]], hi = kBreaks[box[a] + 1];
-            const LD r = (x[a] - lo) / (hi - lo);
-            for (int i = 0; i <= kOrder; ++i) {
-                LD v = 1;
-                for (int m = 0; m <= kOrder; ++m)
-                    if (m != i) v *= (r * kOrder - m) / LD(i - m);
-                l[a][i] = v;
-            }
-        }
-        LD sum = 0;
-        for (int k = 0; k <= kOrder; ++k)
-            for (int j = 0; j <= kOrder; ++j) {
-                const LD w = l[2][k] * l[1][j];
-                const double* row = &nodal[((k * (kOrder + 1)) + j) * (kOrder + 1)];
-                LD s = 0;
-                for (int i = 0; i <= kOrder; ++i) s += row[i] * l[0][i];
-                sum += w * s;
-            }
-        return sum;
-    }
-
-  private:
-    const std::vector<double>& Nodal(const int box[3]) {
-        const int key = box[0] + 5 * (box[1] + 5 * box[2]);
-        auto it = cache_.find(key);
-        if (it != cache_.end()) return it->second;
-        std::vector<double> v;
-        for (int k = 0; k <= kOrder; ++k)
-            for (int j = 0; j <= kOrder; ++j)
-                for (int i = 0; i <= kOrder; ++i) {
-                    const int idx[3] = {i, j, k};
-                    double x[3];
-                    for (int a = 0; a < 3; ++a) {
-                        const double lo = kBreaks[box[a]], hi = kBreaks[box[a] + 1];
-                        const double r = double(idx[a]) / kOrder;
-                        x[a] = lo * (1 - r) + hi * r;
-                    }
-                    v.push_back(U(x[0], x[1], x[2]));
-                }
-        return cache_[key] = std::move(v);
-    }
-    std::map<int, std::vector<double>> cache_;
-};
+using testing::NkSincTruth;
 
 // Renders `scene` at each tolerance and checks every pixel against the reference along
 // the same ray through nk-sinc's interpolant.

@@ -268,7 +268,8 @@ TEST(SceneTest, KeyPathsCoverTheDesignSchema) {
                             "output.png",
                             "output.stats",
                             "output.hits",
-                            "output.rgba"}) {
+                            "output.rgba",
+                            "output.errors"}) {
         EXPECT_NE(std::find(paths.begin(), paths.end(), key), paths.end()) << key;
     }
 }

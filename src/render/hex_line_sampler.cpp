@@ -1,0 +1,235 @@
+// Register-blocked sampling of a Lagrange hexahedron along a line (see hex_line_sampler.h).
+#include "render/hex_line_sampler.h"
+
+#include <algorithm>
+#include <cmath>
+
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#define HPRAY_HEX_LINE_KERNEL 1
+#else
+#define HPRAY_HEX_LINE_KERNEL 0
+#endif
+
+namespace hpray {
+
+#if HPRAY_HEX_LINE_KERNEL
+namespace {
+
+/// Rows of the equispaced Lagrange polynomials of degree p on [0, 1] at x[s]:
+/// L[i * S + s] = l_i(x[s]) = A_i(x) B_{p-i}(1 - x) with the Silvester factors
+/// A_i(x) = prod_{m<i} (p x - m) / (m + 1) (vectorised over s). `a` holds S doubles.
+void LagrangeRows(int p, const double* x, int S, double* L, double* a) {
+    // Row p - m holds B_m(1 - x) = prod_{q<m} (p (1 - x) - q) / (q + 1).
+    for (int s = 0; s < S; ++s) L[p * S + s] = 1;
+    for (int m = 0; m < p; ++m) {
+        const double inv = 1.0 / (m + 1);
+        const double* prev = L + (p - m) * S;
+        double* next = L + (p - m - 1) * S;
+        for (int s = 0; s < S; ++s) next[s] = prev[s] * ((p * (1 - x[s]) - m) * inv);
+    }
+    for (int s = 0; s < S; ++s) a[s] = 1;
+    for (int i = 0; i <= p; ++i) {
+        double* row = L + i * S;
+        for (int s = 0; s < S; ++s) row[s] *= a[s];
+        if (i < p) {
+            const double inv = 1.0 / (i + 1);
+            for (int s = 0; s < S; ++s) a[s] *= (p * x[s] - i) * inv;
+        }
+    }
+}
+
+/// out[s] = sum_k L2[k][s] sum_j L1[j][s] sum_i u[i + N (j + N k)] L0[i][s] for s < count
+/// (a multiple of 4; L rows have stride S). The first contraction, which holds almost all
+/// the work, is a small matrix product: tiles of 4 rows of u times 3 vectors of samples
+/// (12 accumulators, the 3 sample vectors and a broadcast fill the 16 registers), then
+/// a tail block of one vector.
+template <int N>
+void Contract(const double* u, const double* L0, const double* L1, const double* L2,
+              int count, int S, double* out) {
+    int b = 0;
+    for (; b + 12 <= count; b += 12) {
+        __m256d o0 = _mm256_setzero_pd(), o1 = o0, o2 = o0;
+        for (int k = 0; k < N; ++k) {
+            __m256d g0 = _mm256_setzero_pd(), g1 = g0, g2 = g0;
+            int j = 0;
+            for (; j + 4 <= N; j += 4) {
+                const double* r = u + N * (j + N * k);
+                __m256d a00 = _mm256_setzero_pd(), a01 = a00, a02 = a00, a10 = a00,
+                        a11 = a00, a12 = a00, a20 = a00, a21 = a00, a22 = a00, a30 = a00,
+                        a31 = a00, a32 = a00;
+                for (int i = 0; i < N; ++i) {
+                    const double* l = L0 + i * S + b;
+                    const __m256d l0 = _mm256_loadu_pd(l), l1 = _mm256_loadu_pd(l + 4),
+                                  l2 = _mm256_loadu_pd(l + 8);
+                    __m256d c = _mm256_broadcast_sd(r + i);
+                    a00 = _mm256_fmadd_pd(c, l0, a00);
+                    a01 = _mm256_fmadd_pd(c, l1, a01);
+                    a02 = _mm256_fmadd_pd(c, l2, a02);
+                    c = _mm256_broadcast_sd(r + N + i);
+                    a10 = _mm256_fmadd_pd(c, l0, a10);
+                    a11 = _mm256_fmadd_pd(c, l1, a11);
+                    a12 = _mm256_fmadd_pd(c, l2, a12);
+                    c = _mm256_broadcast_sd(r + 2 * N + i);
+                    a20 = _mm256_fmadd_pd(c, l0, a20);
+                    a21 = _mm256_fmadd_pd(c, l1, a21);
+                    a22 = _mm256_fmadd_pd(c, l2, a22);
+                    c = _mm256_broadcast_sd(r + 3 * N + i);
+                    a30 = _mm256_fmadd_pd(c, l0, a30);
+                    a31 = _mm256_fmadd_pd(c, l1, a31);
+                    a32 = _mm256_fmadd_pd(c, l2, a32);
+                }
+                const double* m = L1 + j * S + b;
+                g0 = _mm256_fmadd_pd(a00, _mm256_loadu_pd(m), g0);
+                g1 = _mm256_fmadd_pd(a01, _mm256_loadu_pd(m + 4), g1);
+                g2 = _mm256_fmadd_pd(a02, _mm256_loadu_pd(m + 8), g2);
+                m += S;
+                g0 = _mm256_fmadd_pd(a10, _mm256_loadu_pd(m), g0);
+                g1 = _mm256_fmadd_pd(a11, _mm256_loadu_pd(m + 4), g1);
+                g2 = _mm256_fmadd_pd(a12, _mm256_loadu_pd(m + 8), g2);
+                m += S;
+                g0 = _mm256_fmadd_pd(a20, _mm256_loadu_pd(m), g0);
+                g1 = _mm256_fmadd_pd(a21, _mm256_loadu_pd(m + 4), g1);
+                g2 = _mm256_fmadd_pd(a22, _mm256_loadu_pd(m + 8), g2);
+                m += S;
+                g0 = _mm256_fmadd_pd(a30, _mm256_loadu_pd(m), g0);
+                g1 = _mm256_fmadd_pd(a31, _mm256_loadu_pd(m + 4), g1);
+                g2 = _mm256_fmadd_pd(a32, _mm256_loadu_pd(m + 8), g2);
+            }
+            for (; j < N; ++j) {
+                const double* r = u + N * (j + N * k);
+                __m256d a0 = _mm256_setzero_pd(), a1 = a0, a2 = a0;
+                for (int i = 0; i < N; ++i) {
+                    const double* l = L0 + i * S + b;
+                    const __m256d c = _mm256_broadcast_sd(r + i);
+                    a0 = _mm256_fmadd_pd(c, _mm256_loadu_pd(l), a0);
+                    a1 = _mm256_fmadd_pd(c, _mm256_loadu_pd(l + 4), a1);
+                    a2 = _mm256_fmadd_pd(c, _mm256_loadu_pd(l + 8), a2);
+                }
+                const double* m = L1 + j * S + b;
+                g0 = _mm256_fmadd_pd(a0, _mm256_loadu_pd(m), g0);
+                g1 = _mm256_fmadd_pd(a1, _mm256_loadu_pd(m + 4), g1);
+                g2 = _mm256_fmadd_pd(a2, _mm256_loadu_pd(m + 8), g2);
+            }
+            const double* n = L2 + k * S + b;
+            o0 = _mm256_fmadd_pd(g0, _mm256_loadu_pd(n), o0);
+            o1 = _mm256_fmadd_pd(g1, _mm256_loadu_pd(n + 4), o1);
+            o2 = _mm256_fmadd_pd(g2, _mm256_loadu_pd(n + 8), o2);
+        }
+        _mm256_storeu_pd(out + b, o0);
+        _mm256_storeu_pd(out + b + 4, o1);
+        _mm256_storeu_pd(out + b + 8, o2);
+    }
+    for (; b < count; b += 4) {
+        __m256d o = _mm256_setzero_pd();
+        for (int k = 0; k < N; ++k) {
+            __m256d g = _mm256_setzero_pd();
+            int j = 0;
+            for (; j + 4 <= N; j += 4) {
+                const double* r = u + N * (j + N * k);
+                __m256d a0 = _mm256_setzero_pd(), a1 = a0, a2 = a0, a3 = a0;
+                for (int i = 0; i < N; ++i) {
+                    const __m256d l = _mm256_loadu_pd(L0 + i * S + b);
+                    a0 = _mm256_fmadd_pd(_mm256_broadcast_sd(r + i), l, a0);
+                    a1 = _mm256_fmadd_pd(_mm256_broadcast_sd(r + N + i), l, a1);
+                    a2 = _mm256_fmadd_pd(_mm256_broadcast_sd(r + 2 * N + i), l, a2);
+                    a3 = _mm256_fmadd_pd(_mm256_broadcast_sd(r + 3 * N + i), l, a3);
+                }
+                const double* m = L1 + j * S + b;
+                g = _mm256_fmadd_pd(a0, _mm256_loadu_pd(m), g);
+                g = _mm256_fmadd_pd(a1, _mm256_loadu_pd(m + S), g);
+                g = _mm256_fmadd_pd(a2, _mm256_loadu_pd(m + 2 * S), g);
+                g = _mm256_fmadd_pd(a3, _mm256_loadu_pd(m + 3 * S), g);
+            }
+            for (; j < N; ++j) {
+                const double* r = u + N * (j + N * k);
+                __m256d a0 = _mm256_setzero_pd();
+                for (int i = 0; i < N; ++i)
+                    a0 = _mm256_fmadd_pd(_mm256_broadcast_sd(r + i),
+                                         _mm256_loadu_pd(L0 + i * S + b), a0);
+                g = _mm256_fmadd_pd(a0, _mm256_loadu_pd(L1 + j * S + b), g);
+            }
+            o = _mm256_fmadd_pd(g, _mm256_loadu_pd(L2 + k * S + b), o);
+        }
+        _mm256_storeu_pd(out + b, o);
+    }
+}
+
+/// The same for the one sample s (column s of the L rows): the first two contractions
+/// swapped, G[i] = sum_jk u[i + N (j + N k)] L1[j] L2[k] vectorised over i, then
+/// sum_i G[i] L0[i]. A few hundred cycles where a block of four lanes for one sample costs
+/// as much as four.
+template <int N>
+double ContractOne(const double* u, const double* L0, const double* L1, const double* L2,
+                   int S, int s) {
+    constexpr int V = N / 4;  // whole vectors of i; the rest scalar
+    __m256d g[V > 0 ? V : 1];
+    for (int v = 0; v < V; ++v) g[v] = _mm256_setzero_pd();
+    double rest[4] = {0, 0, 0, 0};
+    for (int k = 0; k < N; ++k) {
+        const double l2 = L2[k * S + s];
+        for (int j = 0; j < N; ++j) {
+            const double w = L1[j * S + s] * l2;
+            const double* row = u + N * (j + N * k);
+            const __m256d wv = _mm256_set1_pd(w);
+            for (int v = 0; v < V; ++v)
+                g[v] = _mm256_fmadd_pd(_mm256_loadu_pd(row + 4 * v), wv, g[v]);
+            for (int i = 4 * V; i < N; ++i) rest[i - 4 * V] = std::fma(row[i], w, rest[i - 4 * V]);
+        }
+    }
+    alignas(32) double gi[4 * (V > 0 ? V : 1)];
+    for (int v = 0; v < V; ++v) _mm256_store_pd(gi + 4 * v, g[v]);
+    double f = 0;
+    for (int i = 0; i < 4 * V; ++i) f = std::fma(gi[i], L0[i * S + s], f);
+    for (int i = 4 * V; i < N; ++i) f = std::fma(rest[i - 4 * V], L0[i * S + s], f);
+    return f;
+}
+
+using Kernel = void (*)(const double*, const double*, const double*, const double*, int, int,
+                        double*);
+using OneKernel = double (*)(const double*, const double*, const double*, const double*, int,
+                             int);
+constexpr int kMaxKernelOrder = 10;
+constexpr Kernel kKernels[kMaxKernelOrder + 1] = {
+    nullptr,      &Contract<2>, &Contract<3>, &Contract<4>, &Contract<5>,  &Contract<6>,
+    &Contract<7>, &Contract<8>, &Contract<9>, &Contract<10>, &Contract<11>};
+constexpr OneKernel kOneKernels[kMaxKernelOrder + 1] = {
+    nullptr,         &ContractOne<2>, &ContractOne<3>, &ContractOne<4>,
+    &ContractOne<5>, &ContractOne<6>, &ContractOne<7>, &ContractOne<8>,
+    &ContractOne<9>, &ContractOne<10>, &ContractOne<11>};
+
+}  // namespace
+
+bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const double dref[3],
+                         const double* t, int count, double* out) {
+    if (p < 1 || p > kMaxKernelOrder || count < 1 || count > kMaxHexLineSamples)
+        return false;
+    const int S = (count + 3) / 4 * 4;
+    const int n = p + 1;
+    alignas(32) double L[3 * (kMaxKernelOrder + 1) * kMaxHexLineSamples];
+    alignas(32) double x[kMaxHexLineSamples], a[kMaxHexLineSamples];
+    alignas(32) double result[kMaxHexLineSamples];
+    for (int d = 0; d < 3; ++d) {
+        // Padding repeats the last point.
+        for (int s = 0; s < S; ++s) x[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
+        LagrangeRows(p, x, S, L + d * n * S, a);
+    }
+    // Whole vectors of samples by the blocked kernel, the last count % 4 one by one.
+    const int blocked = count / 4 * 4;
+    if (blocked > 0) kKernels[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
+    for (int s = blocked; s < count; ++s)
+        result[s] = kOneKernels[p](u, L, L + n * S, L + 2 * n * S, S, s);
+    for (int s = 0; s < count; ++s) out[s] = result[s];
+    return true;
+}
+
+#else
+
+bool SampleAffineHexLine(int, const double*, const double*, const double*, const double*,
+                         int, double*) {
+    return false;
+}
+
+#endif
+
+}  // namespace hpray
