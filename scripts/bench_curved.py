@@ -19,6 +19,7 @@ import math
 import os
 import platform
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -80,15 +81,18 @@ def run_hpray(binary, config, sets, size, threads, tmp, rgba=None):
         cmd += ["--set", f"output.rgba={rgba}"]
     for kv in sets:
         cmd += ["--set", kv]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if p.returncode != 0:
         return {"failed": (p.stderr.strip().splitlines() or ["exit %d" % p.returncode])[-1]}
     with open(stats) as f:
         s = json.load(f)
     iso, vol = s.get("iso", {}), s.get("volume", {})
-    return {"wall": wall, "render": s["timing_s"]["render"],
+    return {"wall": wall, "cpu": cpu, "render": s["timing_s"]["render"],
             "iso_max": iso.get("max_residual_relative"),
             "iso_rms": iso.get("rms_residual_relative"),
             "hits": iso.get("hits"),
@@ -361,7 +365,6 @@ def main():
         print("bench_curved: ../shared/data is missing: the shared-data scenes "
               "(deal.II step-65, MFEM escher) are left out of the report", file=sys.stderr)
 
-    cache = {}  # (config, sets) -> summary of the current binary
     with tempfile.TemporaryDirectory(prefix="bc_", dir="/tmp") as tmp:
         # 1. before/after
         before_after = []
@@ -386,8 +389,6 @@ def main():
             if "failed" in cur:
                 sys.exit(f"bench_curved: the current hpray failed on {config}: {cur['failed']}")
             base = summarise(runs["baseline"]) if args.baseline_bin else None
-            if timed == config:
-                cache[(config, ())] = cur
             before_after.append({"name": name, "config": config, "kind": kind,
                                  "current": cur, "baseline": base, "diff": diff,
                                  "copied": timed != config})
@@ -402,20 +403,23 @@ def main():
             if name not in present:
                 continue
             _, config, kind = present[name]
+            # Round-robin: each round runs every setting once, so that a drift of the
+            # machine's load hits all settings alike.
+            sets = [[] if v is None else [f"accuracy.{key}={v:g}"] for v in values]
+            runs = [[] for _ in values]
+            for r in range(args.runs):
+                for i in range(len(values)):
+                    runs[i].append(run_hpray(hpray, config, sets[i], args.size,
+                                             args.threads, tmp))
             points = []
-            for v in values:
-                sets = () if v is None else (f"accuracy.{key}={v:g}",)
-                if (config, sets) not in cache:
-                    cache[(config, sets)] = summarise(
-                        [run_hpray(hpray, config, list(sets), args.size, args.threads, tmp)
-                         for _ in range(args.runs)])
-                m = cache[(config, sets)]
+            for v, rs, kv in zip(values, runs, sets):
+                m = summarise(rs)
                 if "failed" in m:
-                    sys.exit(f"bench_curved: hpray failed on {config} with {sets}: "
+                    sys.exit(f"bench_curved: hpray failed on {config} with {kv}: "
                              f"{m['failed']}")
                 points.append({"value": v, "m": m})
-                print(f"{name}: {key}={v if v is not None else 'default'}: render "
-                      f"{m['render']:.3f} s, error {error_of(kind, m)}", file=sys.stderr)
+                print(f"{name}: {key}={label_of(v)}: render {m['render']:.3f} s, "
+                      f"error {error_of(kind, m)}", file=sys.stderr)
             sweeps.append({"name": name, "config": config, "kind": kind, "key": key,
                            "points": points})
 
@@ -442,11 +446,12 @@ def write_report(args, png, info, before_after, sweeps, ref, skipped):
          f"- current: {info['current']} ({info['current_subject']})"]
     if info["baseline"]:
         L.append(f"- baseline: {info['baseline']} ({info['baseline_subject']})")
+    alternating = ", baseline and current alternating" if info["baseline"] else ""
     L += [f"- images {args.size}x{args.size}, `threads: {args.threads}`, medians of "
-          f"{args.runs} run{'s' if args.runs > 1 else ''}" + (", baseline and current alternating" if info["baseline"]
-                                 else ""),
+          f"{args.runs} run{'s' if args.runs > 1 else ''}{alternating}",
           "- render: the stats' `timing_s.render` (rays only); wall: the whole `hpray "
-          "render` process (reading, preparing, rendering; no image written)",
+          "render` process (reading, preparing, rendering; no image written); CPU: that "
+          "process's user + system time, the figure a busy shared machine disturbs least",
           "- error of an isosurface scene: the stats' `iso.max_residual_relative` and "
           "`iso.rms_residual_relative` (|field - isovalue| at the hits, on the true finite "
           "element field, over the field's range); of a volume: `volume.max_error_estimate` "
@@ -457,22 +462,27 @@ def write_report(args, png, info, before_after, sweeps, ref, skipped):
     L += ["## Before and after", ""]
     check = min(args.size, 128)
     if info["baseline"]:
-        L += ["Speedup is baseline / current (above 1: the current code is faster). Before "
-              f"the timed runs both binaries render each scene once at {check}^2 and the "
-              "largest |RGBA| difference of their images is given, so that the times are "
-              "known to be of the same picture (differences of order 1e-15 are rounding). "
-              "A scene marked * is timed on a copy of its config: its fitted camera as the "
-              "current build fits it, written out explicitly (the fitting itself may differ "
-              "between revisions), and without `outline` and `legend`, which only annotate "
-              "the PNG (none is written here) and which an older revision may not know.",
-              "",
-              "| scene | what | render, baseline | render, current | speedup (render) | "
-              "wall, baseline | wall, current | speedup (wall) | max / RMS error, baseline "
-              "| max / RMS error, current | image difference |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+        L += ["Each time cell is baseline → current, then the speedup baseline / current "
+              "(above 1: the current code is faster). Before the timed runs both binaries "
+              f"render each scene once at {check}^2 and the largest |RGBA| difference of "
+              "their images is given, so that the times are known to be of the same picture "
+              "(differences far below 1e-6 are rounding). A scene marked * is timed on a "
+              "copy of its config: its fitted camera as the current build fits it, written "
+              "out explicitly (the fitting itself may differ between revisions), and without "
+              "`outline` and `legend`, which only annotate the PNG (none is written here) "
+              "and which an older revision may not know.", "",
+              "| scene | what | render | wall | CPU | max / RMS error, baseline → current | "
+              "image difference |",
+              "|---|---|---|---|---|---|---|"]
     else:
         L += ["No baseline (`--baseline none`).", "",
-              "| scene | what | render | wall | max / RMS error |", "|---|---|---|---|---|"]
+              "| scene | what | render | wall | CPU | max / RMS error |",
+              "|---|---|---|---|---|---|"]
+
+    def change(base, cur, key):
+        return (f"{base[key]:.3f} → {cur[key]:.3f} s, "
+                f"**{base[key] / cur[key]:.2f}**")
+
     for row in before_after:
         cur, base = row["current"], row["baseline"]
         ce = "%s / %s" % tuple(fmt_e(v) for v in error_of(row["kind"], cur))
@@ -480,27 +490,27 @@ def write_report(args, png, info, before_after, sweeps, ref, skipped):
                f"{DESCRIPTION[row['name']]}"
         if not info["baseline"]:
             L.append(f"| {row['name']} | {what} | {fmt_s(cur['render'])} | "
-                     f"{fmt_s(cur['wall'])} | {ce} |")
+                     f"{fmt_s(cur['wall'])} | {fmt_s(cur['cpu'])} | {ce} |")
         elif "failed" in base:
             msg = base["failed"].replace("|", "/")
-            L.append(f"| {row['name']} | {what} | failed: {msg} | "
-                     f"{fmt_s(cur['render'])} | | failed | {fmt_s(cur['wall'])} | | | {ce} | |")
+            L.append(f"| {row['name']} | {what} | baseline failed: {msg}; current "
+                     f"{fmt_s(cur['render'])} | current {fmt_s(cur['wall'])} | current "
+                     f"{fmt_s(cur['cpu'])} | {ce} | |")
         else:
             be = "%s / %s" % tuple(fmt_e(v) for v in error_of(row["kind"], base))
-            L.append(f"| {row['name']} | {what} | {fmt_s(base['render'])} | "
-                     f"{fmt_s(cur['render'])} | {base['render'] / cur['render']:.2f} | "
-                     f"{fmt_s(base['wall'])} | {fmt_s(cur['wall'])} | "
-                     f"{base['wall'] / cur['wall']:.2f} | {be} | {ce} | "
-                     f"{fmt_e(row['diff'])} |")
+            L.append(f"| {row['name']} | {what} | {change(base, cur, 'render')} | "
+                     f"{change(base, cur, 'wall')} | {change(base, cur, 'cpu')} | "
+                     f"{be} → {ce} | {fmt_e(row['diff'])} |")
     L.append("")
 
     L += ["## Speed against error (current)", "",
           "`accuracy.target_residual` (isosurfaces; default: none, every root polished to "
           "the root tolerance) and `accuracy.volume_tolerance` (volume; the config's own is "
-          "1e-8), set with `--set`. The error columns are what the stats report as "
-          "delivered.", "",
-          "| scene | setting | render | wall | max error | RMS error | hits |",
-          "|---|---|---|---|---|---|---|"]
+          "1e-8), set with `--set`, in rounds that run every setting of a scene once (so "
+          "that a drift of the machine's load hits all settings alike). The error columns "
+          "are what the stats report as delivered.", "",
+          "| scene | setting | render | wall | CPU | max error | RMS error | hits |",
+          "|---|---|---|---|---|---|---|---|"]
     for sw in sweeps:
         for pt in sw["points"]:
             m = pt["m"]
@@ -509,7 +519,8 @@ def write_report(args, png, info, before_after, sweeps, ref, skipped):
                        f"`{sw['key']}: {label_of(pt['value'])}`")
             hits = "" if sw["kind"] != "iso" or m["hits"] is None else f"{m['hits']:.0f}"
             L.append(f"| {sw['name']} | {setting} | {fmt_s(m['render'])} | "
-                     f"{fmt_s(m['wall'])} | {fmt_e(mx)} | {fmt_e(rms)} | {hits} |")
+                     f"{fmt_s(m['wall'])} | {fmt_s(m['cpu'])} | {fmt_e(mx)} | {fmt_e(rms)} | "
+                     f"{hits} |")
     L += ["", f"![render time against error]({os.path.relpath(png, os.path.dirname(args.out))})",
           ""]
 
