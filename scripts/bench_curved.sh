@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# Curved high-order rendering, speed against error: the curved scenes (nk-quartic, nk-sinc
+# iso and volume, deal.II step-65 and MFEM escher from ../shared/data) rendered by a
+# baseline revision and the current build alternately (medians and ratio); render time
+# against the delivered error over accuracy.target_residual and accuracy.volume_tolerance;
+# and VTK's contour of the nk-quartic Lagrange hexahedra (time, residual on the exact
+# quartic) as a reference point. Writes a markdown report and a plot; not part of the tests.
+# Installs the optional packages if missing (python3-vtk9, python3-matplotlib,
+# python3-yaml), builds hpray in $HPRAY_BUILD if needed, and builds the baseline once in a
+# git worktree, build-bench/baseline-<sha>, kept for later runs (remove it with
+# `git worktree remove --force build-bench/baseline-<sha>`).
+# Usage: scripts/bench_curved.sh [--size 512] [--runs 3] [--threads 2]
+#          [--baseline REV|none (default HEAD~1)] [--out docs/benchmarks_curved.md]
+#          [--png PATH (default: --out with .png)]
+# A shared-data scene whose mesh is missing is skipped with a note in the report.
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+
+baseline="HEAD~1"
+args=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --baseline) [ $# -ge 2 ] || { echo "bench_curved: --baseline needs a revision" >&2; exit 2; }
+                baseline="$2"; shift 2 ;;
+    --baseline=*) baseline="${1#*=}"; shift ;;
+    -h|--help) sed -n '2,15p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) args+=("$1"); shift ;;
+  esac
+done
+jobs="${JOBS:-$(nproc)}"
+
+install_packages python3-vtk9 python3-matplotlib python3-yaml
+if [ ! -d "$HPRAY_ROOT/../shared/data" ]; then
+  echo "bench_curved: $(cd "$HPRAY_ROOT/.." && pwd)/shared/data is missing: the deal.II" \
+       "and MFEM scenes will be skipped (noted in the report)" >&2
+fi
+
+step "building hpray in $HPRAY_BUILD"
+if [ ! -f "$HPRAY_BUILD/build.ninja" ]; then
+  cmake -S "$HPRAY_ROOT" -B "$HPRAY_BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release > /dev/null
+fi
+cmake --build "$HPRAY_BUILD" --target hpray -j "$jobs"
+
+if [ "$baseline" != none ]; then
+  sha="$(git -C "$HPRAY_ROOT" rev-parse --verify --quiet "$baseline^{commit}")" || {
+    echo "bench_curved: --baseline $baseline is not a commit of this repository" >&2
+    exit 2
+  }
+  dir="$HPRAY_ROOT/build-bench/baseline-${sha:0:12}"
+  if [ ! -x "$dir/build/bin/hpray" ]; then
+    step "building the baseline $baseline ($sha) in $dir"
+    if [ ! -f "$dir/CMakeLists.txt" ]; then
+      git -C "$HPRAY_ROOT" worktree prune
+      rm -rf "$dir"
+      mkdir -p "$(dirname "$dir")"
+      git -C "$HPRAY_ROOT" worktree add --detach "$dir" "$sha"
+    fi
+    cmake -S "$dir" -B "$dir/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+      -DHPRAY_BUILD_TESTS=OFF -DHPRAY_BUILD_BENCHMARKS=OFF > /dev/null
+    cmake --build "$dir/build" --target hpray -j "$jobs"
+  else
+    step "baseline $baseline ($sha): reusing $dir/build/bin/hpray"
+  fi
+  args+=(--baseline-bin "$dir/build/bin/hpray" --baseline-rev "$baseline" --baseline-sha "$sha")
+fi
+
+step "rendering (baseline and current alternating), accuracy sweeps, VTK contour"
+/usr/bin/python3 "$HPRAY_ROOT/scripts/bench_curved.py" --build "$HPRAY_BUILD" ${args[@]+"${args[@]}"}
