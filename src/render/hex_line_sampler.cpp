@@ -20,21 +20,28 @@ namespace {
 /// L[i * S + s] = l_i(x[s]) = A_i(x) B_{p-i}(1 - x) with the Silvester factors
 /// A_i(x) = prod_{m<i} (p x - m) / (m + 1) (vectorised over s). `a` holds S doubles.
 void LagrangeRows(int p, const double* x, int S, double* L, double* a) {
-    // Row p - m holds B_m(1 - x) = prod_{q<m} (p (1 - x) - q) / (q + 1).
+    // With q = p (1 - x) and r = p x: B_{m+1} = B_m (q - m) / (m + 1), A likewise in r;
+    // each factor one fused multiply-add.
+    double q[kMaxHexLineSamples], r[kMaxHexLineSamples];
+    for (int s = 0; s < S; ++s) {
+        q[s] = p * (1 - x[s]);
+        r[s] = p * x[s];
+    }
+    // Row p - m holds B_m(1 - x) = prod_{m'<m} (q - m') / (m' + 1).
     for (int s = 0; s < S; ++s) L[p * S + s] = 1;
     for (int m = 0; m < p; ++m) {
-        const double inv = 1.0 / (m + 1);
+        const double inv = 1.0 / (m + 1), shift = -m * inv;
         const double* prev = L + (p - m) * S;
         double* next = L + (p - m - 1) * S;
-        for (int s = 0; s < S; ++s) next[s] = prev[s] * ((p * (1 - x[s]) - m) * inv);
+        for (int s = 0; s < S; ++s) next[s] = prev[s] * std::fma(q[s], inv, shift);
     }
     for (int s = 0; s < S; ++s) a[s] = 1;
     for (int i = 0; i <= p; ++i) {
         double* row = L + i * S;
         for (int s = 0; s < S; ++s) row[s] *= a[s];
         if (i < p) {
-            const double inv = 1.0 / (i + 1);
-            for (int s = 0; s < S; ++s) a[s] *= (p * x[s] - i) * inv;
+            const double inv = 1.0 / (i + 1), shift = -i * inv;
+            for (int s = 0; s < S; ++s) a[s] *= std::fma(r[s], inv, shift);
         }
     }
 }
