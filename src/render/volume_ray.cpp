@@ -81,6 +81,12 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
                      std::vector<double>& scratch, std::vector<double>& points,
                      LegendreSeries& derivative, std::vector<double>& out) {
     if (count == 0 || !(p.b > p.a)) return;
+    // |p - c_0| <= sum_{k>=1} |c_k| on [a, b]: levels outside that range are not crossed.
+    const double tail = p.Tail();
+    if (std::none_of(levels, levels + count, [&](double level) {
+            return std::abs(level - p.c[0]) <= tail;
+        }))
+        return;
     // Split [a, b] at the critical points of p: the roots of p', isolated on its series
     // (a window is passed over only where |p'| provably exceeds its rounding).
     points.clear();
