@@ -16,25 +16,33 @@ namespace hpray {
 #if HPRAY_HEX_LINE_KERNEL
 namespace {
 
-/// Rows of the equispaced Lagrange polynomials of degree p on [0, 1] at x[s]:
-/// L[i * S + s] = l_i(x[s]) = A_i(x) B_{p-i}(1 - x) with the Silvester factors
-/// A_i(x) = prod_{m<i} (p x - m) / (m + 1) (vectorised over s). `a` holds S doubles.
-void LagrangeRows(int p, const double* x, int S, double* L, double* a) {
-    // Row p - m holds B_m(1 - x) = prod_{q<m} (p (1 - x) - q) / (q + 1).
-    for (int s = 0; s < S; ++s) L[p * S + s] = 1;
-    for (int m = 0; m < p; ++m) {
-        const double inv = 1.0 / (m + 1);
-        const double* prev = L + (p - m) * S;
-        double* next = L + (p - m - 1) * S;
-        for (int s = 0; s < S; ++s) next[s] = prev[s] * ((p * (1 - x[s]) - m) * inv);
-    }
-    for (int s = 0; s < S; ++s) a[s] = 1;
-    for (int i = 0; i <= p; ++i) {
-        double* row = L + i * S;
-        for (int s = 0; s < S; ++s) row[s] *= a[s];
-        if (i < p) {
-            const double inv = 1.0 / (i + 1);
-            for (int s = 0; s < S; ++s) a[s] *= (p * x[s] - i) * inv;
+/// Rows of the equispaced Lagrange polynomials of degree P on [0, 1] at x[s]:
+/// L[i * S + s] = l_i(x[s]) = A_i(x) B_{P-i}(x) with the Silvester factors
+/// A_i = prod_{m<i} (r - m) / (m + 1), r = P x, and B_j = prod_{m<j} (q - m) / (m + 1),
+/// q = P (1 - x): four lanes at a time, the factors in registers (one fused multiply-add
+/// each), every row stored once. S is a multiple of 4.
+template <int P>
+void LagrangeRows(const double* x, int S, double* L) {
+    for (int s = 0; s < S; s += 4) {
+        const __m256d xv = _mm256_loadu_pd(x + s);
+        const __m256d q = _mm256_mul_pd(_mm256_set1_pd(P),
+                                        _mm256_sub_pd(_mm256_set1_pd(1.0), xv));
+        const __m256d r = _mm256_mul_pd(_mm256_set1_pd(P), xv);
+        __m256d B[P + 1];
+        B[0] = _mm256_set1_pd(1.0);
+        for (int m = 0; m < P; ++m) {
+            const double inv = 1.0 / (m + 1);
+            B[m + 1] = _mm256_mul_pd(
+                B[m], _mm256_fmadd_pd(q, _mm256_set1_pd(inv), _mm256_set1_pd(-m * inv)));
+        }
+        __m256d A = _mm256_set1_pd(1.0);
+        for (int i = 0; i <= P; ++i) {
+            _mm256_storeu_pd(L + i * S + s, _mm256_mul_pd(A, B[P - i]));
+            if (i < P) {
+                const double inv = 1.0 / (i + 1);
+                A = _mm256_mul_pd(
+                    A, _mm256_fmadd_pd(r, _mm256_set1_pd(inv), _mm256_set1_pd(-i * inv)));
+            }
         }
     }
 }
@@ -190,6 +198,11 @@ using Kernel = void (*)(const double*, const double*, const double*, const doubl
 using OneKernel = double (*)(const double*, const double*, const double*, const double*, int,
                              int);
 constexpr int kMaxKernelOrder = 10;
+using RowsKernel = void (*)(const double*, int, double*);
+constexpr RowsKernel kRows[kMaxKernelOrder + 1] = {
+    nullptr,          &LagrangeRows<1>, &LagrangeRows<2>, &LagrangeRows<3>,
+    &LagrangeRows<4>, &LagrangeRows<5>, &LagrangeRows<6>, &LagrangeRows<7>,
+    &LagrangeRows<8>, &LagrangeRows<9>, &LagrangeRows<10>};
 constexpr Kernel kKernels[kMaxKernelOrder + 1] = {
     nullptr,      &Contract<2>, &Contract<3>, &Contract<4>, &Contract<5>,  &Contract<6>,
     &Contract<7>, &Contract<8>, &Contract<9>, &Contract<10>, &Contract<11>};
@@ -207,12 +220,12 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const dou
     const int S = (count + 3) / 4 * 4;
     const int n = p + 1;
     alignas(32) double L[3 * (kMaxKernelOrder + 1) * kMaxHexLineSamples];
-    alignas(32) double x[kMaxHexLineSamples], a[kMaxHexLineSamples];
+    alignas(32) double x[kMaxHexLineSamples];
     alignas(32) double result[kMaxHexLineSamples];
     for (int d = 0; d < 3; ++d) {
         // Padding repeats the last point.
         for (int s = 0; s < S; ++s) x[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
-        LagrangeRows(p, x, S, L + d * n * S, a);
+        kRows[p](x, S, L + d * n * S);
     }
     // Whole vectors of samples by the blocked kernel, the last count % 4 one by one.
     const int blocked = count / 4 * 4;

@@ -234,9 +234,14 @@ double LegendreSeries::Tail() const {
 }
 
 LegendreSeries LegendreSeries::Derivative() const {
+    LegendreSeries d;
+    Derivative(d);
+    return d;
+}
+
+void LegendreSeries::Derivative(LegendreSeries& d) const {
     // p' = sum_k d_k P_k with d_{k-1} = (2k-1) sum_{j >= k, j - k even} c_j (in x), then
     // scaled by dx/dt = 2 / (b - a).
-    LegendreSeries d;
     d.a = a;
     d.b = b;
     const int n = Degree();
@@ -249,13 +254,18 @@ LegendreSeries LegendreSeries::Derivative() const {
         d.c[j - 1] = (2 * (j - 1) + 1) * ((j % 2 == 0) ? even : odd);
     }
     for (double& v : d.c) v *= 2 / (b - a);
-    return d;
 }
 
 LegendreSeries LegendreSeries::Antiderivative() const {
+    LegendreSeries r;
+    Antiderivative(r);
+    return r;
+}
+
+void LegendreSeries::Antiderivative(LegendreSeries& r) const {
     // integral_{-1}^x P_0 = P_1 + P_0; integral_{-1}^x P_k = (P_{k+1} - P_{k-1}) / (2k + 1)
     // for k >= 1 (zero at -1); times dt/dx = (b - a) / 2.
-    LegendreSeries r;
+    HPRAY_CHECK(&r != this);
     r.a = a;
     r.b = b;
     const int n = Degree();
@@ -268,12 +278,16 @@ LegendreSeries LegendreSeries::Antiderivative() const {
         r.c[k + 1] += q;
         r.c[k - 1] -= q;
     }
-    return r;
 }
 
 LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
-    const LglRule& rule = LglNodes(n);
     LegendreSeries s;
+    InterpolateLgl(values, n, a, b, s);
+    return s;
+}
+
+void InterpolateLgl(const double* values, int n, double a, double b, LegendreSeries& s) {
+    const LglRule& rule = LglNodes(n);
     s.a = a;
     s.b = b;
     s.c.assign(n + 1, 0.0);
@@ -284,7 +298,6 @@ LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
         const double v = values[i];
         for (int k = 0; k <= n; ++k) c[k] = std::fma(m[k], v, c[k]);
     }
-    return s;
 }
 
 LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,

@@ -38,9 +38,13 @@ struct LegendreSeries {
     double Tail() const;
     /// The derivative dp/dt as a series of degree n - 1 on the same interval.
     LegendreSeries Derivative() const;
+    /// The same into `out` (reusing its storage).
+    void Derivative(LegendreSeries& out) const;
     /// The antiderivative integral_a^t p as a series of degree n + 1 on the same interval
     /// (zero at t = a).
     LegendreSeries Antiderivative() const;
+    /// The same into `out` (reusing its storage; not *this).
+    void Antiderivative(LegendreSeries& out) const;
 };
 
 /// p(t[s]) into outP[s] and q(t[s]) into outQ[s] for s < count, for two series on the same
@@ -52,6 +56,8 @@ void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t,
 /// the degree-n Legendre series (discrete Legendre transform with the Lobatto correction
 /// of the last coefficient).
 LegendreSeries InterpolateLgl(const double* values, int n, double a, double b);
+/// The same into `out` (reusing its storage).
+void InterpolateLgl(const double* values, int n, double a, double b, LegendreSeries& out);
 
 /// Re-expands `p` on the sub-interval [lo, hi] (same degree), by evaluating it at the LGL
 /// nodes of [lo, hi]. `scratch` is caller-owned and resized as needed.

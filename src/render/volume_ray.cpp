@@ -79,14 +79,21 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
                      const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
-                     std::vector<double>& out) {
+                     LegendreSeries& derivative, std::vector<double>& out) {
     if (count == 0 || !(p.b > p.a)) return;
+    // |p - c_0| <= sum_{k>=1} |c_k| on [a, b]: levels outside that range are not crossed.
+    const double tail = p.Tail();
+    if (std::none_of(levels, levels + count, [&](double level) {
+            return std::abs(level - p.c[0]) <= tail;
+        }))
+        return;
     // Split [a, b] at the critical points of p: the roots of p', isolated on its series
     // (a window is passed over only where |p'| provably exceeds its rounding).
     points.clear();
     points.push_back(p.a);
     if (p.Degree() >= 2) {
-        const LegendreSeries d = p.Derivative();
+        LegendreSeries& d = derivative;
+        p.Derivative(d);
         double sum = 0;
         for (double c : d.c) sum += std::abs(c);
         const double slopeEps = kSeriesRounding * kEps * sum;
@@ -422,7 +429,7 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
     pieces_[f].resize(1);
     ProjectedPiece& piece = pieces_[f][0];
-    piece.p = InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit);
+    InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit, piece.p);
     // As ProjectSegment's exact projection: rounding in the samples and the transform.
     piece.eps = 64 * (n + 1) * kEps * scale;
     piece.converged = true;
@@ -498,7 +505,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
                      4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
         SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol,
                         sampleT_.data(), sampleV_[f].data(), int(sampleV_[f].size()),
-                        scratch_, points_, crossings_);
+                        scratch_, points_, derivative_, crossings_);
         return;
     }
     forEachBreakpoint([&](double b) {
@@ -610,9 +617,9 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     double tauM = ae, v0 = 0, v1 = 0;
     if (be != 0) {
         if (!haveDepthLine_) {
-            LegendreSeries w = ue;
-            w.c[0] = 0;
-            depthLine_ = w.Antiderivative();
+            depthSource_ = ue;
+            depthSource_.c[0] = 0;
+            depthSource_.Antiderivative(depthLine_);
             double sum = 0;
             for (double c : depthLine_.c) sum += std::abs(c);
             depthLineError_ = kSeriesRounding * kEps * sum;

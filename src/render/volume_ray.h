@@ -65,11 +65,11 @@ struct VolumeSetup {
 /// its rounding), and on each monotone interval between them a level strictly between
 /// the end values is crossed once, polished by safeguarded Newton to `tol` in t, started
 /// from the samples (sampleT ascending, sampleV of the field there; samples may be 0)
-/// where they change sides. `scratch` and `points` are caller-owned buffers.
+/// where they change sides. `scratch`, `points` and `derivative` are caller-owned buffers.
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
                      const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
-                     std::vector<double>& out);
+                     LegendreSeries& derivative, std::vector<double>& out);
 
 /// The colour transfer function of a scene (`volume.color_tf`, `slices.#.color_tf`).
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
@@ -177,7 +177,7 @@ class VolumeRayMarcher {
     LegendreSeries line_[2];
     double lineError_[2] = {0, 0};
     double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
-    LegendreSeries depthLine_;
+    LegendreSeries depthLine_, depthSource_, derivative_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
