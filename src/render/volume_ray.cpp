@@ -53,13 +53,14 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
 /// nonzero) at the ends and p is monotone: Newton's method kept inside the shrinking
 /// bracket (bisection when a step leaves it), to `tol` in t.
 double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
-                    double fHi, double guess, double tol) {
+                    double fHi, double guess, double tol, double noise) {
     double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
     for (int it = 0; it < 100; ++it) {
         double v, dv;
         p.Eval(t, v, dv);
         const double f = v - level;
-        if (f == 0) return t;
+        // Within the rounding of p: no closer root can be told apart.
+        if (std::abs(f) <= noise) return t;
         if ((f < 0) == (fLo < 0)) {
             lo = t;
             fLo = f;
@@ -116,6 +117,7 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
     points.push_back(p.b);
     // On each interval between them p is monotone: a level strictly between the end
     // values is crossed once.
+    const double noise = 2 * kEps * (std::abs(p.c[0]) + tail);
     double vlo = p(points[0]);
     for (std::size_t k = 0; k + 1 < points.size(); ++k) {
         const double lo = points[k], hi = points[k + 1], vhi = p(hi);
@@ -133,8 +135,8 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
                     break;
                 }
             }
-            const double t =
-                MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess, tol);
+            const double t = MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess,
+                                          tol, noise);
             if (t > p.a && t < p.b) out.push_back(t);
         }
         vlo = vhi;
