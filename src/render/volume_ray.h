@@ -193,7 +193,7 @@ class VolumeRayMarcher {
     double quadratureNodes_ = 0;  ///< integrand samples not yet counted
     double fieldSamples_ = 0;     ///< field samples of the hexahedron kernel, not yet counted
     CellScratch cellScratch_;
-    std::vector<double> nodeT_, nodeU_[2], nodeDepth_;
+    std::vector<double> nodeT_, nodeU_[2], nodeDepth_, nodeAtt_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
     int fieldCount_ = 1;
     FieldState state_[2];
