@@ -511,11 +511,11 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
         // vectors for p = 8) and count what that coefficient adds, at most.
         const int p = cell.basis->order;
         if (n == 3 * p && p >= 1 && !s.topCoefficient[f].empty()) {
+            const double length = seg.tExit - seg.tEnter;
+            double base = std::abs(dref[0] * length * dref[1] * length * dref[2] * length);
             double top = s.topCoefficient[f][seg.cell];
-            for (int d = 0; d < 3; ++d) {
-                const double step = std::abs(dref[d] * (seg.tExit - seg.tEnter));
-                for (int k = 0; k < p; ++k) top *= step;
-            }
+            for (int k = p; k > 0; k >>= 1, base *= base)  // top * base^p by squaring
+                if (k & 1) top *= base;
             n -= 1;
             unresolved_[f] = kLebesgueBound * top;
         }
