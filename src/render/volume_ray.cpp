@@ -319,31 +319,27 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     // Each ray starts from the same state: its pixel must not depend on the rays the
     // thread integrated before (tiles and threads may take any rays).
     levelHint_ = kStartLevel;
-    started_ = false;
-    startT_ = endT_ = startTau_ = 0;
+    startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
 }
 
 void VolumeRayMarcher::RecordEnds(double p0, double p1, double tau0, const double e0[3],
                                   double tau1, const double e1[3],
                                   double transmittanceAtP1) {
-    (void)tau1;
-    if (!started_) {
-        started_ = true;
-        startT_ = p0;
+    if (p0 == tStart_) {
         startTau_ = tau0;
         for (int c = 0; c < 3; ++c) startEmission_[c] = e0[c];
     }
-    endT_ = p1;
-    for (int c = 0; c < 3; ++c) endEmission_[c] = transmittanceAtP1 * e1[c];
+    if (p1 == tEnd_) {
+        (void)tau1;
+        for (int c = 0; c < 3; ++c) endEmission_[c] = transmittanceAtP1 * e1[c];
+    }
 }
 
 void VolumeRayMarcher::FinishRay(RayComposite& composite) const {
     // d pixel / d tStart = -E(tStart) + tau(tStart) * pixel (everything behind is
-    // attenuated); d pixel / d tEnd = T(tEnd) E(tEnd), at the first and last points
-    // integrated (the ray's ends, or faces where a sliver was left out). They carry a few
-    // ulps of t.
-    const double dStart = 4 * kEps * std::abs(startT_), dEnd = 4 * kEps * std::abs(endT_);
+    // attenuated); d pixel / d tEnd = T(tEnd) E(tEnd). The ends carry a few ulps of t.
+    const double dStart = 4 * kEps * std::abs(tStart_), dEnd = 4 * kEps * std::abs(tEnd_);
     for (int c = 0; c < 3; ++c) {
         composite.error[c] +=
             dStart * std::abs(startTau_ * composite.rgba[c] - startEmission_[c]) +
@@ -713,68 +709,42 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
     RecordEnds(p0, p1, tau0, e0, tau1, e1, composite.transmittance);
 }
 
-void VolumeRayMarcher::EvaluateNodes(int level, double lo, double hi, bool withEnd) {
-    const GaussKronrodPair& rule = GetGaussKronrodPair(level);
-    const int n = rule.size, count = n + (withEnd ? 1 : 0);
-    const double half = 0.5 * (hi - lo), m = 0.5 * (lo + hi);
-    nodeT_.resize(count);
-    for (int f = 0; f < 2; ++f) nodeU_[f].resize(count);
-    nodeDepth_.resize(count);
-    for (int i = 0; i < n; ++i) nodeT_[i] = m + half * rule.nodes[i];
-    if (withEnd) nodeT_[n] = hi;
-    if (fieldCount_ == 1) {
-        EvalPair(line_[0], depthLine_, nodeT_.data(), count, nodeU_[0].data(),
-                 nodeDepth_.data());
-    } else {
-        line_[0].EvalMany(nodeT_.data(), count, nodeU_[0].data());
-        EvalPair(line_[1], depthLine_, nodeT_.data(), count, nodeU_[1].data(),
-                 nodeDepth_.data());
-    }
-}
-
 void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
     const VolumeSetup& s = *setup_;
     const bool wm = s.glow == GlowModel::WilliamsMax;
     const int fe = fieldCount_ - 1;
     const LegendreSeries& uc = line_[0];
     const LegendreSeries& ue = line_[fe];
-    const double length = p1 - p0;
-    // Optical depth from p0, exact for the polynomial field: with ue = m + w (m its mean
-    // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
-    // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
-    if (!haveDepthLine_) {
-        depthSource_ = ue;
-        depthSource_.c[0] = 0;
-        depthSource_.Antiderivative(depthLine_);
-        double sum = 0;
-        for (double c : depthLine_.c) sum += std::abs(c);
-        depthLineError_ = kSeriesRounding * kEps * sum;
-        haveDepthLine_ = true;
-        depthLineT_ = std::numeric_limits<double>::quiet_NaN();
-    }
-    // The first rule's nodes, and the piece's end in a spare lane: the field at the centre
-    // node (the midpoint) picks the transfer functions' pieces, V at the end closes the
-    // piece.
-    const int firstLevel = levelHint_;
-    EvaluateNodes(firstLevel, p0, p1, true);
-    const int firstSize = GetGaussKronrodPair(firstLevel).size;
-    const double endValue[2] = {nodeU_[0][firstSize], nodeU_[fe][firstSize]};
-    const double c0 = nodeU_[0][firstSize / 2];
-    const double em = fe == 0 ? c0 : nodeU_[1][firstSize / 2];
+    const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
+    const double c0 = uc(mid);
+    const double em = fe == 0 ? c0 : ue(mid);
     double ac[3], bc[3], ae, be;
     s.colorTf.AffineOn(s.colorTf.IntervalOf(c0), ac, bc);
     s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(em), &ae, &be);
+    // Optical depth from p0, exact for the polynomial field: with ue = m + w (m its mean
+    // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
+    // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
     double tauM = ae, v0 = 0, v1 = 0;
     if (be != 0) {
+        if (!haveDepthLine_) {
+            depthSource_ = ue;
+            depthSource_.c[0] = 0;
+            depthSource_.Antiderivative(depthLine_);
+            double sum = 0;
+            for (double c : depthLine_.c) sum += std::abs(c);
+            depthLineError_ = kSeriesRounding * kEps * sum;
+            haveDepthLine_ = true;
+            depthLineT_ = std::numeric_limits<double>::quiet_NaN();
+        }
         tauM = ae + be * ue.c[0];
         // Pieces follow each other along the segment: the last end is this start.
         v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_(p0);
-        v1 = nodeDepth_[firstSize];
+        v1 = depthLine_(p1);
+        depthLineT_ = p1;
+        depthLineV_ = v1;
     }
-    depthLineT_ = p1;
-    depthLineV_ = nodeDepth_[firstSize];
     const double depth = std::max(0.0, tauM * length + be * (v1 - v0));
     // Rounding of the depth: the antiderivative's evaluations and the sums (which may
     // cancel: the bound is on the terms).
@@ -812,9 +782,21 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             const GaussKronrodPair& rule = GetGaussKronrodPair(w.level);
             const int n = rule.size;
             const double half = 0.5 * (w.hi - w.lo), m = 0.5 * (w.lo + w.hi);
-            // The first rule on the whole piece was evaluated above.
-            if (evaluations > 1 || w.level != firstLevel) EvaluateNodes(w.level, w.lo, w.hi, false);
-            const double* ueAt = nodeU_[fe].data();
+            nodeT_.resize(n);
+            nodeU_[0].resize(n);
+            nodeU_[1].resize(n);
+            nodeDepth_.resize(n);
+            for (int i = 0; i < n; ++i) nodeT_[i] = m + half * rule.nodes[i];
+            const double* ueAt = nodeU_[0].data();
+            if (be == 0) {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+            } else if (fe == 0) {
+                EvalPair(uc, depthLine_, nodeT_.data(), n, nodeU_[0].data(), nodeDepth_.data());
+            } else {
+                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
+                EvalPair(ue, depthLine_, nodeT_.data(), n, nodeU_[1].data(), nodeDepth_.data());
+                ueAt = nodeU_[1].data();
+            }
             quadratureNodes_ += n;
             nodeAtt_.resize(n);
             double* att = nodeAtt_.data();
@@ -909,17 +891,18 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     composite.transmittance = T * std::exp(-depth);
     // Everything behind is attenuated by the depth's rounding too.
     composite.depthError += depthRounding;
-    // The emission density at the piece's ends: the end from the first evaluation's
-    // spare lane, the start (needed only for the ray's first piece) evaluated.
-    double tau[2] = {0, 0}, emission[2][3] = {{0, 0, 0}, {0, 0, 0}};
-    for (int k = started_ ? 1 : 0; k < 2; ++k) {
-        const double vc = k == 0 ? uc(p0) : endValue[0];
-        const double ve = fe == 0 ? vc : k == 0 ? ue(p0) : endValue[1];
-        tau[k] = std::max(0.0, ae + be * ve);
-        for (int c = 0; c < 3; ++c)
-            emission[k][c] = std::max(0.0, ac[c] + bc[c] * vc) * (wm ? tau[k] : 1.0);
+    if (p0 == tStart_ || p1 == tEnd_) {
+        double tau[2], emission[2][3];
+        const double ends[2] = {p0, p1};
+        for (int k = 0; k < 2; ++k) {
+            const double vc = uc(ends[k]), ve = fe == 0 ? vc : ue(ends[k]);
+            tau[k] = std::max(0.0, ae + be * ve);
+            for (int c = 0; c < 3; ++c)
+                emission[k][c] = std::max(0.0, ac[c] + bc[c] * vc) * (wm ? tau[k] : 1.0);
+        }
+        RecordEnds(p0, p1, tau[0], emission[0], tau[1], emission[1],
+                   composite.transmittance);
     }
-    RecordEnds(p0, p1, tau[0], emission[0], tau[1], emission[1], composite.transmittance);
 }
 
 void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composite) {

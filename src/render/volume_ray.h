@@ -157,8 +157,7 @@ class VolumeRayMarcher {
     /// into the colour error and the depth error.
     void AddFieldError(double length, double depth, double tauMin, double T,
                        double colorSlope, double tauSlope, RayComposite& composite) const;
-    /// Records the emission density at the start of the ray's first piece and at the end
-    /// of its last (for FinishRay).
+    /// Records the emission density at the ray's ends (for FinishRay).
     void RecordEnds(double p0, double p1, double tau0, const double e0[3], double tau1,
                     const double e1[3], double transmittanceAtP1);
     double FieldAt(int f, double t);
@@ -166,10 +165,6 @@ class VolumeRayMarcher {
     void LinearPiece(double p0, double p1, RayComposite& composite);
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
-    /// Series mode: the fields and the depth antiderivative at the nodes of Gauss-Kronrod
-    /// level `level` on [lo, hi] (and at hi after them when `withEnd`) into nodeT_,
-    /// nodeU_ and nodeDepth_.
-    void EvaluateNodes(int level, double lo, double hi, bool withEnd);
     bool Terminate(double t, RayComposite& composite);
     void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
@@ -217,10 +212,6 @@ class VolumeRayMarcher {
     };
     std::vector<Work> stack_;
     int kronrodIntervals_ = 0;
-    /// The first and last points integrated on the ray, the extinction and emission
-    /// density there (for FinishRay).
-    bool started_ = false;
-    double startT_ = 0, endT_ = 0;
     double startTau_ = 0, startEmission_[3] = {0, 0, 0};
     double endEmission_[3] = {0, 0, 0};  ///< times the transmittance there
 };
