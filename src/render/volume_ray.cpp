@@ -406,10 +406,12 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         }
         pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
-        // (reference units) times the field's variation over the cell.
+        // (reference units) times the field's variation over the cell (affine cells map
+        // back in closed form, also those whose field is not a polynomial, as pyramids').
         const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
-        if (!sf.ExactAlongLine())
+        const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
+        if (!(cell.affine && cell.linearInvertible))
             st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
         if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
@@ -506,18 +508,24 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
             dref[i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
                       inv[3 * i + 2] * ray_.dir[2];
         }
-        // The degree-3p coefficient is known in closed form and far below rounding
-        // (about 1e-17 on nk-sinc): interpolate at one degree less (3p samples, whole
-        // vectors for p = 8) and count what that coefficient adds, at most.
+        // The degree-3p coefficient is known in closed form: where it is below the
+        // samples' rounding (about 1e-17 on nk-sinc, whose data is smooth), interpolate at
+        // one degree less (3p samples: whole vectors for p = 8) and count what that
+        // coefficient adds, at most.
         const int p = cell.basis->order;
-        if (n == 3 * p && p >= 1 && !s.topCoefficient[f].empty()) {
+        if (n == 3 * p && p >= 2 && !s.topCoefficient[f].empty()) {
             const double length = seg.tExit - seg.tEnter;
             double base = std::abs(dref[0] * length * dref[1] * length * dref[2] * length);
             double top = s.topCoefficient[f][seg.cell];
             for (int k = p; k > 0; k >>= 1, base *= base)  // top * base^p by squaring
                 if (k & 1) top *= base;
-            n -= 1;
-            unresolved_[f] = kLebesgueBound * top;
+            const Interval& range = (*s.ranges[f])[seg.cell];
+            const double hidden =
+                kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+            if (kLebesgueBound * top <= hidden) {
+                n -= 1;
+                unresolved_[f] = kLebesgueBound * top;
+            }
         }
     }
     // The interpolant at the n + 1 Legendre-Gauss-Lobatto nodes, sampled together.
@@ -909,6 +917,18 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
     const VolumeSetup& s = *setup_;
     const KronrodRule& rule = GetKronrodRule();
     constexpr int n = KronrodRule::kNodes;
+    // The transfer functions are affine on the piece: the slopes of the pieces holding the
+    // field at its midpoint turn field errors into value errors.
+    double colorSlope, tauSlope;
+    {
+        const double mid = 0.5 * (p0 + p1);
+        const double vc = FieldAt(0, mid), ve = s.sameField ? vc : FieldAt(1, mid);
+        double offset[3], slope[3];
+        s.colorTf.AffineOn(s.colorTf.IntervalOf(vc), offset, slope);
+        colorSlope = std::max({std::abs(slope[0]), std::abs(slope[1]), std::abs(slope[2])});
+        s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(ve), offset, slope);
+        tauSlope = std::abs(slope[0]);
+    }
     const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
     stack_.clear();
     stack_.push_back({p0, p1, 0});
@@ -952,7 +972,7 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
         const double behind = s.glow == GlowModel::WilliamsMax
                                   ? 1.0
                                   : 1.0 + s.colorMax * std::max(0.0, tEnd_ - w.hi);
-        const double estimate = T * (errC + errD * behind);
+        const double estimate = T * (1 + kKronrodMargin) * (errC + errD * behind);
         if (estimate > budgetPerLength * (w.hi - w.lo) && w.depth < kMaxKronrodDepth &&
             evaluations < kMaxKronrodEvaluations) {
             stack_.push_back({mid, w.hi, w.depth + 1});
@@ -960,18 +980,26 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
             continue;
         }
         ++kronrodIntervals_;
+        // The Gauss results are kept: the Kronrod differences estimate their errors
+        // sharply (signed for the emission), where they would overstate the Kronrod
+        // results' by orders of magnitude. The Kronrod rule's own error is taken as at most
+        // kKronrodMargin of the difference; the depth error inside the interval (in the
+        // attenuation) stays an absolute term.
         double rgb[3], tauMin = tau[0];
         for (int i = 0; i < n; ++i) tauMin = std::min(tauMin, tau[i]);
         for (int c = 0; c < 3; ++c) {
-            rgb[c] = T * cK[c];
-            composite.error[c] += T * errC + 64 * kEps * std::abs(rgb[c]);
+            rgb[c] = T * cG[c];
+            const double d = cK[c] - cG[c];
+            composite.signedError[c] += T * d;
+            composite.error[c] += T * (kKronrodMargin * std::abs(d) + cMax * errD) +
+                                  64 * kEps * std::abs(rgb[c]);
         }
         composite.AddColor(rgb);
-        AddFieldError(w.hi - w.lo, dK, tauMin, T, s.colorSlope * state_[0].error,
-                      s.extinctionSlope * state_[fieldCount_ - 1].error, composite);
-        composite.rgba[3] += T * -std::expm1(-dK);
-        composite.transmittance = T * std::exp(-dK);
-        composite.depthError += errD + 16 * kEps * std::abs(dK);
+        AddFieldError(w.hi - w.lo, dG, tauMin, T, colorSlope * state_[0].error,
+                      tauSlope * state_[fieldCount_ - 1].error, composite);
+        composite.rgba[3] += T * -std::expm1(-dG);
+        composite.transmittance = T * std::exp(-dG);
+        composite.depthError += (1 + kKronrodMargin) * errD + 16 * kEps * std::abs(dG);
         // The nodes nearest the ends stand for the ends' emission density.
         RecordEnds(w.lo, w.hi, tau[0], emission[0], tau[n - 1], emission[n - 1],
                    composite.transmittance);
