@@ -77,13 +77,14 @@ LglRule BuildRule(int n) {
     }
     // Discrete norms: 2 / (2k + 1), except 2 / n for k = n under Lobatto quadrature.
     r.transform.resize((n + 1) * (n + 1));
-    r.transformByNode.resize((n + 1) * (n + 1));
+    r.transformStride = (n + 1 + 3) / 4 * 4;
+    r.transformByNode.assign(std::size_t(n + 1) * r.transformStride, 0.0);
     for (int k = 0; k <= n; ++k) {
         const double norm = (k < n) ? 2.0 / (2 * k + 1) : 2.0 / n;
         for (int i = 0; i <= n; ++i) {
             const double v = r.weights[i] * r.legendreAtNodes[i * (n + 1) + k] / norm;
             r.transform[k * (n + 1) + i] = v;
-            r.transformByNode[i * (n + 1) + k] = v;
+            r.transformByNode[i * r.transformStride + k] = v;
         }
     }
     return r;
@@ -290,14 +291,16 @@ void InterpolateLgl(const double* values, int n, double a, double b, LegendreSer
     const LglRule& rule = LglNodes(n);
     s.a = a;
     s.b = b;
-    s.c.assign(n + 1, 0.0);
-    // c += value_i * column i of the transform (vectorised over k).
-    double* c = s.c.data();
+    // c += value_i * column i of the transform (vectorised over k, the sums in a local
+    // array the compiler keeps in registers; rows padded to whole vectors).
+    const int stride = rule.transformStride;
+    double c[kMaxLegendreDegree + 4] = {};
     const double* m = rule.transformByNode.data();
-    for (int i = 0; i <= n; ++i, m += n + 1) {
+    for (int i = 0; i <= n; ++i, m += stride) {
         const double v = values[i];
-        for (int k = 0; k <= n; ++k) c[k] = std::fma(m[k], v, c[k]);
+        for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);
     }
+    s.c.assign(c, c + n + 1);
 }
 
 LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,

@@ -15,7 +15,10 @@ struct LglRule {
     /// transform[k * (n + 1) + i] = weights[i] P_k(nodes[i]) / (discrete norm of P_k): the
     /// interpolation transform, coefficient k = sum_i transform[k][i] value_i.
     std::vector<double> transform;
-    std::vector<double> transformByNode;  ///< the same transposed: [i * (n + 1) + k]
+    /// The same transposed, each row padded with zeros to transformStride (a multiple of
+    /// 4): [i * transformStride + k].
+    std::vector<double> transformByNode;
+    int transformStride = 0;
 };
 inline constexpr int kMaxLegendreDegree = 64;
 const LglRule& LglNodes(int n);

@@ -3,7 +3,12 @@
 
 #include <tbb/parallel_for.h>
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "render/hex_line_sampler.h"
@@ -35,6 +40,10 @@ constexpr double kSeriesRounding = 8;
 /// A bound of the rounding error of the field's samples in a cell, in units of eps times
 /// the largest |value| in the cell (measured on nk-sinc's order-8 cells: at most 12).
 constexpr double kSampleRounding = 32;
+/// 1 + the Lebesgue constant of interpolation at the Legendre-Gauss-Lobatto nodes of any
+/// degree used here (at most 2.7 up to degree 30): how much a part of the field that the
+/// samples do not resolve changes the interpolant, at most.
+constexpr double kLebesgueBound = 4;
 /// Trailing Legendre coefficients of an exact series whose sum is below this many eps
 /// times the largest |value| in the cell (half the samples' rounding bound) are dropped,
 /// and their sum counted as field error.
@@ -53,13 +62,14 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
 /// nonzero) at the ends and p is monotone: Newton's method kept inside the shrinking
 /// bracket (bisection when a step leaves it), to `tol` in t.
 double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
-                    double fHi, double guess, double tol) {
+                    double fHi, double guess, double tol, double noise) {
     double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
     for (int it = 0; it < 100; ++it) {
         double v, dv;
         p.Eval(t, v, dv);
         const double f = v - level;
-        if (f == 0) return t;
+        // Within the rounding of p: no closer root can be told apart.
+        if (std::abs(f) <= noise) return t;
         if ((f < 0) == (fLo < 0)) {
             lo = t;
             fLo = f;
@@ -72,6 +82,50 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
         t = next;
     }
     return t;
+}
+
+/// out[i] = exp(-x[i]) for x[i] >= 0 (0 beyond 708), to about 2 ulps: x = k ln 2 - r with
+/// |r| <= ln 2 / 2, e^-r by its Taylor polynomial of degree 13 (error below 1e-17), times
+/// 2^-k built in the exponent bits; four lanes at a time where AVX2 is available.
+void ExpNegative(const double* x, int n, double* out) {
+    constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
+                     kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
+    constexpr double kCoef[14] = {1.0,
+                                  1.0,
+                                  1.0 / 2,
+                                  1.0 / 6,
+                                  1.0 / 24,
+                                  1.0 / 120,
+                                  1.0 / 720,
+                                  1.0 / 5040,
+                                  1.0 / 40320,
+                                  1.0 / 362880,
+                                  1.0 / 3628800,
+                                  1.0 / 39916800,
+                                  1.0 / 479001600,
+                                  1.0 / 6227020800.0};
+    int i = 0;
+#if defined(__AVX2__) && defined(__FMA__)
+    for (; i + 4 <= n; i += 4) {
+        const __m256d xv = _mm256_loadu_pd(x + i);
+        const __m256d big = _mm256_cmp_pd(xv, _mm256_set1_pd(708.0), _CMP_GT_OQ);
+        const __m256d y = _mm256_sub_pd(_mm256_setzero_pd(), _mm256_min_pd(xv, _mm256_set1_pd(708.0)));
+        // k = round(y / ln 2) in the low bits of kd.
+        const __m256d kd = _mm256_fmadd_pd(y, _mm256_set1_pd(kLog2e), _mm256_set1_pd(kShifter));
+        const __m256d k = _mm256_sub_pd(kd, _mm256_set1_pd(kShifter));
+        __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Hi), y);
+        r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Lo), r);
+        __m256d poly = _mm256_set1_pd(kCoef[13]);
+        for (int c = 12; c >= 0; --c) poly = _mm256_fmadd_pd(poly, r, _mm256_set1_pd(kCoef[c]));
+        // 2^k: (k + 1023) << 52, with k the integer in kd's low bits.
+        const __m256i ki = _mm256_sub_epi64(_mm256_castpd_si256(kd),
+                                            _mm256_castpd_si256(_mm256_set1_pd(kShifter)));
+        const __m256i bits = _mm256_slli_epi64(_mm256_add_epi64(ki, _mm256_set1_epi64x(1023)), 52);
+        const __m256d result = _mm256_mul_pd(poly, _mm256_castsi256_pd(bits));
+        _mm256_storeu_pd(out + i, _mm256_andnot_pd(big, result));
+    }
+#endif
+    for (; i < n; ++i) out[i] = x[i] > 708.0 ? 0.0 : std::exp(-x[i]);
 }
 
 }  // namespace
@@ -116,6 +170,7 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
     points.push_back(p.b);
     // On each interval between them p is monotone: a level strictly between the end
     // values is crossed once.
+    const double noise = 2 * kEps * (std::abs(p.c[0]) + tail);
     double vlo = p(points[0]);
     for (std::size_t k = 0; k + 1 < points.size(); ++k) {
         const double lo = points[k], hi = points[k + 1], vhi = p(hi);
@@ -133,8 +188,8 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
                     break;
                 }
             }
-            const double t =
-                MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess, tol);
+            const double t = MonotoneRoot(p, level, lo, hi, vlo - level, vhi - level, guess,
+                                          tol, noise);
             if (t > p.a && t < p.b) out.push_back(t);
         }
         vlo = vhi;
@@ -180,6 +235,43 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
                                                                        : nullptr);
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
+    }
+    // The top coefficient of each Lagrange hexahedron (see VolumeSetup::topCoefficient):
+    // the tensor divided difference of the nodal values at the equispaced y nodes.
+    s.topCoefficient.resize(count);
+    for (int f = 0; f < count; ++f) {
+        if (!s.data[f]) continue;
+        const FieldCellData& data = *s.data[f];
+        s.topCoefficient[f].assign(cells, 0.0);
+        tbb::parallel_for(
+            tbb::blocked_range<std::int64_t>(0, cells, 256),
+            [&](const tbb::blocked_range<std::int64_t>& range) {
+                using LD = long double;
+                for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                    if (mesh.cellShape[c] != CellShape::Hex ||
+                        mesh.cellFamily[c] != CellFamily::Lagrange)
+                        continue;
+                    const int p = mesh.cellOrder[c], n = p + 1;
+                    // Divided-difference weights 1 / prod_{m != i} (y_i - y_m), y_i = 2i/p - 1.
+                    LD w[kMaxOrder + 1];
+                    for (int i = 0; i < n; ++i) {
+                        LD prod = 1;
+                        for (int m = 0; m < n; ++m)
+                            if (m != i) prod *= LD(2 * (i - m)) / p;
+                        w[i] = 1 / prod;
+                    }
+                    const double* u = data.values.data() + mesh.cellOffsets[c];
+                    LD sum = 0;
+                    for (int k = 0; k < n; ++k)
+                        for (int j = 0; j < n; ++j)
+                            for (int i = 0; i < n; ++i)
+                                sum += w[i] * w[j] * w[k] * LD(u[i + n * (j + n * k)]);
+                    // Leading coefficient of P_3p: prod_{k=1}^{3p} (2k - 1) / k.
+                    LD lead = 1;
+                    for (int k = 1; k <= 3 * p; ++k) lead *= LD(2 * k - 1) / k;
+                    s.topCoefficient[f][c] = double(std::abs(sum) / lead);
+                }
+            });
     }
     s.cellKind.assign(cells, VolumeSetup::kVarying);
     tbb::parallel_for(
@@ -305,7 +397,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             continue;
         }
         SegmentField& sf = field_[f];
-        truncated_[f] = 0;
+        truncated_[f] = unresolved_[f] = 0;
         sampleV_[f].clear();
         if (s.data[f]) {
             sf.Begin(*s.data[f], geometry, sel, seg.cell, ray_, s.inversion);
@@ -314,10 +406,12 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         }
         pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
-        // (reference units) times the field's variation over the cell.
+        // (reference units) times the field's variation over the cell (affine cells map
+        // back in closed form, also those whose field is not a polynomial, as pyramids').
         const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
-        if (!sf.ExactAlongLine())
+        const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
+        if (!(cell.affine && cell.linearInvertible))
             st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
         if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
@@ -370,7 +464,8 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
             lineError_[f] = st.constant ? 0.0
                                         : kSampleRounding * kEps * cellScale +
-                                              kSeriesRounding * kEps * sum + truncated_[f];
+                                              kSeriesRounding * kEps * sum + truncated_[f] +
+                                              unresolved_[f];
         }
         haveDepthLine_ = false;
     }
@@ -388,7 +483,7 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     ProjectionOptions projection = s.projection;
     projection.scaleFloor = s.fieldScale[f];
     projection.exactDegree = sf.LineDegree();
-    const int n = std::min(sf.LineDegree(), kMaxLegendreDegree);
+    int n = std::min(sf.LineDegree(), kMaxLegendreDegree);
     if (projection.startDegree == projection.maxDegree || n < 1) {
         // A pinned projection order (order studies): as the isosurfaces do.
         projectionStats_ = ProjectionStats{};
@@ -396,26 +491,51 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
                        projectionStats_, scratch_);
         return;
     }
-    // The interpolant at the n + 1 Legendre-Gauss-Lobatto nodes, sampled together.
-    const LglRule& rule = LglNodes(n);
-    const double mid = 0.5 * (seg.tEnter + seg.tExit), half = 0.5 * (seg.tExit - seg.tEnter);
-    scratch_.resize(2 * (n + 1));
-    double* ts = scratch_.data() + n + 1;
-    for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
     // Affine Lagrange hexahedra: the register-blocked kernel on the gathered values.
     const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
-    bool sampled = false;
-    if (s.data[f] && cell.affine && cell.linearInvertible &&
-        cell.basis->kind == BasisKind::HexLagrange && cell.basis->polynomial) {
+    const bool hexKernel = s.data[f] && cell.affine && cell.linearInvertible &&
+                           cell.basis->kind == BasisKind::HexLagrange &&
+                           cell.basis->polynomial;
+    double ref0[3] = {0, 0, 0}, dref[3] = {0, 0, 0};
+    unresolved_[f] = 0;
+    if (hexKernel) {
         // ref(t) = L^-1 (o + t d - origin).
         const auto& inv = cell.inverseLinear;
-        double rel[3], ref0[3], dref[3];
+        double rel[3];
         for (int i = 0; i < 3; ++i) rel[i] = ray_.origin[i] - cell.origin[i];
         for (int i = 0; i < 3; ++i) {
             ref0[i] = inv[3 * i] * rel[0] + inv[3 * i + 1] * rel[1] + inv[3 * i + 2] * rel[2];
             dref[i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
                       inv[3 * i + 2] * ray_.dir[2];
         }
+        // The degree-3p coefficient is known in closed form: where it is below the
+        // samples' rounding (about 1e-17 on nk-sinc, whose data is smooth), interpolate at
+        // one degree less (3p samples: whole vectors for p = 8) and count what that
+        // coefficient adds, at most.
+        const int p = cell.basis->order;
+        if (n == 3 * p && p >= 2 && !s.topCoefficient[f].empty()) {
+            const double length = seg.tExit - seg.tEnter;
+            double base = std::abs(dref[0] * length * dref[1] * length * dref[2] * length);
+            double top = s.topCoefficient[f][seg.cell];
+            for (int k = p; k > 0; k >>= 1, base *= base)  // top * base^p by squaring
+                if (k & 1) top *= base;
+            const Interval& range = (*s.ranges[f])[seg.cell];
+            const double hidden =
+                kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+            if (kLebesgueBound * top <= hidden) {
+                n -= 1;
+                unresolved_[f] = kLebesgueBound * top;
+            }
+        }
+    }
+    // The interpolant at the n + 1 Legendre-Gauss-Lobatto nodes, sampled together.
+    const LglRule& rule = LglNodes(n);
+    const double mid = 0.5 * (seg.tEnter + seg.tExit), half = 0.5 * (seg.tExit - seg.tEnter);
+    scratch_.resize(2 * (n + 1));
+    double* ts = scratch_.data() + n + 1;
+    for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
+    bool sampled = false;
+    if (hexKernel) {
         const FieldCellData& data = *s.data[f];
         sampled = SampleAffineHexLine(cell.basis->order,
                                       data.values.data() + data.mesh->cellOffsets[seg.cell],
@@ -634,6 +754,11 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         depthLineV_ = v1;
     }
     const double depth = std::max(0.0, tauM * length + be * (v1 - v0));
+    // Rounding of the depth: the antiderivative's evaluations and the sums (which may
+    // cancel: the bound is on the terms).
+    const double depthRounding =
+        (be != 0 ? 2 * std::abs(be) * depthLineError_ : 0.0) +
+        4 * kEps * (std::abs(tauM) * length + std::abs(be * (v1 - v0)));
     const double opacity = -std::expm1(-depth);
     // Williams-Max: E_c = (ac + bc c0) (1 - e^-D) + bc Q with Q = integral (uc - c0) tau
     // e^-phi, since integral tau e^-phi = 1 - e^-D. Wilhelms-Van Gelder: E_c = (ac + bc
@@ -681,21 +806,25 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
                 ueAt = nodeU_[1].data();
             }
             quadratureNodes_ += n;
-            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0, jAbs = 0;
+            nodeAtt_.resize(n);
+            double* att = nodeAtt_.data();
             for (int i = 0; i < n; ++i) {
                 const double dt = nodeT_[i] - p0;
-                const double phi =
-                    be != 0 ? tauM * dt + be * (nodeDepth_[i] - v0) : tauM * dt;
-                const double att = std::exp(-std::max(0.0, phi));
+                att[i] = std::max(0.0, be != 0 ? tauM * dt + be * (nodeDepth_[i] - v0)
+                                               : tauM * dt);
+            }
+            ExpNegative(att, n, att);
+            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0, jAbs = 0;
+            for (int i = 0; i < n; ++i) {
                 const double tau = be != 0 ? ae + be * ueAt[i] : ae;
                 tauMin = std::min(tauMin, tau);
-                const double gq = (nodeU_[0][i] - c0) * (wm ? tau : 1.0) * att;
+                const double gq = (nodeU_[0][i] - c0) * (wm ? tau : 1.0) * att[i];
                 qK += rule.kronrodWeights[i] * gq;
                 qG += rule.gaussWeights[i] * gq;
                 qAbs += rule.kronrodWeights[i] * std::abs(gq);
-                jK += rule.kronrodWeights[i] * att;
-                jG += rule.gaussWeights[i] * att;
-                jAbs += rule.kronrodWeights[i] * att;
+                jK += rule.kronrodWeights[i] * att[i];
+                jG += rule.gaussWeights[i] * att[i];
+                jAbs += rule.kronrodWeights[i] * att[i];
             }
             const double sQ = half * (qK - qG), sJ = half * (jK - jG);
             const double estimate =
@@ -749,20 +878,27 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         }
         rgb[c] = T * e;
         composite.signedError[c] += T * sig;
-        composite.error[c] += T * (kKronrodMargin * unsure + 16 * kEps * rounding);
+        // The rounding of the depth changes this piece's own emission too (e^-phi at the
+        // nodes, 1 - e^-D): at most its terms times depthRounding.
+        const double own = std::abs(wJ[c]) * (wm ? 1.0 : J) + std::abs(bc[c]) * magQ;
+        composite.error[c] +=
+            T * (kKronrodMargin * unsure + 16 * kEps * rounding + own * depthRounding);
     }
     composite.AddColor(rgb);
-    // Field errors through the slopes of the pieces in use.
+    // Field errors through the slopes of the pieces in use, and the rounding of the
+    // transfer functions' affine forms (offset + slope u: a few ulps of the larger term,
+    // which is all there is where the value is near zero).
     double colorError = 0;
-    for (int c = 0; c < 3; ++c) colorError = std::max(colorError, std::abs(bc[c]));
-    colorError *= lineError_[0];
-    const double tauError = std::abs(be) * lineError_[fe];
+    for (int c = 0; c < 3; ++c)
+        colorError = std::max(colorError, std::abs(bc[c]) * lineError_[0] +
+                                              4 * kEps * (std::abs(ac[c]) + std::abs(bc[c] * c0)));
+    const double tauError =
+        std::abs(be) * lineError_[fe] + 4 * kEps * (std::abs(ae) + std::abs(be * em));
     AddFieldError(length, depth, std::max(0.0, tauMin), T, colorError, tauError, composite);
     composite.rgba[3] += T * opacity;
     composite.transmittance = T * std::exp(-depth);
-    // Rounding of the depth: the antiderivative's evaluations and the sums.
-    composite.depthError += 2 * std::abs(be) * depthLineError_ +
-                            4 * kEps * (std::abs(tauM) * length + std::abs(be * (v1 - v0)));
+    // Everything behind is attenuated by the depth's rounding too.
+    composite.depthError += depthRounding;
     if (p0 == tStart_ || p1 == tEnd_) {
         double tau[2], emission[2][3];
         const double ends[2] = {p0, p1};
@@ -781,6 +917,18 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
     const VolumeSetup& s = *setup_;
     const KronrodRule& rule = GetKronrodRule();
     constexpr int n = KronrodRule::kNodes;
+    // The transfer functions are affine on the piece: the slopes of the pieces holding the
+    // field at its midpoint turn field errors into value errors.
+    double colorSlope, tauSlope;
+    {
+        const double mid = 0.5 * (p0 + p1);
+        const double vc = FieldAt(0, mid), ve = s.sameField ? vc : FieldAt(1, mid);
+        double offset[3], slope[3];
+        s.colorTf.AffineOn(s.colorTf.IntervalOf(vc), offset, slope);
+        colorSlope = std::max({std::abs(slope[0]), std::abs(slope[1]), std::abs(slope[2])});
+        s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(ve), offset, slope);
+        tauSlope = std::abs(slope[0]);
+    }
     const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
     stack_.clear();
     stack_.push_back({p0, p1, 0});
@@ -824,7 +972,7 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
         const double behind = s.glow == GlowModel::WilliamsMax
                                   ? 1.0
                                   : 1.0 + s.colorMax * std::max(0.0, tEnd_ - w.hi);
-        const double estimate = T * (errC + errD * behind);
+        const double estimate = T * (1 + kKronrodMargin) * (errC + errD * behind);
         if (estimate > budgetPerLength * (w.hi - w.lo) && w.depth < kMaxKronrodDepth &&
             evaluations < kMaxKronrodEvaluations) {
             stack_.push_back({mid, w.hi, w.depth + 1});
@@ -832,18 +980,26 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
             continue;
         }
         ++kronrodIntervals_;
+        // The Gauss results are kept: the Kronrod differences estimate their errors
+        // sharply (signed for the emission), where they would overstate the Kronrod
+        // results' by orders of magnitude. The Kronrod rule's own error is taken as at most
+        // kKronrodMargin of the difference; the depth error inside the interval (in the
+        // attenuation) stays an absolute term.
         double rgb[3], tauMin = tau[0];
         for (int i = 0; i < n; ++i) tauMin = std::min(tauMin, tau[i]);
         for (int c = 0; c < 3; ++c) {
-            rgb[c] = T * cK[c];
-            composite.error[c] += T * errC + 64 * kEps * std::abs(rgb[c]);
+            rgb[c] = T * cG[c];
+            const double d = cK[c] - cG[c];
+            composite.signedError[c] += T * d;
+            composite.error[c] += T * (kKronrodMargin * std::abs(d) + cMax * errD) +
+                                  64 * kEps * std::abs(rgb[c]);
         }
         composite.AddColor(rgb);
-        AddFieldError(w.hi - w.lo, dK, tauMin, T, s.colorSlope * state_[0].error,
-                      s.extinctionSlope * state_[fieldCount_ - 1].error, composite);
-        composite.rgba[3] += T * -std::expm1(-dK);
-        composite.transmittance = T * std::exp(-dK);
-        composite.depthError += errD + 16 * kEps * std::abs(dK);
+        AddFieldError(w.hi - w.lo, dG, tauMin, T, colorSlope * state_[0].error,
+                      tauSlope * state_[fieldCount_ - 1].error, composite);
+        composite.rgba[3] += T * -std::expm1(-dG);
+        composite.transmittance = T * std::exp(-dG);
+        composite.depthError += (1 + kKronrodMargin) * errD + 16 * kEps * std::abs(dG);
         // The nodes nearest the ends stand for the ends' emission density.
         RecordEnds(w.lo, w.hi, tau[0], emission[0], tau[n - 1], emission[n - 1],
                    composite.transmittance);

@@ -37,6 +37,12 @@ struct VolumeSetup {
     /// Nodal values of each field gathered per cell (point fields; null for cell
     /// fields), shared with the FieldCache.
     std::vector<std::shared_ptr<const FieldCellData>> data;
+    /// Per field and cell, for Lagrange hexahedra of order p (else empty or 0): |c| / |l|
+    /// where c is the coefficient of y1^p y2^p y3^p of the field in the Legendre variables
+    /// y = 2 ref - 1 of the cell and l the leading coefficient of P_3p. Along a segment
+    /// whose y move by dy_d over its Legendre variable, the field's series has the degree
+    /// 3p coefficient c dy1^p dy2^p dy3^p / l, the only one of that degree.
+    std::vector<std::vector<double>> topCoefficient;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
@@ -177,6 +183,7 @@ class VolumeRayMarcher {
     LegendreSeries line_[2];
     double lineError_[2] = {0, 0};
     double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
+    double unresolved_[2] = {0, 0};  ///< bound of the degree not sampled
     LegendreSeries depthLine_, depthSource_, derivative_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
@@ -186,7 +193,7 @@ class VolumeRayMarcher {
     double quadratureNodes_ = 0;  ///< integrand samples not yet counted
     double fieldSamples_ = 0;     ///< field samples of the hexahedron kernel, not yet counted
     CellScratch cellScratch_;
-    std::vector<double> nodeT_, nodeU_[2], nodeDepth_;
+    std::vector<double> nodeT_, nodeU_[2], nodeDepth_, nodeAtt_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
     int fieldCount_ = 1;
     FieldState state_[2];
