@@ -118,28 +118,9 @@ TEST(VolumeErrorBars, SeriesReferenceAgreesWithTheOdeReference) {
         std::vector<LD> kinks(cuts.begin(), cuts.end());
         for (std::size_t k = 0; k + 1 < cuts.size(); ++k)
             for (const RefTf* tf : {&ctf, &etf})
-                for (LD level : tf->scalars) {
-                    const LD a = cuts[k] + 1e-15L, b = cuts[k + 1] - 1e-15L;
-                    LD ta = a, fa = field(a) - level;
-                    for (int m = 1; m <= 64; ++m) {
-                        const LD tb = a + (b - a) * m / 64, fb = field(tb) - level;
-                        if ((fa < 0) != (fb < 0)) {
-                            LD lo = ta, hi = tb, flo = fa;
-                            for (int it = 0; it < 80; ++it) {
-                                const LD mid = (lo + hi) / 2, fm = field(mid) - level;
-                                if ((fm < 0) == (flo < 0)) {
-                                    lo = mid;
-                                    flo = fm;
-                                } else {
-                                    hi = mid;
-                                }
-                            }
-                            kinks.push_back((lo + hi) / 2);
-                        }
-                        ta = tb;
-                        fa = fb;
-                    }
-                }
+                for (LD level : tf->scalars)
+                    testing::SampledCrossings(field, cuts[k] + 1e-15L, cuts[k + 1] - 1e-15L,
+                                              level, 64, kinks);
         const RefPixel ode = testing::ReferenceRay(t0, t1, field, field, ctf, etf, true,
                                                    kinks, {}, 1e-18L);
         const RefPixel series =

@@ -416,4 +416,29 @@ inline RefPixel NkSincSeriesReference(NkSincTruth& truth, const std::array<doubl
     return out;
 }
 
+/// The t in (t0, t1) where a field along a ray crosses `level`, by sampling and bisection
+/// (the field is smooth between t0 and t1).
+inline void SampledCrossings(const std::function<LD(LD)>& f, LD t0, LD t1, LD level,
+                             int samples, std::vector<LD>& out) {
+    LD a = t0, fa = f(t0) - level;
+    for (int k = 1; k <= samples; ++k) {
+        const LD b = t0 + (t1 - t0) * k / samples, fb = f(b) - level;
+        if ((fa < 0) != (fb < 0)) {
+            LD lo = a, hi = b, flo = fa;
+            for (int it = 0; it < 80; ++it) {
+                const LD mid = (lo + hi) / 2, fm = f(mid) - level;
+                if ((fm < 0) == (flo < 0)) {
+                    lo = mid;
+                    flo = fm;
+                } else {
+                    hi = mid;
+                }
+            }
+            out.push_back((lo + hi) / 2);
+        }
+        a = b;
+        fa = fb;
+    }
+}
+
 }  // namespace hpray::testing
