@@ -230,6 +230,7 @@ class RayIntegrator {
                     const Event& e, RayComposite& composite, RenderCounters& counters);
 
     std::vector<Segment> segments_;
+    std::vector<SegmentEnds> ends_;  ///< per segment, when the volume uses them
     SegmentField field_;
     std::vector<std::vector<ProjectedPiece>> pieces_;  ///< per field
     std::vector<char> fieldUsed_;
@@ -334,7 +335,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
     const double tMin = span.t0, tMax = span.t1;
     const CostClock::time_point traceStart =
         costSamples ? CostClock::now() : CostClock::time_point{};
-    setup.traverser->Trace(ray, tMin, tMax, segments_);
+    // Linear tetrahedra take their volume fields from the face points of the walk.
+    const bool facePoints = hasVolume && setup.traverser->FacePoints();
+    setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr);
     counters.segments += static_cast<double>(segments_.size());
     SegmentCostRecorder recorder(
         costSamples, ray, segments_,
@@ -366,7 +369,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         const bool sliceHere = SliceSource(setup, si, span, tMin, tMax);
         const bool volumeHere =
             hasVolume &&
-            marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters);
+            marcher_.BeginSegment(*setup.mesh, *setup.geometry, seg, counters,
+                                  facePoints ? &ends_[si] : nullptr);
         if (!isoHere && !sliceHere && !volumeHere) {
             counters.segmentsCulled += 1;
             recorder.Done(si);

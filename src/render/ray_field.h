@@ -66,6 +66,9 @@ public:
     /// True when the field restricted to the ray is a polynomial of known degree
     /// (affine cell, polynomial space): then `LineDegree()` samples make it exact.
     bool ExactAlongLine() const { return exact_; }
+    /// The cell maps back to reference space in closed form (affine with an invertible
+    /// linear part; every non-degenerate linear tetrahedron).
+    bool Affine() const { return affine_; }
     int LineDegree() const { return lineDegree_; }
 
     /// Mapping-inversion counters accumulated since the last TakeCounters.

@@ -235,6 +235,19 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
                                                                        : nullptr);
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
+        if (sel.field->association != Association::Point) continue;
+        if (sel.field->components == 1 && sel.component == 0) {
+            s.pointValues[f] = sel.field->values.data();
+        } else {
+            std::vector<double>& v = s.pointScalars[f];
+            v.resize(mesh.PointCount());
+            tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, mesh.PointCount(), 4096),
+                              [&](const tbb::blocked_range<std::int64_t>& range) {
+                                  for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                                      v[i] = ScalarValue(sel, i);
+                              });
+            s.pointValues[f] = v.data();
+        }
     }
     // The top coefficient of each Lagrange hexahedron (see VolumeSetup::topCoefficient):
     // the tensor divided difference of the nodal values at the equispaced y nodes.
@@ -367,8 +380,80 @@ void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin,
     composite.depthError += length * tauError;
 }
 
+bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
+    const VolumeSetup& s = *setup_;
+    const double* u = s.pointValues[f];
+    const FacePoint& in = ends.enter;
+    const FacePoint& out = ends.exit;
+    // The tetrahedron's corners in the ray frame: the entry face's three and the exit
+    // face's corner that is not on it.
+    int extra = -1;
+    for (int k = 0; k < 3 && extra < 0; ++k)
+        if (out.v[k] != in.v[0] && out.v[k] != in.v[1] && out.v[k] != in.v[2]) extra = k;
+    if (extra < 0) return false;
+    // The field's gradient in the ray frame by Cramer's rule on the edges from the entry
+    // face's first corner. It only bounds how far the face points may lie off the ray.
+    const double e[3][3] = {{in.x[1] - in.x[0], in.y[1] - in.y[0], in.z[1] - in.z[0]},
+                            {in.x[2] - in.x[0], in.y[2] - in.y[0], in.z[2] - in.z[0]},
+                            {out.x[extra] - in.x[0], out.y[extra] - in.y[0],
+                             out.z[extra] - in.z[0]}};
+    const double u0 = u[in.v[0]];
+    const double du[3] = {u[in.v[1]] - u0, u[in.v[2]] - u0, u[out.v[extra]] - u0};
+    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
+                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
+                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
+    const double c1[3] = {e[2][1] * e[0][2] - e[2][2] * e[0][1],
+                          e[2][2] * e[0][0] - e[2][0] * e[0][2],
+                          e[2][0] * e[0][1] - e[2][1] * e[0][0]};
+    const double c2[3] = {e[0][1] * e[1][2] - e[0][2] * e[1][1],
+                          e[0][2] * e[1][0] - e[0][0] * e[1][2],
+                          e[0][0] * e[1][1] - e[0][1] * e[1][0]};
+    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    double scale = 1;
+    for (const auto& row : e) scale *= std::abs(row[0]) + std::abs(row[1]) + std::abs(row[2]);
+    // A sliver whose gradient the rounded frame cannot resolve to 1e-6: the cell's own
+    // path.
+    if (!(std::abs(det) > 1e-6 * scale)) return false;
+    double grad[3];
+    for (int d = 0; d < 3; ++d)
+        grad[d] = std::abs((c0[d] * du[0] + c1[d] * du[1] + c2[d] * du[2]) / det);
+    // Each face point: the face's linear interpolant at (sum w x, sum w y, sum w z),
+    // whose distance from the ray point at t is the first two sums (the third is t up
+    // to its rounding) plus the corners' errors.
+    double value[2], error = 0;
+    const FacePoint* p[2] = {&in, &out};
+    for (int k = 0; k < 2; ++k) {
+        const FacePoint& q = *p[k];
+        const double uk[3] = {u[q.v[0]], u[q.v[1]], u[q.v[2]]};
+        value[k] = q.w[0] * uk[0] + q.w[1] * uk[1] + q.w[2] * uk[2];
+        double dx = 0, dy = 0, ax = 0, ay = 0, az = 0, au = 0;
+        for (int m = 0; m < 3; ++m) {
+            dx += q.w[m] * q.x[m];
+            dy += q.w[m] * q.y[m];
+            ax += q.w[m] * std::abs(q.x[m]);
+            ay += q.w[m] * std::abs(q.y[m]);
+            az += q.w[m] * std::abs(q.z[m]);
+            au = std::max(au, std::abs(uk[m]));
+        }
+        const double off = grad[0] * (std::abs(dx) + 4 * kEps * ax + q.cornerError) +
+                           grad[1] * (std::abs(dy) + 4 * kEps * ay + q.cornerError) +
+                           grad[2] * 4 * kEps * az;
+        // Twice: the gradient itself carries rounding (at most 1e-6 relative here).
+        error = std::max(error, 2 * off + 4 * kEps * au);
+    }
+    const double t0 = in.t, t1 = out.t;
+    const double slope = (value[1] - value[0]) / (t1 - t0);
+    FieldState& st = state_[f];
+    st.linear = true;
+    st.valueEnter = seg_.tEnter == t0 ? value[0] : value[0] + slope * (seg_.tEnter - t0);
+    st.valueExit = seg_.tExit == t1 ? value[1] : value[0] + slope * (seg_.tExit - t0);
+    st.error = 8 * kEps * s.fieldScale[f] + error;
+    return true;
+}
+
 bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geometry,
-                                    const Segment& seg, RenderCounters& counters) {
+                                    const Segment& seg, RenderCounters& counters,
+                                    const SegmentEnds* ends) {
     const VolumeSetup& s = *setup_;
     seg_ = seg;
     kind_ = s.cellKind[seg.cell];
@@ -399,6 +484,14 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         SegmentField& sf = field_[f];
         truncated_[f] = unresolved_[f] = 0;
         sampleV_[f].clear();
+        pieces_[f].clear();
+        if (ends && ends->enter.Valid() && ends->exit.Valid() && s.pointValues[f] &&
+            geometry.IsDerived(seg.cell) && LinearFromFacePoints(f, *ends)) {
+            // A linear tetrahedron: the field is linear along the ray, its values at the
+            // ends are those of the faces the walk crossed.
+            FindCrossings(f, seg, counters);
+            continue;
+        }
         if (s.data[f]) {
             sf.Begin(*s.data[f], geometry, sel, seg.cell, ray_, s.inversion);
         } else {
@@ -410,9 +503,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         // back in closed form, also those whose field is not a polynomial, as pyramids').
         const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
-        const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
-        if (!(cell.affine && cell.linearInvertible))
-            st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
+        if (!sf.Affine()) st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
         if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
             st.valueEnter = sf(seg.tEnter);

@@ -19,6 +19,7 @@
 #include "render/stats.h"
 #include "render/volume.h"
 #include "scene/scene.h"
+#include "trace/brick_traverser.h"
 #include "trace/ray.h"
 
 namespace hpray {
@@ -44,6 +45,12 @@ struct VolumeSetup {
     /// 3p coefficient c dy1^p dy2^p dy3^p / l, the only one of that degree.
     std::vector<std::vector<double>> topCoefficient;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
+    /// Per point field: its value at each point of the mesh (the field's own array for a
+    /// one-component field, else the selected component or the magnitude gathered once),
+    /// for linear tetrahedra integrated from the traversal's face points; null for a cell
+    /// field.
+    const double* pointValues[2] = {nullptr, nullptr};
+    std::vector<double> pointScalars[2];  ///< storage of pointValues where gathered
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
     /// Wilhelms-Van Gelder, glow zero), both transfer functions constant over the range
@@ -121,8 +128,11 @@ class VolumeRayMarcher {
     /// Prepares segment `seg` (cell, tEnter, tExit) of the current ray: the volume fields
     /// along it and their transfer-function breakpoints. Returns false when the cell
     /// holds nothing to integrate (empty-space skipping: no field is evaluated).
+    /// `ends` (optional): the face points where the ray enters and leaves the cell; for a
+    /// linear tetrahedron with Valid ones, the fields along the segment come from the
+    /// face values there (no access to the cell's nodes).
     bool BeginSegment(const Mesh& mesh, const MeshGeometry& geometry, const Segment& seg,
-                      RenderCounters& counters);
+                      RenderCounters& counters, const SegmentEnds* ends = nullptr);
 
     /// Integrates [a, b] (inside the current segment) into `composite`. Returns true when
     /// the ray may stop: the transmittance fell so low that everything behind changes the
@@ -166,6 +176,10 @@ class VolumeRayMarcher {
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
     bool Terminate(double t, RayComposite& composite);
+    /// Field f (a point field) along a linear tetrahedron's segment from the face points
+    /// `ends`: its values at the segment's ends and the bound of their error. False (and
+    /// nothing set) for a tetrahedron too flat to bound that error in the ray frame.
+    bool LinearFromFacePoints(int f, const SegmentEnds& ends);
     void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
     /// into pieces_[f].

@@ -100,6 +100,30 @@ double Now() {
     return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
 }
 
+// The face point of a crossing x of triangle (a, b, c) (sheared corners of the face's
+// canonical representation, whose point ids are `ids`); dirKz = |ray direction| along the
+// frame's z axis (|a_kz| = |z| dirKz for a corner's offset a from the ray origin).
+void MakeFacePoint(const std::int32_t* ids, const ShearedPoint& a, const ShearedPoint& b,
+                   const ShearedPoint& c, const TriangleCrossing& x, double dirKz,
+                   FacePoint& fp) {
+    constexpr double kU = 0.5 * std::numeric_limits<double>::epsilon();
+    const ShearedPoint* p[3] = {&a, &b, &c};
+    double err = 0;
+    for (int k = 0; k < 3; ++k) {
+        fp.v[k] = ids[k];
+        fp.w[k] = x.bary[k];
+        fp.x[k] = p[k]->x;
+        fp.y[k] = p[k]->y;
+        fp.z[k] = p[k]->z;
+        // The offset's rounding (|a_d| each, |a_kx| <= |x| + |a_kz| as |sx| <= 1), the
+        // shear's fused multiply-add and its result's rounding.
+        err = std::max(err, std::abs(p[k]->x) + std::abs(p[k]->y) +
+                                2 * std::abs(p[k]->z) * dirKz);
+    }
+    fp.cornerError = 4 * kU * err;
+    fp.t = x.t;
+}
+
 inline double Dist2(const double* a, const double* b) {
     const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
     return dx * dx + dy * dy + dz * dz;
@@ -292,8 +316,15 @@ struct BrickTraverser::Impl {
                                std::vector<Crossing>& out) const;
     // The crossing by which the ray leaves cell c after entering it by the crossing of
     // face entryFace at (unclamped) entryT; tIn = the walk's t there (>= entryT).
+    // exitPoint (optional): the exit's face point where a planar tet is left through a
+    // triangle and meshPointIds holds, else not Valid.
     bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
-                  const RayFrame& frame, Crossing& exit) const;
+                  const RayFrame& frame, Crossing& exit,
+                  FacePoint* exitPoint = nullptr) const;
+    // The face point of the crossing `x` of triangular face f (not Valid if f is not a
+    // triangle or its crossing is not x).
+    void EntryPoint(const Crossing& x, const RayFrame& frame, FacePoint& fp) const;
+    bool meshPointIds = false;  // merged point ids are the mesh's point indices
     bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
                       Crossing& exit) const;
     void Tessellation(std::int32_t f,
@@ -326,6 +357,7 @@ struct BrickTraverser::Impl::TopologyBuild {
 void BrickTraverser::Impl::Build() {
     const double t0 = Now();
     BuildTopology();
+    meshPointIds = stats.mergedPoints == stats.points;
     const double t1 = Now();
     BuildScene();
     const double t2 = Now();
@@ -1287,8 +1319,9 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
 // The walk
 
 bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, double entryT,
-                                    double tIn, const RayFrame& frame,
-                                    Crossing& exit) const {
+                                    double tIn, const RayFrame& frame, Crossing& exit,
+                                    FacePoint* exitPoint) const {
+    if (exitPoint) exitPoint->v[0] = -1;
     const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
     const int nf = static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
     if (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
@@ -1304,12 +1337,16 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
             const std::int32_t f = cf[k];
             if (f == entryFace) continue;
             const FaceRec& rec = faces[f];
-            if (!CrossTriangle(frame.Transform(P(rec.v[0])), frame.Transform(P(rec.v[1])),
-                               frame.Transform(P(rec.v[2])), x))
-                continue;
+            const ShearedPoint a = frame.Transform(P(rec.v[0]));
+            const ShearedPoint b = frame.Transform(P(rec.v[1]));
+            const ShearedPoint d = frame.Transform(P(rec.v[2]));
+            if (!CrossTriangle(a, b, d, x)) continue;
             const Crossing cand{x.t, f, x.side};
             if (Leaves(cand, c)) {
                 exit = cand;
+                if (exitPoint && meshPointIds)
+                    MakeFacePoint(rec.v, a, b, d, x, std::abs(frame.dir[frame.kz]),
+                                  *exitPoint);
                 return true;
             }
         }
@@ -1375,6 +1412,20 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
     return false;
 }
 
+void BrickTraverser::Impl::EntryPoint(const Crossing& x, const RayFrame& frame,
+                                      FacePoint& fp) const {
+    fp.v[0] = -1;
+    const FaceRec& rec = faces[x.face];
+    if (!meshPointIds || rec.kind != FaceKind::Triangle) return;
+    const ShearedPoint a = frame.Transform(P(rec.v[0]));
+    const ShearedPoint b = frame.Transform(P(rec.v[1]));
+    const ShearedPoint c = frame.Transform(P(rec.v[2]));
+    TriangleCrossing tx;
+    // The same test as the one that found x, so bitwise the same crossing.
+    if (!CrossTriangle(a, b, c, tx) || tx.t != x.t || tx.side != x.side) return;
+    MakeFacePoint(rec.v, a, b, c, tx, std::abs(frame.dir[frame.kz]), fp);
+}
+
 // Exit search when the exact one found none: this happens only where two cells represent
 // a shared edge differently (non-conforming meshes: an edge with nodes on one side only).
 // Takes the leaving tessellation triangle the ray misses by the least, if it misses by a
@@ -1430,9 +1481,17 @@ TraceCounters BrickTraverser::Counters() const {
     return c;
 }
 
+bool BrickTraverser::FacePoints() const { return impl_->meshPointIds; }
+
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                            std::vector<Segment>& out) const {
+    Trace(ray, tMin, tMax, out, nullptr);
+}
+
+void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
+                           std::vector<Segment>& out, std::vector<SegmentEnds>* ends) const {
     out.clear();
+    if (ends) ends->clear();
     const Impl& im = *impl_;
     RaySpan span{tMin, tMax};
     if (!(tMin <= tMax) || !ClipRayToBox(ray, im.brick.box, span)) return;
@@ -1505,15 +1564,25 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
         std::int32_t entryFace = entry.face;
         double entryT = entry.t;
         int zeroSteps = 0;
+        SegmentEnds se;
+        if (ends) im.EntryPoint(entry, frame, se.enter);
         while (true) {
             Crossing ex;
-            if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex)) {
+            if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex,
+                             ends ? &se.exit : nullptr)) {
                 im.walkFailures.fetch_add(1, std::memory_order_relaxed);
                 break;
             }
             const double tOut = std::max(ex.t, tIn);
             const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
-            if (a < b) out.push_back({c, a, b});
+            if (a < b) {
+                out.push_back({c, a, b});
+                if (ends) {
+                    ends->push_back(se);
+                    if (!se.exit.Valid()) ends->back().enter.v[0] = -1;
+                }
+            }
+            if (ends) se.enter = se.exit;
             tCur = tOut;
             if (tOut >= tHi) return;
             const std::int64_t next = im.faces[ex.face].cell[ex.side > 0 ? 1 : 0];

@@ -81,6 +81,32 @@ struct TraceCounters {
     std::int64_t walkFailures = 0;  ///< walks abandoned (rest found by the next entry)
 };
 
+/// Where a ray crosses a planar triangular face: the face's corners (point indices of the
+/// brick's mesh), the barycentric weights of the crossing on them (each >= 0, sum 1) and
+/// its ray parameter t = sum w_k z_k. Computed from the face's one canonical
+/// representation, so both cells of a face get bitwise the same point. The corners are
+/// also given in the ray frame (trace/ray_frame.h: x, y across the ray, z its parameter),
+/// so that a user can bound how far the point (sum w_k x_k, sum w_k y_k, t) lies from the
+/// ray: a few rounding errors of the corners' coordinates, cornerError bounding those.
+struct FacePoint {
+    std::int32_t v[3] = {-1, -1, -1};  ///< v[0] < 0: not available
+    double w[3] = {0, 0, 0};
+    double t = 0;
+    double x[3] = {0, 0, 0}, y[3] = {0, 0, 0}, z[3] = {0, 0, 0};
+    /// Bound of the error of each corner's x and y (ray frame) against the exact
+    /// transformation of its world position.
+    double cornerError = 0;
+
+    bool Valid() const { return v[0] >= 0; }
+};
+
+/// The face points where a segment's ray enters and leaves its cell (walked linear
+/// tetrahedra only; elsewhere not Valid). A segment clipped to a box or range starts or
+/// ends between them.
+struct SegmentEnds {
+    FacePoint enter, exit;
+};
+
 /// Ray caster of one brick. Built once (adjacency over faces matched by merged corner
 /// positions, and an Embree scene over the boundary faces), then queried from any number
 /// of threads.
@@ -135,6 +161,15 @@ class BrickTraverser {
     /// [tMin, tMax], sorted by t, each of positive length. While the ray stays inside the
     /// mesh a segment's tExit equals the next tEnter bitwise. Thread-safe.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out) const;
+    /// The same, and for each segment of `out` the face points where the ray enters and
+    /// leaves its cell (`ends`, cleared first, one entry per segment). They are Valid
+    /// where a planar tetrahedron was walked from face to face and the brick's points
+    /// are its mesh's (FacePoints() is true); the segments are those of the plain Trace.
+    void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
+               std::vector<SegmentEnds>* ends) const;
+    /// True when the face points' corners are point indices of the brick's mesh (no two
+    /// of its points were merged into one).
+    bool FacePoints() const;
 
     const TraverserStats& Stats() const;
     TraceCounters Counters() const;

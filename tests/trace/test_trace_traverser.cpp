@@ -486,6 +486,84 @@ TEST(BrickTraverser, UnsharedPointsAreMergedByPosition) {
     }
 }
 
+// The face points of a tet walk: the segments are the plain Trace's; every face point is
+// a convex combination of its face's corners (which are corners of the segment's cell)
+// that lies on the ray at its t, to rounding; the exit of a segment is bitwise the entry
+// of the next one; and a segment clipped by the range or the box lies between them.
+TEST(BrickTraverser, FacePointsOfTetsLieOnTheRayAndAreSharedByNeighbours) {
+    const Mesh mesh = GridMesh(5, 0.3, [](int, int, int) { return CubeCut::Tets5; });
+    Box sub{{0.1, -1, 0.2}, {0.95, 2, 0.8}};
+    std::mt19937_64 rng(8);
+    std::uniform_real_distribution<double> uni(0, 1);
+    for (const Box& box : {mesh.Bounds(), sub}) {
+        const BrickTraverser tr(Brick{&mesh, box});
+        ASSERT_TRUE(tr.FacePoints());
+        std::vector<Segment> plain, segs;
+        std::vector<SegmentEnds> ends;
+        std::size_t checked = 0;
+        for (int i = 0; i < 2000; ++i) {
+            const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                                    {uni(rng), uni(rng), uni(rng)});
+            const double tMin = i % 3 == 0 ? 1.6 + uni(rng) : -INFINITY;
+            const double tMax = i % 5 == 0 ? 2.2 + uni(rng) : INFINITY;
+            tr.Trace(ray, tMin, tMax, plain);
+            tr.Trace(ray, tMin, tMax, segs, &ends);
+            ASSERT_EQ(segs.size(), plain.size()) << i;
+            ASSERT_EQ(ends.size(), segs.size()) << i;
+            for (std::size_t k = 0; k < segs.size(); ++k) {
+                const Segment& s = segs[k];
+                EXPECT_EQ(s.cell, plain[k].cell);
+                EXPECT_EQ(s.tEnter, plain[k].tEnter);
+                EXPECT_EQ(s.tExit, plain[k].tExit);
+                const FacePoint* fp[2] = {&ends[k].enter, &ends[k].exit};
+                ASSERT_TRUE(fp[0]->Valid() && fp[1]->Valid()) << i << " " << k;
+                EXPECT_LE(fp[0]->t, s.tEnter);
+                EXPECT_GE(fp[1]->t, s.tExit);
+                const std::int64_t* nodes = mesh.CellNodes(s.cell);
+                for (const FacePoint* p : fp) {
+                    double sum = 0, x[3] = {0, 0, 0};
+                    for (int m = 0; m < 3; ++m) {
+                        EXPECT_GE(p->w[m], 0.0);
+                        sum += p->w[m];
+                        EXPECT_TRUE(std::find(nodes, nodes + 4, p->v[m]) != nodes + 4)
+                            << "corner " << p->v[m] << " is not a node of cell " << s.cell;
+                        for (int d = 0; d < 3; ++d)
+                            x[d] += p->w[m] * mesh.points[3 * p->v[m] + d];
+                    }
+                    EXPECT_NEAR(sum, 1.0, 1e-15);
+                    double dist = 0;
+                    for (int d = 0; d < 3; ++d)
+                        dist = std::max(dist,
+                                        std::abs(x[d] - (ray.origin[d] + p->t * ray.dir[d])));
+                    EXPECT_LE(dist, 1e-14) << i << " " << k;
+                    EXPECT_GT(p->cornerError, 0.0);
+                    EXPECT_LE(p->cornerError, 1e-14);
+                }
+                if (k + 1 < segs.size() && segs[k + 1].tEnter == s.tExit) {
+                    const FacePoint& a = ends[k].exit;
+                    const FacePoint& b = ends[k + 1].enter;
+                    EXPECT_EQ(a.t, b.t);
+                    for (int m = 0; m < 3; ++m) {
+                        EXPECT_EQ(a.v[m], b.v[m]);
+                        EXPECT_EQ(a.w[m], b.w[m]);
+                    }
+                }
+                ++checked;
+            }
+        }
+        EXPECT_GT(checked, 10000u);
+    }
+    // Points merged by position are not the mesh's own: no face points.
+    const Mesh unshared = Unshare(MakeBuiltin("builtin:cube-tets-3"), 0.0);
+    const BrickTraverser merged(Brick::WholeMesh(unshared));
+    EXPECT_FALSE(merged.FacePoints());
+    std::vector<Segment> segs;
+    std::vector<SegmentEnds> ends;
+    merged.Trace(MakeRay({0.3, 0.4, -1}, {0.6, 0.5, 2}), -INFINITY, INFINITY, segs, &ends);
+    ASSERT_FALSE(segs.empty());
+    for (const SegmentEnds& e : ends) EXPECT_FALSE(e.enter.Valid() || e.exit.Valid());
+}
+
 TEST(BrickTraverser, InvertedCellsAreTraversedLikePositiveOnes) {
     const Mesh mesh = MakeBuiltin("builtin:cube-tets-4");
     Mesh flipped = mesh;
