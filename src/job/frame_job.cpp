@@ -21,6 +21,7 @@
 #include "compositor.h"
 #include "io/mesh_io.h"
 #include "job/tile_dealer.h"
+#include "mesh/mesh_order.h"
 #include "render/annotate.h"
 #include "scene/camera.h"
 #include "util/error.h"
@@ -378,6 +379,8 @@ void FrameJob::LoadWhole() {
     readOptions_.timeStep = timeStep_;
     whole_ = collection_ ? ReadCollectionStep(*collection_, timeStep_, readOptions_)
                          : ReadMesh(scene_.data.mesh, readOptions_);
+    // Neighbouring cells near each other in memory: the rays' walks stay in cache.
+    OrderSpatially(*whole_);
     if (!mpi::Root()) return;
     std::string what = scene_.data.mesh;
     if (collection_) {
@@ -708,7 +711,8 @@ Image FrameJob::RenderDistributed(const Scene& scene, RenderStats& stats,
             Image image;
             if (part_) {
                 t0 = std::chrono::steady_clock::now();
-                const Mesh mesh = partition::LoadBrick(*part_, b, readOptions_);
+                Mesh mesh = partition::LoadBrick(*part_, b, readOptions_);
+                OrderSpatially(mesh);
                 stats.timing.load += Seconds(t0);
                 RenderOneBrick(mesh, plan.boxes[b], scene, image, stats, nullptr,
                                &accumulated,

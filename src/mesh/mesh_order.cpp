@@ -1,0 +1,130 @@
+#include "mesh/mesh_order.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <numeric>
+
+namespace hpray {
+namespace {
+
+// Spreads the low 21 bits of v to every third bit.
+std::uint64_t Spread3(std::uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+}
+
+template <typename Body>
+void ParallelFor(std::int64_t n, Body body) {
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::int64_t>& r) {
+                          for (std::int64_t i = r.begin(); i < r.end(); ++i) body(i);
+                      });
+}
+
+template <typename T>
+void PermuteBlocks(std::vector<T>& values, const std::vector<std::int64_t>& oldOf,
+                   std::size_t block) {
+    if (values.empty()) return;
+    std::vector<T> out(values.size());
+    ParallelFor(static_cast<std::int64_t>(oldOf.size()), [&](std::int64_t i) {
+        std::copy_n(values.begin() + static_cast<std::ptrdiff_t>(oldOf[i] * block), block,
+                    out.begin() + static_cast<std::ptrdiff_t>(i * block));
+    });
+    values.swap(out);
+}
+
+}  // namespace
+
+std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
+    const std::int64_t nCells = mesh.CellCount(), nPoints = mesh.PointCount();
+    std::vector<std::int64_t> cellOld(nCells);
+    std::iota(cellOld.begin(), cellOld.end(), 0);
+    if (nCells == 0) return cellOld;
+    // Keys of 3 x 11 bits of Morton code over 31 bits of index: sorting them orders ties
+    // by index. (A brick holds fewer than 2^31 cells; see BrickTraverser.)
+    constexpr int kBits = 11;
+    if (nCells >= (std::int64_t(1) << 31)) return cellOld;
+    const Box box = mesh.Bounds();
+    double extent = 0;
+    for (int d = 0; d < 3; ++d) extent = std::max(extent, box.hi[d] - box.lo[d]);
+    const double top = double((1 << kBits) - 1);
+    const double scale = extent > 0 ? top / extent : 0.0;
+    std::vector<std::uint64_t> keyed(nCells);
+    ParallelFor(nCells, [&](std::int64_t c) {
+        const std::int64_t* nodes = mesh.CellNodes(c);
+        const int n = mesh.CellNodeCount(c);
+        double centre[3] = {0, 0, 0};
+        for (int k = 0; k < n; ++k)
+            for (int d = 0; d < 3; ++d) centre[d] += mesh.points[3 * nodes[k] + d];
+        std::uint64_t key = 0;
+        for (int d = 0; d < 3; ++d) {
+            const double q = n > 0 ? (centre[d] / n - box.lo[d]) * scale : 0.0;
+            key |= Spread3(static_cast<std::uint64_t>(std::clamp(q, 0.0, top))) << d;
+        }
+        keyed[c] = key << 31 | static_cast<std::uint64_t>(c);
+    });
+    tbb::parallel_sort(keyed.begin(), keyed.end());
+    ParallelFor(nCells, [&](std::int64_t i) {
+        cellOld[i] = static_cast<std::int64_t>(keyed[i] & ((std::uint64_t(1) << 31) - 1));
+    });
+    keyed.clear();
+    keyed.shrink_to_fit();
+
+    // Points along the same curve (their own positions).
+    std::vector<std::int64_t> newPoint(nPoints), pointOld(nPoints);
+    if (nPoints < (std::int64_t(1) << 31)) {
+        std::vector<std::uint64_t> pointKey(nPoints);
+        ParallelFor(nPoints, [&](std::int64_t p) {
+            std::uint64_t key = 0;
+            for (int d = 0; d < 3; ++d) {
+                const double q = (mesh.points[3 * p + d] - box.lo[d]) * scale;
+                key |= Spread3(static_cast<std::uint64_t>(std::clamp(q, 0.0, top))) << d;
+            }
+            pointKey[p] = key << 31 | static_cast<std::uint64_t>(p);
+        });
+        tbb::parallel_sort(pointKey.begin(), pointKey.end());
+        ParallelFor(nPoints, [&](std::int64_t i) {
+            pointOld[i] = static_cast<std::int64_t>(pointKey[i] & ((std::uint64_t(1) << 31) - 1));
+            newPoint[pointOld[i]] = i;
+        });
+    } else {
+        std::iota(pointOld.begin(), pointOld.end(), 0);
+        std::iota(newPoint.begin(), newPoint.end(), 0);
+    }
+
+    // Cells: connectivity in the new order with new point indices.
+    std::vector<std::int64_t> offsets(nCells + 1), connectivity(mesh.connectivity.size());
+    offsets[0] = 0;
+    for (std::int64_t i = 0; i < nCells; ++i)
+        offsets[i + 1] = offsets[i] + mesh.CellNodeCount(cellOld[i]);
+    ParallelFor(nCells, [&](std::int64_t i) {
+        const std::int64_t* nodes = mesh.CellNodes(cellOld[i]);
+        const int n = mesh.CellNodeCount(cellOld[i]);
+        for (int k = 0; k < n; ++k) connectivity[offsets[i] + k] = newPoint[nodes[k]];
+    });
+    mesh.cellOffsets.swap(offsets);
+    mesh.connectivity.swap(connectivity);
+    PermuteBlocks(mesh.cellShape, cellOld, 1);
+    PermuteBlocks(mesh.cellOrder, cellOld, 1);
+    PermuteBlocks(mesh.cellFamily, cellOld, 1);
+    if (static_cast<std::int64_t>(mesh.ghost.size()) == nCells)
+        PermuteBlocks(mesh.ghost, cellOld, 1);
+    if (static_cast<std::int64_t>(mesh.vtkType.size()) == nCells)
+        PermuteBlocks(mesh.vtkType, cellOld, 1);
+    for (Field& f : mesh.cellFields)
+        PermuteBlocks(f.values, cellOld, static_cast<std::size_t>(f.components));
+    PermuteBlocks(mesh.points, pointOld, 3);
+    for (Field& f : mesh.pointFields)
+        PermuteBlocks(f.values, pointOld, static_cast<std::size_t>(f.components));
+    return cellOld;
+}
+
+}  // namespace hpray
