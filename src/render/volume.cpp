@@ -22,48 +22,14 @@ PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars,
     HPRAY_CHECK(values_.size() == scalars_.size() * std::size_t(channels_));
     for (std::size_t k = 1; k < scalars_.size(); ++k)
         HPRAY_CHECK(scalars_[k - 1] < scalars_[k]);
-}
-
-int PiecewiseLinearTf::IntervalOf(double s) const {
-    if (!(s >= scalars_.front())) return -1;
-    if (s >= scalars_.back()) return Size() - 1;
-    // First control point > s, minus one.
-    const auto it = std::upper_bound(scalars_.begin(), scalars_.end(), s);
-    return static_cast<int>(it - scalars_.begin()) - 1;
-}
-
-void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
-    const int n = Size();
-    if (k < 0 || k >= n - 1) {
-        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
-        for (int c = 0; c < channels_; ++c) out[c] = v[c];
-        return;
-    }
-    // (1 - w) v_k + w v_{k+1} reproduces both control values exactly at w = 0 and w = 1.
-    const double w = (s - scalars_[k]) / (scalars_[k + 1] - scalars_[k]);
-    const double* v0 = values_.data() + std::size_t(k) * channels_;
-    const double* v1 = v0 + channels_;
-    for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
-}
-
-void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
-    const int n = Size();
-    if (k < 0 || k >= n - 1) {
-        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
-        for (int c = 0; c < channels_; ++c) {
-            offset[c] = v[c];
-            slope[c] = 0;
-        }
-        return;
-    }
-    const double s0 = scalars_[k], s1 = scalars_[k + 1];
-    const double* v0 = values_.data() + std::size_t(k) * channels_;
-    const double* v1 = v0 + channels_;
-    for (int c = 0; c < channels_; ++c) {
-        slope[c] = (v1[c] - v0[c]) / (s1 - s0);
-        // Anchored at the end nearer zero, so the offset carries no large cancellation.
-        offset[c] = std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0
-                                                 : v1[c] - slope[c] * s1;
+    // Piece k sits at index k + 1: the clamped pieces -1 and Size() - 1 have slope 0.
+    steepest_.assign(scalars_.size() + 1, 0.0);
+    for (int k = 0; k + 1 < Size(); ++k) {
+        std::vector<double> o(channels_), sl(channels_);
+        AffineOn(k, o.data(), sl.data());
+        double m = 0;
+        for (double x : sl) m = std::max(m, std::abs(x));
+        steepest_[k + 1] = m;
     }
 }
 
@@ -128,7 +94,11 @@ void TaylorMoments(double alpha, double beta, double m[3]) {
         m[0] += c * kReciprocal[n + 1];
         m[1] += c * kReciprocal[n + 2];
         m[2] += c * kReciprocal[n + 3];
-        const double next = (-alpha * c - 2 * beta * cPrev) * kReciprocal[n + 1];
+        // c_{n+1} = a_n c_n + b_n c_{n-1}: the factors and b_n c_{n-1} do not wait for
+        // c_n, so each term costs one fused multiply-add of latency.
+        const double a = -alpha * kReciprocal[n + 1];
+        const double b = -2 * beta * kReciprocal[n + 1];
+        const double next = std::fma(a, c, b * cPrev);
         cPrev = c;
         c = next;
         if (std::abs(c) + std::abs(cPrev) <= 1e-19) break;

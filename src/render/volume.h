@@ -4,7 +4,10 @@
 // pieces where it is not.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstddef>
 #include <vector>
 
 namespace hpray {
@@ -34,6 +37,8 @@ class PiecewiseLinearTf {
     /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
     /// pieces): `offset`, `slope` get Channels() values.
     void AffineOn(int k, double* offset, double* slope) const;
+    /// max over channels of |slope| of piece k (AffineOn's), tabulated.
+    double SteepestOn(int k) const { return steepest_[k + 1]; }
 
     /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the
     /// ends or at control points inside). `minOut`, `maxOut` get Channels() values.
@@ -47,7 +52,52 @@ class PiecewiseLinearTf {
     std::vector<double> scalars_;
     std::vector<double> values_;
     int channels_ = 1;
+    std::vector<double> steepest_;  ///< SteepestOn(k) at k + 1
 };
+
+// Called per ray piece: inline.
+inline int PiecewiseLinearTf::IntervalOf(double s) const {
+    if (!(s >= scalars_.front())) return -1;
+    if (s >= scalars_.back()) return Size() - 1;
+    // First control point > s, minus one.
+    const auto it = std::upper_bound(scalars_.begin(), scalars_.end(), s);
+    return static_cast<int>(it - scalars_.begin()) - 1;
+}
+
+inline void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) {
+        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
+        for (int c = 0; c < channels_; ++c) out[c] = v[c];
+        return;
+    }
+    // (1 - w) v_k + w v_{k+1} reproduces both control values exactly at w = 0 and w = 1.
+    const double w = (s - scalars_[k]) / (scalars_[k + 1] - scalars_[k]);
+    const double* v0 = values_.data() + std::size_t(k) * channels_;
+    const double* v1 = v0 + channels_;
+    for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
+}
+
+inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) {
+        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
+        for (int c = 0; c < channels_; ++c) {
+            offset[c] = v[c];
+            slope[c] = 0;
+        }
+        return;
+    }
+    const double s0 = scalars_[k], s1 = scalars_[k + 1];
+    const double* v0 = values_.data() + std::size_t(k) * channels_;
+    const double* v1 = v0 + channels_;
+    for (int c = 0; c < channels_; ++c) {
+        slope[c] = (v1[c] - v0[c]) / (s1 - s0);
+        // Anchored at the end nearer zero, so the offset carries no large cancellation.
+        offset[c] = std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0
+                                                 : v1[c] - slope[c] * s1;
+    }
+}
 
 /// Integrals of one ray piece of world length `length` over which the extinction is
 /// linear, tau(x) = tau0 (1 - x) + tau1 x for x = (t - tStart) / length in [0, 1]. With

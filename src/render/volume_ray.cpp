@@ -414,9 +414,10 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
     // A sliver whose gradient the rounded frame cannot resolve to 1e-6: the cell's own
     // path.
     if (!(std::abs(det) > 1e-6 * scale)) return false;
+    const double inv = 1 / det;
     double grad[3];
     for (int d = 0; d < 3; ++d)
-        grad[d] = std::abs((c0[d] * du[0] + c1[d] * du[1] + c2[d] * du[2]) / det);
+        grad[d] = std::abs((c0[d] * du[0] + c1[d] * du[1] + c2[d] * du[2]) * inv);
     // Each face point: the face's linear interpolant at (sum w x, sum w y, sum w z),
     // whose distance from the ray point at t is the first two sums (the third is t up
     // to its rounding) plus the corners' errors.
@@ -438,7 +439,8 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
         const double off = grad[0] * (std::abs(dx) + 4 * kEps * ax + q.cornerError) +
                            grad[1] * (std::abs(dy) + 4 * kEps * ay + q.cornerError) +
                            grad[2] * 4 * kEps * az;
-        // Twice: the gradient itself carries rounding (at most 1e-6 relative here).
+        // Twice: the gradient itself carries rounding (at most 1e-6 relative here, and
+        // the reciprocal of det one more).
         error = std::max(error, 2 * off + 4 * kEps * au);
     }
     const double t0 = in.t, t1 = out.t;
@@ -727,7 +729,9 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
 double VolumeRayMarcher::FieldAt(int f, double t) {
     const FieldState& st = state_[f];
     if (st.linear) {
-        if (st.constant) return st.valueEnter;
+        // The ends exactly, without a division (as the interpolation gives them).
+        if (st.constant || t == seg_.tEnter) return st.valueEnter;
+        if (t == seg_.tExit) return st.valueExit;
         const double x = (t - seg_.tEnter) / (seg_.tExit - seg_.tEnter);
         return (1 - x) * st.valueEnter + x * st.valueExit;
     }
@@ -773,11 +777,8 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
         s.extinctionTf.EvalOn(ke, ve0, &tau0);
         s.extinctionTf.EvalOn(ke, ve1, &tau1);
         // The slopes of the pieces in use turn field errors into value errors.
-        double offset[3], slope[3];
-        s.colorTf.AffineOn(kc, offset, slope);
-        colorSlope = std::max({std::abs(slope[0]), std::abs(slope[1]), std::abs(slope[2])});
-        s.extinctionTf.AffineOn(ke, offset, slope);
-        tauSlope = std::abs(slope[0]);
+        colorSlope = s.colorTf.SteepestOn(kc);
+        tauSlope = s.extinctionTf.SteepestOn(ke);
     }
     tau0 = std::max(0.0, tau0);
     tau1 = std::max(0.0, tau1);

@@ -325,6 +325,9 @@ struct BrickTraverser::Impl {
     // triangle or its crossing is not x).
     void EntryPoint(const Crossing& x, const RayFrame& frame, FacePoint& fp) const;
     bool meshPointIds = false;  // merged point ids are the mesh's point indices
+    // Every cell is a tetrahedron whose four faces are planar triangles (cell c's faces
+    // at cellFaces[4 c]).
+    bool planarTetsOnly = false;
     bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
                       Crossing& exit) const;
     void Tessellation(std::int32_t f,
@@ -358,6 +361,16 @@ void BrickTraverser::Impl::Build() {
     const double t0 = Now();
     BuildTopology();
     meshPointIds = stats.mergedPoints == stats.points;
+    {
+        const Mesh& mesh = *brick.mesh;
+        const std::int64_t n = mesh.CellCount();
+        bool tets = n > 0 && static_cast<std::int64_t>(cellFaces.size()) == 4 * n;
+        for (std::int64_t c = 0; c < n && tets; ++c)
+            tets = mesh.cellShape[c] == CellShape::Tet && cellFaceOffset[c] == 4 * c;
+        for (std::size_t f = 0; f < faces.size() && tets; ++f)
+            tets = faces[f].kind == FaceKind::Triangle;
+        planarTetsOnly = tets;
+    }
     const double t1 = Now();
     BuildScene();
     const double t2 = Now();
@@ -1322,13 +1335,20 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
                                     double tIn, const RayFrame& frame, Crossing& exit,
                                     FacePoint* exitPoint) const {
     if (exitPoint) exitPoint->v[0] = -1;
-    const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
-    const int nf = static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
-    if (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
-        faces[cf[0]].kind == FaceKind::Triangle &&
-        faces[cf[1]].kind == FaceKind::Triangle &&
-        faces[cf[2]].kind == FaceKind::Triangle &&
-        faces[cf[3]].kind == FaceKind::Triangle) {
+    // A brick of planar tets only needs none of the checks (each of them a load from
+    // memory that the walk would wait for).
+    const std::int32_t* cf =
+        &cellFaces[planarTetsOnly ? 4 * c : cellFaceOffset[c]];
+    if (planarTetsOnly)
+        for (int k = 0; k < 4; ++k) __builtin_prefetch(&faces[cf[k]]);
+    const int nf = planarTetsOnly ? 4 : static_cast<int>(cellFaceOffset[c + 1] -
+                                                         cellFaceOffset[c]);
+    if (planarTetsOnly ||
+        (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
+         faces[cf[0]].kind == FaceKind::Triangle &&
+         faces[cf[1]].kind == FaceKind::Triangle &&
+         faces[cf[2]].kind == FaceKind::Triangle &&
+         faces[cf[3]].kind == FaceKind::Triangle)) {
         // A planar tet seen along the (perturbed) ray covers the ray with exactly one
         // entering and one leaving face (exact predicates on the projected corners), so
         // the first leaving face is the exit.
