@@ -164,8 +164,34 @@ void EvalPyramidPsi(int p, const double ref[3], double* psi, double* dPsi, int s
     }
 }
 
-void EvalPyramid(const BasisTable& basis, const double ref[3], double* values,
-                 double* dRef) {
+// The linear pyramid: EvalPyramidPsi at p = 1 with its factors of 1 and loops unrolled
+// (the same operations, so bitwise the same values; no coupling between levels).
+void EvalLinearPyramid(const double ref[3], double* values, double* dRef) {
+    double a, b, u;
+    Collapse(ref, a, b, u);
+    const double la[2] = {1.0 - a, a}, lb[2] = {1.0 - b, b};
+    for (int j = 0, m = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i, ++m) {
+            const double ll = la[i] * lb[j];
+            values[m] = ll * u;
+            if (!dRef) continue;
+            const double ra = (i == 0 ? -1.0 : 1.0) * lb[j];
+            const double sb = la[i] * (j == 0 ? -1.0 : 1.0);
+            dRef[3 * m] = ra;
+            dRef[3 * m + 1] = sb;
+            dRef[3 * m + 2] = ra * (a - 0.5) + sb * (b - 0.5) + ll * -1.0;
+        }
+    values[4] = ref[2];
+    if (dRef) {
+        dRef[12] = dRef[13] = 0.0;
+        dRef[14] = 1.0;
+    }
+}
+
+}  // namespace
+
+void EvalPyramidAnyOrder(const BasisTable& basis, const double ref[3], double* values,
+                         double* dRef) {
     const int n = basis.nodeCount, p = basis.order;
     // Rows: value, d/dr, d/ds, d/dt; solved in place from psi to the nodal functions.
     double work[4 * kMaxPyramidNodes];
@@ -212,6 +238,17 @@ void EvalPyramid(const BasisTable& basis, const double ref[3], double* values,
     if (dRef)
         for (int m = 0; m < n; ++m)
             for (int d = 0; d < 3; ++d) dRef[3 * m + d] = work[(d + 1) * kMaxPyramidNodes + m];
+}
+
+namespace {
+
+void EvalPyramid(const BasisTable& basis, const double ref[3], double* values,
+                 double* dRef) {
+    if (basis.order == 1) {
+        EvalLinearPyramid(ref, values, dRef);
+        return;
+    }
+    EvalPyramidAnyOrder(basis, ref, values, dRef);
 }
 
 void EvalLagrange(const BasisTable& basis, const double ref[3], double* values,

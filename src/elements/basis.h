@@ -108,6 +108,10 @@ const BasisTable& GetBasis(CellShape shape, int order,
 /// 3 * nodeCount entries, dRef[3 m + d] = dN_m / dref_d. Buffers are owned by the caller;
 /// nothing is allocated. Thread-safe.
 void EvalBasis(const BasisTable& basis, const double ref[3], double* values, double* dRef);
+/// EvalBasis of a Lagrange pyramid by the path for every order (EvalBasis takes a
+/// specialised one for the linear pyramid, which must give bitwise the same values).
+void EvalPyramidAnyOrder(const BasisTable& basis, const double ref[3], double* values,
+                         double* dRef);
 
 /// Reference cell membership: the largest signed Euclidean distance (reference units) of
 /// `ref` beyond the planes of the cell's faces; <= 0 inside the closed cell, > 0 outside.
