@@ -42,26 +42,8 @@ fi
 cmake --build "$HPRAY_BUILD" --target hpray -j "$jobs"
 
 if [ "$baseline" != none ]; then
-  sha="$(git -C "$HPRAY_ROOT" rev-parse --verify --quiet "$baseline^{commit}")" || {
-    echo "bench_curved: --baseline $baseline is not a commit of this repository" >&2
-    exit 2
-  }
-  dir="$HPRAY_ROOT/build-bench/baseline-${sha:0:12}"
-  if [ ! -x "$dir/build/bin/hpray" ]; then
-    step "building the baseline $baseline ($sha) in $dir"
-    if [ ! -f "$dir/CMakeLists.txt" ]; then
-      git -C "$HPRAY_ROOT" worktree prune
-      rm -rf "$dir"
-      mkdir -p "$(dirname "$dir")"
-      git -C "$HPRAY_ROOT" worktree add --detach "$dir" "$sha"
-    fi
-    cmake -S "$dir" -B "$dir/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-      -DHPRAY_BUILD_TESTS=OFF -DHPRAY_BUILD_BENCHMARKS=OFF > /dev/null
-    cmake --build "$dir/build" --target hpray -j "$jobs"
-  else
-    step "baseline $baseline ($sha): reusing $dir/build/bin/hpray"
-  fi
-  args+=(--baseline-bin "$dir/build/bin/hpray" --baseline-rev "$baseline" --baseline-sha "$sha")
+  build_baseline "$baseline"
+  args+=(--baseline-bin "$BASELINE_BIN" --baseline-rev "$baseline" --baseline-sha "$BASELINE_SHA")
 fi
 
 step "rendering (baseline and current alternating), accuracy sweeps, VTK contour"

@@ -87,8 +87,14 @@ def main():
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--size", type=int, help="image size for every scene (default: each scene's)")
     ap.add_argument("--docs", default=os.path.join(ROOT, "docs"))
+    ap.add_argument("--baseline-bin", help="an hpray of an earlier revision, timed too")
+    ap.add_argument("--baseline-rev", default="baseline", help="its revision, for labels")
     args = ap.parse_args()
     hpray = os.path.join(args.build, "bin", "hpray")
+    ours = ["hpray"]
+    if args.baseline_bin:
+        ours.append("baseline")
+        LABEL["baseline"] = f"hpray at {args.baseline_rev} (same tolerance)"
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         for sc in SCENES:
@@ -99,14 +105,17 @@ def main():
                 continue
             ref = os.path.join(tmp, "ref.npy")
             run_hpray(hpray, sc["config"], size, 1e-12, ref, args.threads)
-            times = {k: {"first": [], "later": []} for k in ["hpray"] + MAPPERS}
+            times = {k: {"first": [], "later": []} for k in ours + MAPPERS}
             err = {}
             for r in range(args.runs):
-                out = os.path.join(tmp, "hpray.npy")
-                wall, render = run_hpray(hpray, sc["config"], size, None, out, args.threads)
-                times["hpray"]["first"].append(wall)
-                times["hpray"]["later"].append(render)
-                err["hpray"] = errors(out, ref)
+                for k in ours:
+                    out = os.path.join(tmp, k + ".npy")
+                    binary = args.baseline_bin if k == "baseline" else hpray
+                    wall, render = run_hpray(binary, sc["config"], size, None, out,
+                                             args.threads)
+                    times[k]["first"].append(wall)
+                    times[k]["later"].append(render)
+                    err[k] = errors(out, ref)
                 for m in MAPPERS:
                     out = os.path.join(tmp, m + ".npy")
                     first, later = run_vtk(m, scene, out, args.frames)
@@ -114,7 +123,7 @@ def main():
                     times[m]["later"].append(later)
                     err[m] = errors(out, ref)
                 print(f"{sc['name']}: round {r + 1} of {args.runs} done", file=sys.stderr)
-            for k in ["hpray"] + MAPPERS:
+            for k in ours + MAPPERS:
                 results.append({"scene": sc["name"], "size": size, "renderer": k,
                                 "first": statistics.median(times[k]["first"]),
                                 "later": statistics.median(times[k]["later"]),
@@ -145,7 +154,9 @@ def write_docs(results, args):
                "first frame is reading the file to the first image, later frames re-render "
                "a turning camera in the same process (VTK 9.1, under Xvfb with llvmpipe). "
                "Errors are against hpray at volume_tolerance 1e-12; VTK's include its 8-bit "
-               "framebuffer (up to 0.002) and, at silhouettes, its own pixel sampling.\n\n"
+               "framebuffer (up to 0.002) and, at silhouettes, its own pixel sampling."
+               + (f" `hpray at {args.baseline_rev}` is this program at that revision, "
+                  "timed in the same rounds." if args.baseline_bin else "") + "\n\n"
                f"{table}\n\n![time against error](benchmarks_peers.png)\n{footer}\n")
     text = ""
     if os.path.exists(md):
@@ -167,7 +178,7 @@ def plot(results, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(8, 5))
-    markers = {"hpray": "*", "raycast-linear": "o", "raycast-preint": "s",
+    markers = {"hpray": "*", "baseline": "P", "raycast-linear": "o", "raycast-preint": "s",
                "projected-tetrahedra": "^"}
     scenes = sorted({r["scene"] for r in results})
     colors = dict(zip(scenes, ["tab:blue", "tab:orange", "tab:green"]))

@@ -50,3 +50,31 @@ configure_and_build() {
 # laptop or CI container need both.
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_rmaps_base_oversubscribe=1 OMPI_MCA_mpi_yield_when_idle=1
+
+# build_baseline REV: builds the hpray target of revision REV once in a git worktree,
+# build-bench/baseline-<sha>, kept for later runs (remove it with `git worktree remove
+# --force build-bench/baseline-<sha>`), for benchmarks that time it against the current
+# build. Sets BASELINE_BIN and BASELINE_SHA; exits 2 if REV is not a commit.
+build_baseline() {
+  local rev="$1" jobs="${JOBS:-$(nproc)}"
+  BASELINE_SHA="$(git -C "$HPRAY_ROOT" rev-parse --verify --quiet "$rev^{commit}")" || {
+    echo "$(basename "$0"): --baseline $rev is not a commit of this repository" >&2
+    exit 2
+  }
+  local dir="$HPRAY_ROOT/build-bench/baseline-${BASELINE_SHA:0:12}"
+  BASELINE_BIN="$dir/build/bin/hpray"
+  if [ -x "$BASELINE_BIN" ]; then
+    step "baseline $rev ($BASELINE_SHA): reusing $BASELINE_BIN"
+    return
+  fi
+  step "building the baseline $rev ($BASELINE_SHA) in $dir"
+  if [ ! -f "$dir/CMakeLists.txt" ]; then
+    git -C "$HPRAY_ROOT" worktree prune
+    rm -rf "$dir"
+    mkdir -p "$(dirname "$dir")"
+    git -C "$HPRAY_ROOT" worktree add --detach "$dir" "$BASELINE_SHA"
+  fi
+  cmake -S "$dir" -B "$dir/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+    -DHPRAY_BUILD_TESTS=OFF -DHPRAY_BUILD_BENCHMARKS=OFF > /dev/null
+  cmake --build "$dir/build" --target hpray -j "$jobs"
+}
