@@ -164,8 +164,15 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
     const double alpha = length * tau0;
     const double beta = 0.5 * length * (tau1 - tau0);
     const double depth = 0.5 * length * (tau0 + tau1);
-    q.transmittance = std::exp(-depth);
-    q.opacity = -std::expm1(-depth);
+    // One exponential: for small depth the opacity by expm1 and T = 1 - opacity (T >=
+    // 0.6, so within 2 ulps), else T by exp and the opacity 1 - T (>= 0.39, likewise).
+    if (depth < 0.5) {
+        q.opacity = -std::expm1(-depth);
+        q.transmittance = 1 - q.opacity;
+    } else {
+        q.transmittance = std::exp(-depth);
+        q.opacity = 1 - q.transmittance;
+    }
     double m[3];
     if (alpha + std::abs(beta) <= 1) {
         TaylorMoments(alpha, beta, m);
