@@ -667,21 +667,23 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
     const VolumeSetup& s = *setup_;
     FieldState& st = state_[f];
     if (st.constant) return;
-    const Interval& range = (*s.ranges[f])[seg.cell];
-    // The control points of the transfer functions this field drives.
-    auto forEachBreakpoint = [&](auto&& visit) {
+    // The control points of the transfer functions this field drives, strictly inside
+    // [lo, hi].
+    auto forEachBreakpoint = [&](double lo, double hi, auto&& visit) {
         if (f == 0)
             for (double b : s.colorTf.Scalars())
-                if (b > range.lo && b < range.hi) visit(b);
+                if (b > lo && b < hi) visit(b);
         if (f == 1 || s.sameField)
             for (double b : s.extinctionTf.Scalars())
-                if (b > range.lo && b < range.hi) visit(b);
+                if (b > lo && b < hi) visit(b);
     };
     if (st.linear) {
         const double dv = st.valueExit - st.valueEnter;
         if (dv == 0) return;
         const double length = seg.tExit - seg.tEnter;
-        forEachBreakpoint([&](double b) {
+        // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)).
+        forEachBreakpoint(std::min(st.valueEnter, st.valueExit),
+                          std::max(st.valueEnter, st.valueExit), [&](double b) {
             const double x = (b - st.valueEnter) / dv;
             if (x > 0 && x < 1) {
                 const double t = seg.tEnter + x * length;
@@ -690,8 +692,9 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         });
         return;
     }
+    const Interval& range = (*s.ranges[f])[seg.cell];
     bool any = false;
-    forEachBreakpoint([&](double) { any = true; });
+    forEachBreakpoint(range.lo, range.hi, [&](double) { any = true; });
     if (!any) return;
     SegmentField& sf = field_[f];
     if (pieces_[f].empty()) {
@@ -710,7 +713,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         // its degree): its crossings of all the breakpoints at once, found on it, which
         // costs no field evaluation.
         levels_.clear();
-        forEachBreakpoint([&](double b) { levels_.push_back(b); });
+        forEachBreakpoint(range.lo, range.hi, [&](double b) { levels_.push_back(b); });
         std::sort(levels_.begin(), levels_.end());
         levels_.erase(std::unique(levels_.begin(), levels_.end()), levels_.end());
         const double tol =
@@ -721,7 +724,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
                         scratch_, points_, derivative_, crossings_);
         return;
     }
-    forEachBreakpoint([&](double b) {
+    forEachBreakpoint(range.lo, range.hi, [&](double b) {
         counters.rootFailures += FindRoots(sf, pieces_[f], b, s.roots, scratch_, record);
     });
 }
