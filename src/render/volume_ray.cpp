@@ -332,6 +332,7 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     // Each ray starts from the same state: its pixel must not depend on the rays the
     // thread integrated before (tiles and threads may take any rays).
     levelHint_ = kStartLevel;
+    for (FacePointSums& sums : faceSums_) sums.t = std::numeric_limits<double>::quiet_NaN();
     startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
 }
@@ -425,23 +426,33 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
     const FacePoint* p[2] = {&in, &out};
     for (int k = 0; k < 2; ++k) {
         const FacePoint& q = *p[k];
-        const double uk[3] = {u[q.v[0]], u[q.v[1]], u[q.v[2]]};
-        value[k] = q.w[0] * uk[0] + q.w[1] * uk[1] + q.w[2] * uk[2];
-        double dx = 0, dy = 0, ax = 0, ay = 0, az = 0, au = 0;
-        for (int m = 0; m < 3; ++m) {
-            dx += q.w[m] * q.x[m];
-            dy += q.w[m] * q.y[m];
-            ax += q.w[m] * std::abs(q.x[m]);
-            ay += q.w[m] * std::abs(q.y[m]);
-            az += q.w[m] * std::abs(q.z[m]);
-            au = std::max(au, std::abs(uk[m]));
+        // The entry is the previous segment's exit, mostly: its sums are kept.
+        FacePointSums& sums = faceSums_[f];
+        if (!(k == 0 && sums.t == q.t && sums.v[0] == q.v[0] && sums.v[1] == q.v[1] &&
+              sums.v[2] == q.v[2])) {
+            const double uk[3] = {u[q.v[0]], u[q.v[1]], u[q.v[2]]};
+            double dx = 0, dy = 0, ax = 0, ay = 0, az = 0, au = 0;
+            for (int m = 0; m < 3; ++m) {
+                dx += q.w[m] * q.x[m];
+                dy += q.w[m] * q.y[m];
+                ax += q.w[m] * std::abs(q.x[m]);
+                ay += q.w[m] * std::abs(q.y[m]);
+                az += q.w[m] * std::abs(q.z[m]);
+                au = std::max(au, std::abs(uk[m]));
+            }
+            sums.value = q.w[0] * uk[0] + q.w[1] * uk[1] + q.w[2] * uk[2];
+            sums.offX = std::abs(dx) + 4 * kEps * ax + q.cornerError;
+            sums.offY = std::abs(dy) + 4 * kEps * ay + q.cornerError;
+            sums.offZ = 4 * kEps * az;
+            sums.rounding = 4 * kEps * au;
+            sums.t = q.t;
+            for (int m = 0; m < 3; ++m) sums.v[m] = q.v[m];
         }
-        const double off = grad[0] * (std::abs(dx) + 4 * kEps * ax + q.cornerError) +
-                           grad[1] * (std::abs(dy) + 4 * kEps * ay + q.cornerError) +
-                           grad[2] * 4 * kEps * az;
+        value[k] = sums.value;
+        const double off = grad[0] * sums.offX + grad[1] * sums.offY + grad[2] * sums.offZ;
         // Twice: the gradient itself carries rounding (at most 1e-6 relative here, and
         // the reciprocal of det one more).
-        error = std::max(error, 2 * off + 4 * kEps * au);
+        error = std::max(error, 2 * off + sums.rounding);
     }
     const double t0 = in.t, t1 = out.t;
     const double slope = (value[1] - value[0]) / (t1 - t0);

@@ -209,6 +209,14 @@ class VolumeRayMarcher {
     CellScratch cellScratch_;
     std::vector<double> nodeT_, nodeU_[2], nodeDepth_, nodeAtt_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
+    /// Per field, what LinearFromFacePoints computed at the last face point (the exit
+    /// of the last segment), keyed by its t and corners: the next segment's entry.
+    struct FacePointSums {
+        double t = 0;
+        std::int32_t v[3] = {-1, -1, -1};
+        double value = 0, offX = 0, offY = 0, offZ = 0, rounding = 0;
+    };
+    FacePointSums faceSums_[2];
     int fieldCount_ = 1;
     FieldState state_[2];
     SegmentField field_[2];
