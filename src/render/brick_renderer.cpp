@@ -437,6 +437,7 @@ bool RayIntegrator::SliceSource(const BrickSetup& setup, std::size_t si, const R
     // `snap` before (after) it, inside the brick's span and outside the neighbouring
     // segments and what the previous run's last segment owns; the slice is then drawn at
     // the segment's end.
+    if (setup.slices.empty()) return false;
     const Segment& seg = segments_[si];
     const bool runStart = si == 0 || segments_[si - 1].tExit != seg.tEnter;
     const bool runEnd = si + 1 == segments_.size() || segments_[si + 1].tEnter != seg.tExit;
@@ -592,7 +593,7 @@ bool RayIntegrator::Composite(const BrickSetup& setup, const Ray& ray, const Seg
     }
     if (volumeHere && !stop && transmittance > 0)
         stop = marcher_.Integrate(tDone, std::min(seg.tExit, cutoff), composite, counters);
-    field_.AddCountersTo(counters);
+    if (loaded >= 0) field_.AddCountersTo(counters);
     if (transmittance <= 0 || stop)
         return StopsHere(std::min(seg.tExit, cutoff), composite, recorder);
     return false;
