@@ -52,7 +52,7 @@ MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
             Box box;
             if (k < 0) {
                 part.affine += g.Derive(c, scratch).affine;
-                box = g.CellBox(c);
+                box = GeometryBox(g.Basis(c), scratch.xyz);  // CellBox(c), not gathered again
             } else {
                 const BasisTable& basis = g.Basis(c);
                 double* xyz = g.nodeXyz_.data() + 3 * nodeStart[k];
