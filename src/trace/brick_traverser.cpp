@@ -7,6 +7,7 @@
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -514,12 +515,21 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             for (std::int64_t c = k * chunkCells; c < end; ++c) {
                 const CellTopology& s = Topology(mesh.cellShape[c]);
                 for (int f = 0; f < s.faces; ++f) {
-                    const int n = sortedKey(c, f, key);
-                    if (std::adjacent_find(key, key + n) != key + n) {
+                    // The smallest corner, and whether two corners are the same point
+                    // (as sortedKey's sorted run would show, without the sort).
+                    const int n = s.faceSize[f];
+                    for (int a = 0; a < n; ++a) key[a] = corners[8 * c + s.face[f][a]];
+                    bool repeated = false;
+                    std::int32_t smallest = key[0];
+                    for (int a = 1; a < n; ++a) {
+                        smallest = std::min(smallest, key[a]);
+                        for (int b = 0; b < a; ++b) repeated = repeated || key[a] == key[b];
+                    }
+                    if (repeated) {
                         nbCell[6 * c + f] = kDegenerate;
                         continue;
                     }
-                    ++h[key[0]];
+                    ++h[smallest];
                 }
             }
         });
@@ -600,26 +610,51 @@ void BrickTraverser::Impl::NumberFaces(TopologyBuild& t) {
     for (std::int64_t c = 0; c < nCells; ++c)
         cellFaceOffset[c + 1] = cellFaceOffset[c] + Topology(mesh.cellShape[c]).faces;
     cellFaces.assign(cellFaceOffset.back(), -1);
-    nFaces = 0;
-    for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = Topology(mesh.cellShape[c]).faces;
-        for (int f = 0; f < nf; ++f) {
-            const std::int32_t nb = nbCell[6 * c + f];
-            if (nb < 0 || c < nb)
-                cellFaces[cellFaceOffset[c] + f] = std::int32_t(nFaces++);
-            if (nFaces >= std::numeric_limits<std::int32_t>::max())
-                throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
+    // Ids in cell order, as one sequential pass would give them: the faces each range of
+    // cells owns are counted, then numbered from the range's start.
+    const std::int64_t chunkCells = 16384;
+    const std::int64_t chunks = (nCells + chunkCells - 1) / chunkCells;
+    std::vector<std::int64_t> chunkStart(chunks + 1, 0);
+    auto owned = [&](std::int64_t c, int f) {
+        const std::int32_t nb = nbCell[6 * c + f];
+        return nb < 0 || c < nb;
+    };
+    tbb::parallel_for(std::int64_t(0), chunks, [&](std::int64_t k) {
+        std::int64_t count = 0;
+        const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+        for (std::int64_t c = k * chunkCells; c < end; ++c) {
+            const int nf = Topology(mesh.cellShape[c]).faces;
+            for (int f = 0; f < nf; ++f) count += owned(c, f);
         }
-    }
-    for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = Topology(mesh.cellShape[c]).faces;
-        for (int f = 0; f < nf; ++f) {
-            const std::int32_t nb = nbCell[6 * c + f];
-            if (nb >= 0 && nb < c)
-                cellFaces[cellFaceOffset[c] + f] =
-                    cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+        chunkStart[k + 1] = count;
+    });
+    for (std::int64_t k = 0; k < chunks; ++k) chunkStart[k + 1] += chunkStart[k];
+    nFaces = chunkStart[chunks];
+    if (nFaces >= std::numeric_limits<std::int32_t>::max())
+        throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
+    tbb::parallel_for(std::int64_t(0), chunks, [&](std::int64_t k) {
+        std::int64_t next = chunkStart[k];
+        const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+        for (std::int64_t c = k * chunkCells; c < end; ++c) {
+            const int nf = Topology(mesh.cellShape[c]).faces;
+            for (int f = 0; f < nf; ++f)
+                if (owned(c, f)) cellFaces[cellFaceOffset[c] + f] = std::int32_t(next++);
         }
-    }
+    });
+    // A shared face's id, from the lower-numbered cell that owns it (all numbered above).
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, nCells, 4096),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                const int nf = Topology(mesh.cellShape[c]).faces;
+                for (int f = 0; f < nf; ++f) {
+                    const std::int32_t nb = nbCell[6 * c + f];
+                    if (nb >= 0 && nb < c)
+                        cellFaces[cellFaceOffset[c] + f] =
+                            cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+                }
+            }
+        });
 }
 
 // 6. The canonical record of every face and its geometry.
@@ -638,6 +673,22 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
         const double* y = P(b);
         return x[0] != y[0] ? x[0] < y[0] : x[1] != y[1] ? x[1] < y[1] : x[2] < y[2];
     };
+    // The merged points' ranks in byPosition order. Merged points have distinct
+    // positions, so the order is total and comparing ranks is comparing positions, from
+    // a small array instead of three coordinates of two random points.
+    const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
+    std::vector<std::int32_t> rank(nMerged);
+    {
+        std::vector<std::int32_t> order(nMerged);
+        std::iota(order.begin(), order.end(), 0);
+        tbb::parallel_sort(order.begin(), order.end(), byPosition);
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nMerged, 16384),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                                  rank[order[i]] = std::int32_t(i);
+                          });
+    }
+    const auto byRank = [&rank](std::int32_t a, std::int32_t b) { return rank[a] < rank[b]; };
     // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
     // (from its lower corner by position), so that every face holding the edge sees the
     // same sequence; returns whether that reverses the face's counter-clockwise order.
@@ -746,14 +797,14 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                 rec.cell[0] = std::int32_t(c);
                 continue;
             }
-            const bool same = Canonicalize(ids, n, canon, byPosition);
+            const bool same = Canonicalize(ids, n, canon, byRank);
             std::copy(canon, canon + n, rec.v);
             rec.cell[same ? 0 : 1] = std::int32_t(c);
             if (nb >= 0) {
                 std::int32_t ids2[4], canon2[4];
                 int local2[4];
                 outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
-                const bool same2 = Canonicalize(ids2, n, canon2, byPosition);
+                const bool same2 = Canonicalize(ids2, n, canon2, byRank);
                 if (same2 == same) {
                     // Reported after the loop, for the lowest cell whatever the order.
                     static std::mutex overlapMutex;
@@ -765,6 +816,11 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                     continue;
                 }
                 rec.cell[same2 ? 0 : 1] = nb;
+            }
+            const int p = mesh.cellOrder[c];
+            if (n == 3 && p == 1) {
+                rec.kind = FaceKind::Triangle;  // a straight triangle: nothing to measure
+                continue;
             }
             // Local corner of each canonical corner.
             int canonLocal[4];
@@ -785,7 +841,6 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
             double size = std::sqrt(Dist2(lo, hi));
             const double tol = options.straightTolerance * size;
             // Straight? Compare every face node with the (bi)linear face of the corners.
-            const int p = mesh.cellOrder[c];
             const CellFamily family = mesh.cellFamily[c];
             const FaceBasis basis = n == 3 ? FaceBasis::Triangle
                                     : family == CellFamily::Serendipity
