@@ -321,6 +321,9 @@ struct BrickTraverser::Impl::TopologyBuild {
     std::vector<std::int8_t> orient;       ///< per cell: +1, or -1 for a mirrored cell
     std::vector<std::int32_t> nbCell;      ///< 6 per cell: neighbour, kNone, kDegenerate
     std::vector<std::int8_t> nbFace;       ///< 6 per cell: the neighbour's face
+    /// 6 per cell, for triangles with a neighbour: 1 where the two cells' outward corner
+    /// cycles of the face turn the same way (the cells overlap), else 0.
+    std::vector<std::uint8_t> nbSameSense;
     std::int64_t nFaces = 0;
 };
 
@@ -483,19 +486,22 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     };
     nbCell.assign(6 * nCells, kNone);
     nbFace.assign(6 * nCells, -1);
+    t.nbSameSense.assign(6 * nCells, 0);
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
     {
         // A face after its smallest corner: the other corners (a triangle's fourth is -1,
-        // so triangles and quadrilaterals never match) and its cell and face.
+        // so triangles and quadrilaterals never match) and its cell and face (bits 0-2;
+        // bit 3, triangles: the parity of the outward corner cycle by merged id).
         struct FaceKey {
             std::int32_t k[3];
             std::int32_t cell;
             std::int8_t face;
+            int Face() const { return face & 7; }
             bool operator<(const FaceKey& o) const {
                 if (k[0] != o.k[0]) return k[0] < o.k[0];
                 if (k[1] != o.k[1]) return k[1] < o.k[1];
                 if (k[2] != o.k[2]) return k[2] < o.k[2];
-                return cell != o.cell ? cell < o.cell : face < o.face;
+                return cell != o.cell ? cell < o.cell : Face() < o.Face();
             }
             bool SameFace(const FaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
@@ -544,7 +550,9 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             }
             bucket[v + 1] = at;
         }
-        std::vector<FaceKey> keys(bucket.back());
+        // Not value-initialised: every key is written below (in parallel, so the pages
+        // are first touched by both threads).
+        std::unique_ptr<FaceKey[]> keys(new FaceKey[bucket.back()]);
         tbb::parallel_for(0, kChunks, [&](int k) {
             std::vector<std::int64_t>& fill = count[k];
             std::int32_t key[4];
@@ -559,7 +567,15 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                     fk.k[1] = key[2];
                     fk.k[2] = n == 4 ? key[3] : -1;
                     fk.cell = std::int32_t(c);
-                    fk.face = std::int8_t(f);
+                    int parity = 0;
+                    if (n == 3) {
+                        // The outward cycle (as BuildFaceRecords walks it): its inversions.
+                        std::int32_t o[3];
+                        for (int q = 0; q < 3; ++q)
+                            o[q] = corners[8 * c + s.face[f][t.orient[c] > 0 ? q : (3 - q) % 3]];
+                        parity = ((o[0] > o[1]) + (o[0] > o[2]) + (o[1] > o[2])) & 1;
+                    }
+                    fk.face = std::int8_t(f | parity << 3);
                 }
             }
         });
@@ -569,17 +585,25 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
             [&](const tbb::blocked_range<std::int64_t>& range) {
                 for (std::int64_t v = range.begin(); v < range.end(); ++v) {
-                    FaceKey* first = keys.data() + bucket[v];
-                    FaceKey* last = keys.data() + bucket[v + 1];
+                    FaceKey* first = keys.get() + bucket[v];
+                    FaceKey* last = keys.get() + bucket[v + 1];
                     std::sort(first, last);
                     for (FaceKey* run = first; run < last;) {
                         FaceKey* end = run + 1;
                         while (end < last && end->SameFace(*run)) ++end;
                         if (end - run == 2 && run[0].cell != run[1].cell) {
-                            nbCell[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].cell;
-                            nbFace[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].face;
-                            nbCell[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].cell;
-                            nbFace[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].face;
+                            const std::int64_t a = 6 * std::int64_t(run[0].cell) + run[0].Face();
+                            const std::int64_t b = 6 * std::int64_t(run[1].cell) + run[1].Face();
+                            nbCell[a] = run[1].cell;
+                            nbFace[a] = std::int8_t(run[1].Face());
+                            nbCell[b] = run[0].cell;
+                            nbFace[b] = std::int8_t(run[0].Face());
+                            if (run->k[2] < 0) {
+                                // Two cycles of the same three corners turn the same way
+                                // exactly when their parities agree.
+                                const std::uint8_t same = ((run[0].face ^ run[1].face) & 8) == 0;
+                                t.nbSameSense[a] = t.nbSameSense[b] = same;
+                            }
                         } else if (end - run > 2) {
                             // Sorted by cell within the run: the first names the lowest.
                             std::int64_t cur = badCell.load();
@@ -665,6 +689,7 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
     const auto& orient = t.orient;
     const auto& nbCell = t.nbCell;
     const auto& nbFace = t.nbFace;
+    const auto& nbSameSense = t.nbSameSense;
     const std::int64_t nFaces = t.nFaces;
     const auto& mergedOf = t.mergedOf;
     faces.assign(nFaces, FaceRec{});
@@ -801,10 +826,18 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
             std::copy(canon, canon + n, rec.v);
             rec.cell[same ? 0 : 1] = std::int32_t(c);
             if (nb >= 0) {
-                std::int32_t ids2[4], canon2[4];
-                int local2[4];
-                outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
-                const bool same2 = Canonicalize(ids2, n, canon2, byRank);
+                // The neighbour's canonical sense: for a triangle from the parities that
+                // MatchFaces compared (no visit to the neighbour's corners); a
+                // quadrilateral's cycles may differ by more than their sense.
+                bool same2;
+                if (n == 3) {
+                    same2 = nbSameSense[6 * c + f] ? same : !same;
+                } else {
+                    std::int32_t ids2[4], canon2[4];
+                    int local2[4];
+                    outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                    same2 = Canonicalize(ids2, n, canon2, byRank);
+                }
                 if (same2 == same) {
                     // Reported after the loop, for the lowest cell whatever the order.
                     static std::mutex overlapMutex;
