@@ -405,8 +405,9 @@ constexpr int kSmallTetNodes = 35;
 // Bounds of a Lagrange tetrahedron with at most kSmallTetNodes nodes: the same operations
 // in the same order as the general path below (so bitwise the same interval), without its
 // scratch vectors.
-Interval SmallTetBounds(const BasisTable& basis, const double* coeffsIn, int stride) {
-    const int n = basis.nodeCount;
+template <int kFixed>
+Interval SmallTetBoundsN(const BasisTable& basis, const double* coeffsIn, int stride) {
+    const int n = kFixed > 0 ? kFixed : basis.nodeCount;
     double nodalLo = std::numeric_limits<double>::infinity(), nodalHi = -nodalLo;
     for (int m = 0; m < n; ++m) {
         nodalLo = std::min(nodalLo, coeffsIn[m * stride]);
@@ -437,6 +438,12 @@ Interval SmallTetBounds(const BasisTable& basis, const double* coeffsIn, int str
     out.lo = NextDown(NextDown(out.lo + shift));
     out.hi = NextUp(NextUp(out.hi + shift));
     return out;
+}
+
+// The linear tetrahedron (a fixed size: loops unrolled) or any other small one.
+Interval SmallTetBounds(const BasisTable& basis, const double* coeffsIn, int stride) {
+    return basis.nodeCount == 4 ? SmallTetBoundsN<4>(basis, coeffsIn, stride)
+                                : SmallTetBoundsN<0>(basis, coeffsIn, stride);
 }
 
 Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {

@@ -137,14 +137,23 @@ void MergePoints(const std::vector<double>& points, double tol, double diag,
     // within tol of its cell's side, which is rare.
     const double cellSize = diag > 0 ? std::max(16 * tol, 1e-9 * diag) : 1.0;
     std::vector<std::array<std::int64_t, 3>> key(n);
-    for (std::int64_t i = 0; i < n; ++i)
-        for (int d = 0; d < 3; ++d)
-            key[i][d] = static_cast<std::int64_t>(
-                std::floor((points[3 * i + d] - lo[d]) / cellSize));
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 16384),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                              for (int d = 0; d < 3; ++d)
+                                  key[i][d] = static_cast<std::int64_t>(
+                                      std::floor((points[3 * i + d] - lo[d]) / cellSize));
+                      });
     std::vector<std::int64_t> order(n);
     std::iota(order.begin(), order.end(), 0);
-    std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
-        return key[a] != key[b] ? key[a] < key[b] : a < b;
+    // (key, index) is a total order: the sorted order is unique, however it is sorted.
+    tbb::parallel_sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
+        const auto& ka = key[a];
+        const auto& kb = key[b];
+        if (ka[0] != kb[0]) return ka[0] < kb[0];
+        if (ka[1] != kb[1]) return ka[1] < kb[1];
+        if (ka[2] != kb[2]) return ka[2] < kb[2];
+        return a < b;
     });
     std::vector<std::int64_t> parent(n);
     std::iota(parent.begin(), parent.end(), 0);
