@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <numeric>
 #include <sstream>
@@ -322,17 +323,42 @@ constexpr const char* kSource = "mesh";
 constexpr std::int32_t kNone = -1, kDegenerate = -2;
 }  // namespace
 
+namespace {
+/// An array of the build whose pages are first written by all threads: assign(n, value)
+/// fills it in parallel (std::vector::assign is one thread's memset and page faults).
+template <typename T>
+class BuildArray {
+  public:
+    void assign(std::size_t n, T value) {
+        data_.reset(new T[n]);  // default-initialised: not yet touched
+        size_ = n;
+        T* data = data_.get();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::size_t(1) << 16),
+                          [&](const tbb::blocked_range<std::size_t>& range) {
+                              std::fill(data + range.begin(), data + range.end(), value);
+                          });
+    }
+    T& operator[](std::size_t i) { return data_[i]; }
+    const T& operator[](std::size_t i) const { return data_[i]; }
+    std::size_t size() const { return size_; }
+
+  private:
+    std::unique_ptr<T[]> data_;
+    std::size_t size_ = 0;
+};
+}  // namespace
+
 /// What the phases of BuildTopology hand to each other; freed when it returns.
 struct BrickTraverser::Impl::TopologyBuild {
     double diag = 0;                       ///< diagonal of the mesh's point bounds
     std::vector<std::int32_t> mergedOf;    ///< point -> merged id
-    std::vector<std::int32_t> corners;     ///< 8 per cell: merged ids of its corners
-    std::vector<std::int8_t> orient;       ///< per cell: +1, or -1 for a mirrored cell
-    std::vector<std::int32_t> nbCell;      ///< 6 per cell: neighbour, kNone, kDegenerate
-    std::vector<std::int8_t> nbFace;       ///< 6 per cell: the neighbour's face
+    BuildArray<std::int32_t> corners;      ///< 8 per cell: merged ids of its corners
+    BuildArray<std::int8_t> orient;        ///< per cell: +1, or -1 for a mirrored cell
+    BuildArray<std::int32_t> nbCell;       ///< 6 per cell: neighbour, kNone, kDegenerate
+    BuildArray<std::int8_t> nbFace;        ///< 6 per cell: the neighbour's face
     /// 6 per cell, for triangles with a neighbour: 1 where the two cells' outward corner
     /// cycles of the face turn the same way (the cells overlap), else 0.
-    std::vector<std::uint8_t> nbSameSense;
+    BuildArray<std::uint8_t> nbSameSense;
     std::int64_t nFaces = 0;
 };
 
@@ -499,20 +525,49 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
     {
         // A face after its smallest corner: the other corners (a triangle's fourth is -1,
-        // so triangles and quadrilaterals never match) and its cell and face (bits 0-2;
-        // bit 3, triangles: the parity of the outward corner cycle by merged id).
-        struct FaceKey {
+        // so triangles and quadrilaterals never match), its cell and face, and for
+        // triangles the parity of its outward corner cycle by merged id. Ordered by
+        // corners, then cell, then face. Two layouts: 16 bytes while cell << 4 fits 32
+        // bits, else 20.
+        struct NarrowFaceKey {
+            std::int32_t k[3];
+            std::uint32_t cf;  // cell << 4 | face << 1 | parity
+            void Set(const std::int32_t* key, std::int64_t c, int f, int parity) {
+                k[0] = key[0], k[1] = key[1], k[2] = key[2];
+                cf = std::uint32_t(c) << 4 | std::uint32_t(f) << 1 | std::uint32_t(parity);
+            }
+            std::int32_t Cell() const { return std::int32_t(cf >> 4); }
+            int Face() const { return int(cf >> 1 & 7); }
+            int Parity() const { return int(cf & 1); }
+            bool operator<(const NarrowFaceKey& o) const {
+                if (k[0] != o.k[0]) return k[0] < o.k[0];
+                if (k[1] != o.k[1]) return k[1] < o.k[1];
+                if (k[2] != o.k[2]) return k[2] < o.k[2];
+                return cf < o.cf;  // cell, then face (the parity bit never decides)
+            }
+            bool SameFace(const NarrowFaceKey& o) const {
+                return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
+            }
+        };
+        struct WideFaceKey {
             std::int32_t k[3];
             std::int32_t cell;
-            std::int8_t face;
-            int Face() const { return face & 7; }
-            bool operator<(const FaceKey& o) const {
+            std::int8_t bits;  // face | parity << 3
+            void Set(const std::int32_t* key, std::int64_t c, int f, int parity) {
+                k[0] = key[0], k[1] = key[1], k[2] = key[2];
+                cell = std::int32_t(c);
+                bits = std::int8_t(f | parity << 3);
+            }
+            std::int32_t Cell() const { return cell; }
+            int Face() const { return bits & 7; }
+            int Parity() const { return bits >> 3 & 1; }
+            bool operator<(const WideFaceKey& o) const {
                 if (k[0] != o.k[0]) return k[0] < o.k[0];
                 if (k[1] != o.k[1]) return k[1] < o.k[1];
                 if (k[2] != o.k[2]) return k[2] < o.k[2];
                 return cell != o.cell ? cell < o.cell : Face() < o.Face();
             }
-            bool SameFace(const FaceKey& o) const {
+            bool SameFace(const WideFaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }
         };
@@ -559,6 +614,8 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             }
             bucket[v + 1] = at;
         }
+        auto fillAndMatch = [&](auto keyType) {
+        using FaceKey = decltype(keyType);
         // Not value-initialised: every key is written below (in parallel, so the pages
         // are first touched by both threads).
         std::unique_ptr<FaceKey[]> keys(new FaceKey[bucket.back()]);
@@ -571,11 +628,7 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                 for (int f = 0; f < s.faces; ++f) {
                     if (nbCell[6 * c + f] == kDegenerate) continue;
                     const int n = sortedKey(c, f, key);
-                    FaceKey& fk = keys[fill[key[0]]++];
-                    fk.k[0] = key[1];
-                    fk.k[1] = key[2];
-                    fk.k[2] = n == 4 ? key[3] : -1;
-                    fk.cell = std::int32_t(c);
+                    if (n == 3) key[3] = -1;
                     int parity = 0;
                     if (n == 3) {
                         // The outward cycle (as BuildFaceRecords walks it): its inversions.
@@ -584,7 +637,7 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                             o[q] = corners[8 * c + s.face[f][t.orient[c] > 0 ? q : (3 - q) % 3]];
                         parity = ((o[0] > o[1]) + (o[0] > o[2]) + (o[1] > o[2])) & 1;
                     }
-                    fk.face = std::int8_t(f | parity << 3);
+                    keys[fill[key[0]]++].Set(key + 1, c, f, parity);
                 }
             }
         });
@@ -600,30 +653,35 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                     for (FaceKey* run = first; run < last;) {
                         FaceKey* end = run + 1;
                         while (end < last && end->SameFace(*run)) ++end;
-                        if (end - run == 2 && run[0].cell != run[1].cell) {
-                            const std::int64_t a = 6 * std::int64_t(run[0].cell) + run[0].Face();
-                            const std::int64_t b = 6 * std::int64_t(run[1].cell) + run[1].Face();
-                            nbCell[a] = run[1].cell;
+                        if (end - run == 2 && run[0].Cell() != run[1].Cell()) {
+                            const std::int64_t a = 6 * std::int64_t(run[0].Cell()) + run[0].Face();
+                            const std::int64_t b = 6 * std::int64_t(run[1].Cell()) + run[1].Face();
+                            nbCell[a] = run[1].Cell();
                             nbFace[a] = std::int8_t(run[1].Face());
-                            nbCell[b] = run[0].cell;
+                            nbCell[b] = run[0].Cell();
                             nbFace[b] = std::int8_t(run[0].Face());
                             if (run->k[2] < 0) {
                                 // Two cycles of the same three corners turn the same way
                                 // exactly when their parities agree.
-                                const std::uint8_t same = ((run[0].face ^ run[1].face) & 8) == 0;
+                                const std::uint8_t same = run[0].Parity() == run[1].Parity();
                                 t.nbSameSense[a] = t.nbSameSense[b] = same;
                             }
                         } else if (end - run > 2) {
                             // Sorted by cell within the run: the first names the lowest.
                             std::int64_t cur = badCell.load();
-                            while (run->cell < cur &&
-                                   !badCell.compare_exchange_weak(cur, run->cell)) {
+                            while (run->Cell() < cur &&
+                                   !badCell.compare_exchange_weak(cur, run->Cell())) {
                             }
                         }
                         run = end;
                     }
                 }
             });
+        };
+        if (nCells < (std::int64_t(1) << 28))
+            fillAndMatch(NarrowFaceKey{});
+        else
+            fillAndMatch(WideFaceKey{});
     }
     if (badCell.load() != std::numeric_limits<std::int64_t>::max()) {
         std::ostringstream where;
