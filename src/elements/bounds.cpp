@@ -531,4 +531,45 @@ Box GeometryBox(const BasisTable& basis, const double* nodeXyz) {
     return box;
 }
 
+Box GeometryBoxEnclosure(const BasisTable& basis, const double* nodeXyz) {
+    const double inf = std::numeric_limits<double>::infinity();
+    Box box{{-inf, -inf, -inf}, {inf, inf, inf}};
+    if (basis.shape != CellShape::Tet || basis.family == CellFamily::Serendipity ||
+        basis.nodeCount > kSmallTetNodes)
+        return box;
+    // R: the largest sum of |T| over a row of the Lagrange-to-Bernstein transform (1 for
+    // the linear tetrahedron), remembered per basis on each thread.
+    thread_local const BasisTable* seen = nullptr;
+    thread_local double rowSum = 0;
+    if (seen != &basis) {
+        const BernsteinTable& t = GetTable(basis.shape, basis.order);
+        const int n = basis.nodeCount;
+        double worst = 0;
+        for (int r = 0; r < n; ++r) {
+            double sum = 0;
+            for (int c = 0; c < n; ++c) sum += t.simplex.abs[std::size_t(r) * n + c];
+            worst = std::max(worst, sum);
+        }
+        seen = &basis;
+        rowSum = worst;
+    }
+    // Bounds (SmallTetBounds): with the shift s in [lo, hi], every |f - s| <= hi - lo,
+    // every Bernstein coefficient and its margin (gamma < 1e-10) stay within (1 + gamma)
+    // R (hi - lo) of 0 up to a few ulps, and adding s back and stepping outward twice
+    // costs a few ulps of |lo| + |hi| + that more: 2.1 R (hi - lo) plus 1e-12 of the
+    // magnitudes covers it all with a wide margin (also the rounding of lo - w itself).
+    for (int d = 0; d < 3; ++d) {
+        double lo = nodeXyz[d], hi = nodeXyz[d];
+        for (int m = 1; m < basis.nodeCount; ++m) {
+            lo = std::min(lo, nodeXyz[3 * m + d]);
+            hi = std::max(hi, nodeXyz[3 * m + d]);
+        }
+        const double w = 2.1 * rowSum * (hi - lo) + 1e-12 * (std::abs(lo) + std::abs(hi)) +
+                         1e-300;
+        box.lo[d] = lo - w;
+        box.hi[d] = hi + w;
+    }
+    return box;
+}
+
 }  // namespace hpray
