@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <memory>
@@ -384,7 +386,70 @@ void Bernstein(const BernsteinTable& t, const BasisTable& basis, const std::vect
     }
 }
 
+// std::nextafter(x, +-inf), inlined (called four times per bound, for every cell): the
+// same result for every x, NaN and infinities included.
+inline double NextUp(double x) {
+    if (std::isnan(x) || x == std::numeric_limits<double>::infinity()) return x;
+    if (x == 0) return std::numeric_limits<double>::denorm_min();
+    std::uint64_t b;
+    std::memcpy(&b, &x, sizeof b);
+    b = x > 0 ? b + 1 : b - 1;
+    std::memcpy(&x, &b, sizeof b);
+    return x;
+}
+inline double NextDown(double x) { return -NextUp(-x); }
+
+// Lagrange tetrahedra of up to this many nodes (order 4) are bounded from stack arrays.
+constexpr int kSmallTetNodes = 35;
+
+// Bounds of a Lagrange tetrahedron with at most kSmallTetNodes nodes: the same operations
+// in the same order as the general path below (so bitwise the same interval), without its
+// scratch vectors.
+template <int kFixed>
+Interval SmallTetBoundsN(const BasisTable& basis, const double* coeffsIn, int stride) {
+    const int n = kFixed > 0 ? kFixed : basis.nodeCount;
+    double nodalLo = std::numeric_limits<double>::infinity(), nodalHi = -nodalLo;
+    for (int m = 0; m < n; ++m) {
+        nodalLo = std::min(nodalLo, coeffsIn[m * stride]);
+        nodalHi = std::max(nodalHi, coeffsIn[m * stride]);
+    }
+    const double shift = 0.5 * nodalLo + 0.5 * nodalHi;
+    double f[kSmallTetNodes], af[kSmallTetNodes];
+    for (int m = 0; m < n; ++m) {
+        f[m] = coeffsIn[m * stride] - shift;
+        af[m] = std::abs(f[m]);
+    }
+    const BernsteinTable& t = GetTable(basis.shape, basis.order);
+    const double gamma = t.gamma + 0.0 + 2.0 * kUnit;
+    const double inf = std::numeric_limits<double>::infinity();
+    Interval out{inf, -inf};
+    for (int r = 0; r < n; ++r) {
+        double s = 0.0, as = 0.0;
+        const double* row = t.simplex.v.data() + static_cast<std::size_t>(r) * n;
+        const double* arow = t.simplex.abs.data() + static_cast<std::size_t>(r) * n;
+        for (int c = 0; c < n; ++c) {
+            s += row[c] * f[c];
+            as += arow[c] * af[c];
+        }
+        const double margin = gamma * as;
+        out.lo = std::min(out.lo, s - margin);
+        out.hi = std::max(out.hi, s + margin);
+    }
+    out.lo = NextDown(NextDown(out.lo + shift));
+    out.hi = NextUp(NextUp(out.hi + shift));
+    return out;
+}
+
+// The linear tetrahedron (a fixed size: loops unrolled) or any other small one.
+Interval SmallTetBounds(const BasisTable& basis, const double* coeffsIn, int stride) {
+    return basis.nodeCount == 4 ? SmallTetBoundsN<4>(basis, coeffsIn, stride)
+                                : SmallTetBoundsN<0>(basis, coeffsIn, stride);
+}
+
 Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
+    if (basis.shape == CellShape::Tet && basis.family != CellFamily::Serendipity &&
+        basis.nodeCount <= kSmallTetNodes)
+        return SmallTetBounds(basis, coeffsIn, stride);
     // Constants are reproduced exactly by both bases, so transform f - shift and add the
     // shift back: the rounding margin then scales with the variation of the data, not
     // with its offset (fields like 1e6 + O(1)).
@@ -445,8 +510,8 @@ Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
         out.hi = std::max(out.hi, b[k] + margin);
     }
     // Adding the shift rounds once more (half an ulp): step outward twice.
-    out.lo = std::nextafter(std::nextafter(out.lo + shift, -inf), -inf);
-    out.hi = std::nextafter(std::nextafter(out.hi + shift, inf), inf);
+    out.lo = NextDown(NextDown(out.lo + shift));
+    out.hi = NextUp(NextUp(out.hi + shift));
     return out;
 }
 
@@ -462,6 +527,47 @@ Box GeometryBox(const BasisTable& basis, const double* nodeXyz) {
         const Interval i = Bounds(basis, nodeXyz + d, 3);
         box.lo[d] = i.lo;
         box.hi[d] = i.hi;
+    }
+    return box;
+}
+
+Box GeometryBoxEnclosure(const BasisTable& basis, const double* nodeXyz) {
+    const double inf = std::numeric_limits<double>::infinity();
+    Box box{{-inf, -inf, -inf}, {inf, inf, inf}};
+    if (basis.shape != CellShape::Tet || basis.family == CellFamily::Serendipity ||
+        basis.nodeCount > kSmallTetNodes)
+        return box;
+    // R: the largest sum of |T| over a row of the Lagrange-to-Bernstein transform (1 for
+    // the linear tetrahedron), remembered per basis on each thread.
+    thread_local const BasisTable* seen = nullptr;
+    thread_local double rowSum = 0;
+    if (seen != &basis) {
+        const BernsteinTable& t = GetTable(basis.shape, basis.order);
+        const int n = basis.nodeCount;
+        double worst = 0;
+        for (int r = 0; r < n; ++r) {
+            double sum = 0;
+            for (int c = 0; c < n; ++c) sum += t.simplex.abs[std::size_t(r) * n + c];
+            worst = std::max(worst, sum);
+        }
+        seen = &basis;
+        rowSum = worst;
+    }
+    // Bounds (SmallTetBounds): with the shift s in [lo, hi], every |f - s| <= hi - lo,
+    // every Bernstein coefficient and its margin (gamma < 1e-10) stay within (1 + gamma)
+    // R (hi - lo) of 0 up to a few ulps, and adding s back and stepping outward twice
+    // costs a few ulps of |lo| + |hi| + that more: 2.1 R (hi - lo) plus 1e-12 of the
+    // magnitudes covers it all with a wide margin (also the rounding of lo - w itself).
+    for (int d = 0; d < 3; ++d) {
+        double lo = nodeXyz[d], hi = nodeXyz[d];
+        for (int m = 1; m < basis.nodeCount; ++m) {
+            lo = std::min(lo, nodeXyz[3 * m + d]);
+            hi = std::max(hi, nodeXyz[3 * m + d]);
+        }
+        const double w = 2.1 * rowSum * (hi - lo) + 1e-12 * (std::abs(lo) + std::abs(hi)) +
+                         1e-300;
+        box.lo[d] = lo - w;
+        box.hi[d] = hi + w;
     }
     return box;
 }

@@ -40,4 +40,11 @@ Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride =
 /// x y z interleaved per node, internal order.
 Box GeometryBox(const BasisTable& basis, const double* nodeXyz);
 
+/// A box that holds GeometryBox(basis, nodeXyz), from the range of the node coordinates
+/// alone (widened by the Bernstein transform's largest absolute row sum, with room for
+/// every rounding of the exact box): where only a union of boxes is wanted, a cell whose
+/// enclosure lies strictly inside the union so far needs no exact box. Lagrange
+/// tetrahedra of up to 35 nodes; an infinite box for other bases.
+Box GeometryBoxEnclosure(const BasisTable& basis, const double* nodeXyz);
+
 }  // namespace hpray

@@ -52,7 +52,16 @@ MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
             Box box;
             if (k < 0) {
                 part.affine += g.Derive(c, scratch).affine;
-                box = g.CellBox(c);
+                // The box only widens the bounds: not needed where its enclosure stays
+                // strictly inside them (NaN compares false: then it is computed).
+                const BasisTable& basis = g.Basis(c);
+                const Box outer = GeometryBoxEnclosure(basis, scratch.xyz);
+                bool inside = true;
+                for (int d = 0; d < 3; ++d)
+                    inside = inside && outer.lo[d] > part.box.lo[d] &&
+                             outer.hi[d] < part.box.hi[d];
+                if (inside) continue;
+                box = GeometryBox(basis, scratch.xyz);  // CellBox(c), not gathered again
             } else {
                 const BasisTable& basis = g.Basis(c);
                 double* xyz = g.nodeXyz_.data() + 3 * nodeStart[k];

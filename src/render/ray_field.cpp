@@ -81,61 +81,147 @@ void ReduceHexOrders(const Mesh& mesh, const ScalarSelector& field, FieldCellDat
 }
 }  // namespace
 
+namespace {
+// Whether SegmentField::BeginLinearTet has no closed form for linear tetrahedron c: its
+// determinant, by the same operations in the same order (so bitwise the same number).
+bool LinearTetDegenerate(const Mesh& mesh, std::int64_t c) {
+    const std::int64_t* nodes = mesh.CellNodes(c);
+    const double* p0 = &mesh.points[3 * nodes[0]];
+    double e[3][3];
+    for (int i = 0; i < 3; ++i) {
+        const double* p = &mesh.points[3 * nodes[i + 1]];
+        for (int d = 0; d < 3; ++d) e[i][d] = p[d] - p0[d];
+    }
+    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
+                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
+                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
+    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    return det == 0 || !std::isfinite(det);
+}
+
+// Per-thread scratch of CellRefGradBound.
+struct BoundScratch {
+    std::vector<double> deriv[3];
+    EvalWorkspace ws;
+    CellScratch cell;
+};
+
+// A guaranteed bound of |df/dref_d| over cell c from its nodal values, for affine cells
+// of polynomial spaces (the derivatives' nodal interpolants are exact and their
+// Bernstein hull bounds them); +inf elsewhere.
+std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_t c,
+                                       const double* nodal, BoundScratch& s) {
+    const double inf = std::numeric_limits<double>::infinity();
+    std::array<double, 3> bound = {inf, inf, inf};
+    const CellGeometry& cell = geometry.Cell(c, s.cell);
+    const BasisTable& basis = *cell.basis;
+    if (!cell.affine || !basis.polynomial) return bound;
+    auto& deriv = s.deriv;
+    // Reference derivatives at the nodes: exact nodal interpolants of dF/dref_d.
+    const int n = basis.nodeCount;
+    for (auto& v : deriv) v.assign(n, 0.0);
+    if (basis.kind == BasisKind::HexLagrange) {
+        // Tensor product: the 1-D differentiation matrix along each direction.
+        const int p = basis.order, q = p + 1;
+        double D[(kMaxOrder + 1) * (kMaxOrder + 1)], l[kMaxOrder + 1];
+        for (int i = 0; i < q; ++i)
+            LagrangeEquispaced1D(p, double(i) / p, l, D + q * i);  // D[i][j] = l_j'(x_i)
+        for (int k = 0; k < q; ++k)
+            for (int j = 0; j < q; ++j)
+                for (int i = 0; i < q; ++i) {
+                    double dr = 0, ds = 0, dt = 0;
+                    for (int m = 0; m < q; ++m) {
+                        dr += D[q * i + m] * nodal[m + q * (j + q * k)];
+                        ds += D[q * j + m] * nodal[i + q * (m + q * k)];
+                        dt += D[q * k + m] * nodal[i + q * (j + q * m)];
+                    }
+                    const int node = i + q * (j + q * k);
+                    deriv[0][node] = dr;
+                    deriv[1][node] = ds;
+                    deriv[2][node] = dt;
+                }
+    } else {
+        for (int m = 0; m < n; ++m) {
+            const double ref[3] = {basis.refNodes[m][0], basis.refNodes[m][1],
+                                   basis.refNodes[m][2]};
+            EvalBasis(basis, ref, s.ws.values.data(), s.ws.dRef.data());
+            for (int q = 0; q < n; ++q)
+                for (int a = 0; a < 3; ++a) deriv[a][m] += nodal[q] * s.ws.dRef[3 * q + a];
+        }
+    }
+    for (int a = 0; a < 3; ++a) {
+        const Interval i = FieldBounds(basis, deriv[a].data());
+        bound[a] = std::max(std::abs(i.lo), std::abs(i.hi));
+    }
+    return bound;
+}
+}  // namespace
+
+const double* FieldCellData::CellValues(std::int64_t c, std::vector<double>& scratch) const {
+    if (!values.empty() || pointValues.empty()) return values.data() + mesh->cellOffsets[c];
+    const int count = mesh->CellNodeCount(c);
+    scratch.resize(count);
+    const std::int64_t* nodes = mesh->CellNodes(c);
+    for (int m = 0; m < count; ++m) scratch[m] = pointValues[nodes[m]];
+    return scratch.data();
+}
+
+const std::array<double, 3>* FieldCellData::RefGradBound(std::int64_t c) const {
+    if (!refGradBound.empty()) return &refGradBound[c];
+    const auto it = std::lower_bound(fallbackCells.begin(), fallbackCells.end(), c);
+    if (it == fallbackCells.end() || *it != c) return nullptr;
+    return &fallbackBounds[it - fallbackCells.begin()];
+}
+
 FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometry,
                                    const ScalarSelector& field) {
     FieldCellData d;
     d.mesh = &mesh;
     const std::int64_t cells = mesh.CellCount();
-    d.values.resize(mesh.connectivity.size());
     const double inf = std::numeric_limits<double>::infinity();
+    if (field.field->association != Association::Point) {
+        d.values.resize(mesh.connectivity.size());
+        d.refGradBound.assign(cells, {inf, inf, inf});
+        return d;
+    }
+    if (cells > 0 && geometry.derivedCells == cells) {
+        // Linear tetrahedra only: the field per point, and the bounds of the tetrahedra
+        // without a closed form.
+        const std::int64_t points = mesh.PointCount();
+        d.pointValues.resize(points);
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, points, 4096),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                                  d.pointValues[i] = ScalarValue(field, i);
+                          });
+        tbb::enumerable_thread_specific<std::vector<std::int64_t>> found;
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                                  if (LinearTetDegenerate(mesh, c)) found.local().push_back(c);
+                          });
+        for (const auto& part : found)
+            d.fallbackCells.insert(d.fallbackCells.end(), part.begin(), part.end());
+        std::sort(d.fallbackCells.begin(), d.fallbackCells.end());
+        BoundScratch scratch;
+        std::vector<double> nodal;
+        for (std::int64_t c : d.fallbackCells)
+            d.fallbackBounds.push_back(
+                CellRefGradBound(geometry, c, d.CellValues(c, nodal), scratch));
+        return d;
+    }
+    d.values.resize(mesh.connectivity.size());
     d.refGradBound.assign(cells, {inf, inf, inf});
-    if (field.field->association != Association::Point) return d;
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 256),
                       [&](const tbb::blocked_range<std::int64_t>& range) {
-        std::vector<double> nodal, deriv[3];
-        EvalWorkspace ws;
-        CellScratch scratch;
+        std::vector<double> nodal;
+        BoundScratch scratch;
         for (std::int64_t c = range.begin(); c < range.end(); ++c) {
             GatherCellValues(mesh, *field.field, field.component, c, nodal);
             std::copy(nodal.begin(), nodal.end(), d.values.begin() + mesh.cellOffsets[c]);
-            const CellGeometry& cell = geometry.Cell(c, scratch);
-            const BasisTable& basis = *cell.basis;
-            if (!cell.affine || !basis.polynomial) continue;
-            // Reference derivatives at the nodes: exact nodal interpolants of dF/dref_d.
-            const int n = basis.nodeCount;
-            for (auto& v : deriv) v.assign(n, 0.0);
-            if (basis.kind == BasisKind::HexLagrange) {
-                // Tensor product: the 1-D differentiation matrix along each direction.
-                const int p = basis.order, q = p + 1;
-                double D[(kMaxOrder + 1) * (kMaxOrder + 1)], l[kMaxOrder + 1];
-                for (int i = 0; i < q; ++i)
-                    LagrangeEquispaced1D(p, double(i) / p, l, D + q * i);  // D[i][j] = l_j'(x_i)
-                for (int k = 0; k < q; ++k)
-                    for (int j = 0; j < q; ++j)
-                        for (int i = 0; i < q; ++i) {
-                            double dr = 0, ds = 0, dt = 0;
-                            for (int m = 0; m < q; ++m) {
-                                dr += D[q * i + m] * nodal[m + q * (j + q * k)];
-                                ds += D[q * j + m] * nodal[i + q * (m + q * k)];
-                                dt += D[q * k + m] * nodal[i + q * (j + q * m)];
-                            }
-                            const int node = i + q * (j + q * k);
-                            deriv[0][node] = dr;
-                            deriv[1][node] = ds;
-                            deriv[2][node] = dt;
-                        }
-            } else
-            for (int m = 0; m < n; ++m) {
-                const double ref[3] = {basis.refNodes[m][0], basis.refNodes[m][1],
-                                       basis.refNodes[m][2]};
-                EvalBasis(basis, ref, ws.values.data(), ws.dRef.data());
-                for (int q = 0; q < n; ++q)
-                    for (int a = 0; a < 3; ++a) deriv[a][m] += nodal[q] * ws.dRef[3 * q + a];
-            }
-            for (int a = 0; a < 3; ++a) {
-                const Interval i = FieldBounds(basis, deriv[a].data());
-                d.refGradBound[c][a] = std::max(std::abs(i.lo), std::abs(i.hi));
-            }
+            // A derived tetrahedron's bound is read only where BeginLinearTet fails.
+            if (geometry.IsDerived(c) && !LinearTetDegenerate(mesh, c)) continue;
+            d.refGradBound[c] = CellRefGradBound(geometry, c, nodal.data(), scratch);
         }
     });
     ReduceHexOrders(mesh, field, d);
@@ -189,12 +275,11 @@ void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry
                          const InversionOptions& inversion) {
     (void)field;  // `data` was built for this field
     linearTet_ = false;
-    if (geometry.IsDerived(c) &&
-        BeginLinearTet(*data.mesh, c, data.values.data() + data.mesh->cellOffsets[c], ray))
+    if (geometry.IsDerived(c) && BeginLinearTet(*data.mesh, c, data.CellValues(c, nodal_), ray))
         return;
     BeginCommon(geometry, c, ray, inversion);
-    scalar_.nodal = data.values.data() + data.mesh->cellOffsets[c];
-    gradBound_ = &data.refGradBound[c];
+    scalar_.nodal = data.CellValues(c, nodal_);
+    gradBound_ = data.RefGradBound(c);
     lineDegree_ = cell_->basis->lineDegree;
     if (!data.reducedOrder.empty() && data.reducedOrder[c] > 0) {
         // Evaluated at its own lower order: along a line in an affine cell that is a

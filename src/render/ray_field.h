@@ -31,6 +31,21 @@ struct FieldCellData {
     /// Largest bound, over the reduced cells, of |reduced interpolant - cell's| (absolute):
     /// the Lebesgue constant cubed times the nodal rounding.
     double reductionTolerance = 0;
+    /// A point field on a mesh of linear tetrahedra only (every cell derived, see
+    /// MeshGeometry::IsDerived) keeps nothing per cell: `values` and `refGradBound` stay
+    /// empty, each tetrahedron reads its four values from `pointValues` (the field at every
+    /// point), and only the tetrahedra that SegmentField::BeginLinearTet cannot take
+    /// (degenerate ones) keep a derivative bound: `fallbackBounds[k]` is cell
+    /// `fallbackCells[k]`'s (sorted by cell).
+    std::vector<double> pointValues;
+    std::vector<std::int64_t> fallbackCells;
+    std::vector<std::array<double, 3>> fallbackBounds;
+
+    /// Cell c's nodal values: in `values`, or gathered from `pointValues` into `scratch`
+    /// (then valid until `scratch` changes).
+    const double* CellValues(std::int64_t c, std::vector<double>& scratch) const;
+    /// Cell c's derivative bound; nullptr where none is kept.
+    const std::array<double, 3>* RefGradBound(std::int64_t c) const;
 
     static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
                                const ScalarSelector& field);

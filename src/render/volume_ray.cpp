@@ -252,8 +252,12 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
     // The top coefficient of each Lagrange hexahedron (see VolumeSetup::topCoefficient):
     // the tensor divided difference of the nodal values at the equispaced y nodes.
     s.topCoefficient.resize(count);
+    bool anyLagrangeHex = false;  // else left empty (the integrator checks)
+    for (std::int64_t c = 0; c < cells && !anyLagrangeHex; ++c)
+        anyLagrangeHex = mesh.cellShape[c] == CellShape::Hex &&
+                         mesh.cellFamily[c] == CellFamily::Lagrange;
     for (int f = 0; f < count; ++f) {
-        if (!s.data[f]) continue;
+        if (!s.data[f] || !anyLagrangeHex) continue;
         const FieldCellData& data = *s.data[f];
         s.topCoefficient[f].assign(cells, 0.0);
         tbb::parallel_for(

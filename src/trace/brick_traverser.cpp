@@ -7,6 +7,7 @@
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -14,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <numeric>
 #include <sstream>
@@ -160,14 +162,23 @@ void MergePoints(const std::vector<double>& points, double tol, double diag,
     // within tol of its cell's side, which is rare.
     const double cellSize = diag > 0 ? std::max(16 * tol, 1e-9 * diag) : 1.0;
     std::vector<std::array<std::int64_t, 3>> key(n);
-    for (std::int64_t i = 0; i < n; ++i)
-        for (int d = 0; d < 3; ++d)
-            key[i][d] = static_cast<std::int64_t>(
-                std::floor((points[3 * i + d] - lo[d]) / cellSize));
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n, 16384),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                              for (int d = 0; d < 3; ++d)
+                                  key[i][d] = static_cast<std::int64_t>(
+                                      std::floor((points[3 * i + d] - lo[d]) / cellSize));
+                      });
     std::vector<std::int64_t> order(n);
     std::iota(order.begin(), order.end(), 0);
-    std::sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
-        return key[a] != key[b] ? key[a] < key[b] : a < b;
+    // (key, index) is a total order: the sorted order is unique, however it is sorted.
+    tbb::parallel_sort(order.begin(), order.end(), [&](std::int64_t a, std::int64_t b) {
+        const auto& ka = key[a];
+        const auto& kb = key[b];
+        if (ka[0] != kb[0]) return ka[0] < kb[0];
+        if (ka[1] != kb[1]) return ka[1] < kb[1];
+        if (ka[2] != kb[2]) return ka[2] < kb[2];
+        return a < b;
     });
     std::vector<std::int64_t> parent(n);
     std::iota(parent.begin(), parent.end(), 0);
@@ -346,14 +357,42 @@ constexpr const char* kSource = "mesh";
 constexpr std::int32_t kNone = -1, kDegenerate = -2;
 }  // namespace
 
+namespace {
+/// An array of the build whose pages are first written by all threads: assign(n, value)
+/// fills it in parallel (std::vector::assign is one thread's memset and page faults).
+template <typename T>
+class BuildArray {
+  public:
+    void assign(std::size_t n, T value) {
+        data_.reset(new T[n]);  // default-initialised: not yet touched
+        size_ = n;
+        T* data = data_.get();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::size_t(1) << 16),
+                          [&](const tbb::blocked_range<std::size_t>& range) {
+                              std::fill(data + range.begin(), data + range.end(), value);
+                          });
+    }
+    T& operator[](std::size_t i) { return data_[i]; }
+    const T& operator[](std::size_t i) const { return data_[i]; }
+    std::size_t size() const { return size_; }
+
+  private:
+    std::unique_ptr<T[]> data_;
+    std::size_t size_ = 0;
+};
+}  // namespace
+
 /// What the phases of BuildTopology hand to each other; freed when it returns.
 struct BrickTraverser::Impl::TopologyBuild {
     double diag = 0;                       ///< diagonal of the mesh's point bounds
     std::vector<std::int32_t> mergedOf;    ///< point -> merged id
-    std::vector<std::int32_t> corners;     ///< 8 per cell: merged ids of its corners
-    std::vector<std::int8_t> orient;       ///< per cell: +1, or -1 for a mirrored cell
-    std::vector<std::int32_t> nbCell;      ///< 6 per cell: neighbour, kNone, kDegenerate
-    std::vector<std::int8_t> nbFace;       ///< 6 per cell: the neighbour's face
+    BuildArray<std::int32_t> corners;      ///< 8 per cell: merged ids of its corners
+    BuildArray<std::int8_t> orient;        ///< per cell: +1, or -1 for a mirrored cell
+    BuildArray<std::int32_t> nbCell;       ///< 6 per cell: neighbour, kNone, kDegenerate
+    BuildArray<std::int8_t> nbFace;        ///< 6 per cell: the neighbour's face
+    /// 6 per cell, for triangles with a neighbour: 1 where the two cells' outward corner
+    /// cycles of the face turn the same way (the cells overlap), else 0.
+    BuildArray<std::uint8_t> nbSameSense;
     std::int64_t nFaces = 0;
 };
 
@@ -527,21 +566,53 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     };
     nbCell.assign(6 * nCells, kNone);
     nbFace.assign(6 * nCells, -1);
+    t.nbSameSense.assign(6 * nCells, 0);
     std::atomic<std::int64_t> badCell{std::numeric_limits<std::int64_t>::max()};
     {
         // A face after its smallest corner: the other corners (a triangle's fourth is -1,
-        // so triangles and quadrilaterals never match) and its cell and face.
-        struct FaceKey {
+        // so triangles and quadrilaterals never match), its cell and face, and for
+        // triangles the parity of its outward corner cycle by merged id. Ordered by
+        // corners, then cell, then face. Two layouts: 16 bytes while cell << 4 fits 32
+        // bits, else 20.
+        struct NarrowFaceKey {
             std::int32_t k[3];
-            std::int32_t cell;
-            std::int8_t face;
-            bool operator<(const FaceKey& o) const {
+            std::uint32_t cf;  // cell << 4 | face << 1 | parity
+            void Set(const std::int32_t* key, std::int64_t c, int f, int parity) {
+                k[0] = key[0], k[1] = key[1], k[2] = key[2];
+                cf = std::uint32_t(c) << 4 | std::uint32_t(f) << 1 | std::uint32_t(parity);
+            }
+            std::int32_t Cell() const { return std::int32_t(cf >> 4); }
+            int Face() const { return int(cf >> 1 & 7); }
+            int Parity() const { return int(cf & 1); }
+            bool operator<(const NarrowFaceKey& o) const {
                 if (k[0] != o.k[0]) return k[0] < o.k[0];
                 if (k[1] != o.k[1]) return k[1] < o.k[1];
                 if (k[2] != o.k[2]) return k[2] < o.k[2];
-                return cell != o.cell ? cell < o.cell : face < o.face;
+                return cf < o.cf;  // cell, then face (the parity bit never decides)
             }
-            bool SameFace(const FaceKey& o) const {
+            bool SameFace(const NarrowFaceKey& o) const {
+                return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
+            }
+        };
+        struct WideFaceKey {
+            std::int32_t k[3];
+            std::int32_t cell;
+            std::int8_t bits;  // face | parity << 3
+            void Set(const std::int32_t* key, std::int64_t c, int f, int parity) {
+                k[0] = key[0], k[1] = key[1], k[2] = key[2];
+                cell = std::int32_t(c);
+                bits = std::int8_t(f | parity << 3);
+            }
+            std::int32_t Cell() const { return cell; }
+            int Face() const { return bits & 7; }
+            int Parity() const { return bits >> 3 & 1; }
+            bool operator<(const WideFaceKey& o) const {
+                if (k[0] != o.k[0]) return k[0] < o.k[0];
+                if (k[1] != o.k[1]) return k[1] < o.k[1];
+                if (k[2] != o.k[2]) return k[2] < o.k[2];
+                return cell != o.cell ? cell < o.cell : Face() < o.Face();
+            }
+            bool SameFace(const WideFaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }
         };
@@ -559,12 +630,21 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             for (std::int64_t c = k * chunkCells; c < end; ++c) {
                 const CellTopology& s = Topology(mesh.cellShape[c]);
                 for (int f = 0; f < s.faces; ++f) {
-                    const int n = sortedKey(c, f, key);
-                    if (std::adjacent_find(key, key + n) != key + n) {
+                    // The smallest corner, and whether two corners are the same point
+                    // (as sortedKey's sorted run would show, without the sort).
+                    const int n = s.faceSize[f];
+                    for (int a = 0; a < n; ++a) key[a] = corners[8 * c + s.face[f][a]];
+                    bool repeated = false;
+                    std::int32_t smallest = key[0];
+                    for (int a = 1; a < n; ++a) {
+                        smallest = std::min(smallest, key[a]);
+                        for (int b = 0; b < a; ++b) repeated = repeated || key[a] == key[b];
+                    }
+                    if (repeated) {
                         nbCell[6 * c + f] = kDegenerate;
                         continue;
                     }
-                    ++h[key[0]];
+                    ++h[smallest];
                 }
             }
         });
@@ -579,7 +659,11 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             }
             bucket[v + 1] = at;
         }
-        std::vector<FaceKey> keys(bucket.back());
+        auto fillAndMatch = [&](auto keyType) {
+        using FaceKey = decltype(keyType);
+        // Not value-initialised: every key is written below (in parallel, so the pages
+        // are first touched by both threads).
+        std::unique_ptr<FaceKey[]> keys(new FaceKey[bucket.back()]);
         tbb::parallel_for(0, kChunks, [&](int k) {
             std::vector<std::int64_t>& fill = count[k];
             std::int32_t key[4];
@@ -589,12 +673,16 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                 for (int f = 0; f < s.faces; ++f) {
                     if (nbCell[6 * c + f] == kDegenerate) continue;
                     const int n = sortedKey(c, f, key);
-                    FaceKey& fk = keys[fill[key[0]]++];
-                    fk.k[0] = key[1];
-                    fk.k[1] = key[2];
-                    fk.k[2] = n == 4 ? key[3] : -1;
-                    fk.cell = std::int32_t(c);
-                    fk.face = std::int8_t(f);
+                    if (n == 3) key[3] = -1;
+                    int parity = 0;
+                    if (n == 3) {
+                        // The outward cycle (as BuildFaceRecords walks it): its inversions.
+                        std::int32_t o[3];
+                        for (int q = 0; q < 3; ++q)
+                            o[q] = corners[8 * c + s.face[f][t.orient[c] > 0 ? q : (3 - q) % 3]];
+                        parity = ((o[0] > o[1]) + (o[0] > o[2]) + (o[1] > o[2])) & 1;
+                    }
+                    keys[fill[key[0]]++].Set(key + 1, c, f, parity);
                 }
             }
         });
@@ -604,28 +692,41 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
             [&](const tbb::blocked_range<std::int64_t>& range) {
                 for (std::int64_t v = range.begin(); v < range.end(); ++v) {
-                    FaceKey* first = keys.data() + bucket[v];
-                    FaceKey* last = keys.data() + bucket[v + 1];
+                    FaceKey* first = keys.get() + bucket[v];
+                    FaceKey* last = keys.get() + bucket[v + 1];
                     std::sort(first, last);
                     for (FaceKey* run = first; run < last;) {
                         FaceKey* end = run + 1;
                         while (end < last && end->SameFace(*run)) ++end;
-                        if (end - run == 2 && run[0].cell != run[1].cell) {
-                            nbCell[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].cell;
-                            nbFace[6 * std::int64_t(run[0].cell) + run[0].face] = run[1].face;
-                            nbCell[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].cell;
-                            nbFace[6 * std::int64_t(run[1].cell) + run[1].face] = run[0].face;
+                        if (end - run == 2 && run[0].Cell() != run[1].Cell()) {
+                            const std::int64_t a = 6 * std::int64_t(run[0].Cell()) + run[0].Face();
+                            const std::int64_t b = 6 * std::int64_t(run[1].Cell()) + run[1].Face();
+                            nbCell[a] = run[1].Cell();
+                            nbFace[a] = std::int8_t(run[1].Face());
+                            nbCell[b] = run[0].Cell();
+                            nbFace[b] = std::int8_t(run[0].Face());
+                            if (run->k[2] < 0) {
+                                // Two cycles of the same three corners turn the same way
+                                // exactly when their parities agree.
+                                const std::uint8_t same = run[0].Parity() == run[1].Parity();
+                                t.nbSameSense[a] = t.nbSameSense[b] = same;
+                            }
                         } else if (end - run > 2) {
                             // Sorted by cell within the run: the first names the lowest.
                             std::int64_t cur = badCell.load();
-                            while (run->cell < cur &&
-                                   !badCell.compare_exchange_weak(cur, run->cell)) {
+                            while (run->Cell() < cur &&
+                                   !badCell.compare_exchange_weak(cur, run->Cell())) {
                             }
                         }
                         run = end;
                     }
                 }
             });
+        };
+        if (nCells < (std::int64_t(1) << 28))
+            fillAndMatch(NarrowFaceKey{});
+        else
+            fillAndMatch(WideFaceKey{});
     }
     if (badCell.load() != std::numeric_limits<std::int64_t>::max()) {
         std::ostringstream where;
@@ -645,26 +746,51 @@ void BrickTraverser::Impl::NumberFaces(TopologyBuild& t) {
     for (std::int64_t c = 0; c < nCells; ++c)
         cellFaceOffset[c + 1] = cellFaceOffset[c] + Topology(mesh.cellShape[c]).faces;
     cellFaces.assign(cellFaceOffset.back(), -1);
-    nFaces = 0;
-    for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = Topology(mesh.cellShape[c]).faces;
-        for (int f = 0; f < nf; ++f) {
-            const std::int32_t nb = nbCell[6 * c + f];
-            if (nb < 0 || c < nb)
-                cellFaces[cellFaceOffset[c] + f] = std::int32_t(nFaces++);
-            if (nFaces >= std::numeric_limits<std::int32_t>::max())
-                throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
+    // Ids in cell order, as one sequential pass would give them: the faces each range of
+    // cells owns are counted, then numbered from the range's start.
+    const std::int64_t chunkCells = 16384;
+    const std::int64_t chunks = (nCells + chunkCells - 1) / chunkCells;
+    std::vector<std::int64_t> chunkStart(chunks + 1, 0);
+    auto owned = [&](std::int64_t c, int f) {
+        const std::int32_t nb = nbCell[6 * c + f];
+        return nb < 0 || c < nb;
+    };
+    tbb::parallel_for(std::int64_t(0), chunks, [&](std::int64_t k) {
+        std::int64_t count = 0;
+        const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+        for (std::int64_t c = k * chunkCells; c < end; ++c) {
+            const int nf = Topology(mesh.cellShape[c]).faces;
+            for (int f = 0; f < nf; ++f) count += owned(c, f);
         }
-    }
-    for (std::int64_t c = 0; c < nCells; ++c) {
-        const int nf = Topology(mesh.cellShape[c]).faces;
-        for (int f = 0; f < nf; ++f) {
-            const std::int32_t nb = nbCell[6 * c + f];
-            if (nb >= 0 && nb < c)
-                cellFaces[cellFaceOffset[c] + f] =
-                    cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+        chunkStart[k + 1] = count;
+    });
+    for (std::int64_t k = 0; k < chunks; ++k) chunkStart[k + 1] += chunkStart[k];
+    nFaces = chunkStart[chunks];
+    if (nFaces >= std::numeric_limits<std::int32_t>::max())
+        throw InputError(kSource, "", "more than 2^31 - 1 faces in one brick");
+    tbb::parallel_for(std::int64_t(0), chunks, [&](std::int64_t k) {
+        std::int64_t next = chunkStart[k];
+        const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+        for (std::int64_t c = k * chunkCells; c < end; ++c) {
+            const int nf = Topology(mesh.cellShape[c]).faces;
+            for (int f = 0; f < nf; ++f)
+                if (owned(c, f)) cellFaces[cellFaceOffset[c] + f] = std::int32_t(next++);
         }
-    }
+    });
+    // A shared face's id, from the lower-numbered cell that owns it (all numbered above).
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, nCells, 4096),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                const int nf = Topology(mesh.cellShape[c]).faces;
+                for (int f = 0; f < nf; ++f) {
+                    const std::int32_t nb = nbCell[6 * c + f];
+                    if (nb >= 0 && nb < c)
+                        cellFaces[cellFaceOffset[c] + f] =
+                            cellFaces[cellFaceOffset[nb] + nbFace[6 * c + f]];
+                }
+            }
+        });
 }
 
 // 6. The canonical record of every face and its geometry.
@@ -675,6 +801,7 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
     const auto& orient = t.orient;
     const auto& nbCell = t.nbCell;
     const auto& nbFace = t.nbFace;
+    const auto& nbSameSense = t.nbSameSense;
     const std::int64_t nFaces = t.nFaces;
     const auto& mergedOf = t.mergedOf;
     faces.assign(nFaces, FaceRec{});
@@ -683,6 +810,22 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
         const double* y = P(b);
         return x[0] != y[0] ? x[0] < y[0] : x[1] != y[1] ? x[1] < y[1] : x[2] < y[2];
     };
+    // The merged points' ranks in byPosition order. Merged points have distinct
+    // positions, so the order is total and comparing ranks is comparing positions, from
+    // a small array instead of three coordinates of two random points.
+    const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
+    std::vector<std::int32_t> rank(nMerged);
+    {
+        std::vector<std::int32_t> order(nMerged);
+        std::iota(order.begin(), order.end(), 0);
+        tbb::parallel_sort(order.begin(), order.end(), byPosition);
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nMerged, 16384),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                                  rank[order[i]] = std::int32_t(i);
+                          });
+    }
+    const auto byRank = [&rank](std::int32_t a, std::int32_t b) { return rank[a] < rank[b]; };
     // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
     // (from its lower corner by position), so that every face holding the edge sees the
     // same sequence; returns whether that reverses the face's counter-clockwise order.
@@ -791,14 +934,22 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                 rec.cell[0] = std::int32_t(c);
                 continue;
             }
-            const bool same = Canonicalize(ids, n, canon, byPosition);
+            const bool same = Canonicalize(ids, n, canon, byRank);
             std::copy(canon, canon + n, rec.v);
             rec.cell[same ? 0 : 1] = std::int32_t(c);
             if (nb >= 0) {
-                std::int32_t ids2[4], canon2[4];
-                int local2[4];
-                outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
-                const bool same2 = Canonicalize(ids2, n, canon2, byPosition);
+                // The neighbour's canonical sense: for a triangle from the parities that
+                // MatchFaces compared (no visit to the neighbour's corners); a
+                // quadrilateral's cycles may differ by more than their sense.
+                bool same2;
+                if (n == 3) {
+                    same2 = nbSameSense[6 * c + f] ? same : !same;
+                } else {
+                    std::int32_t ids2[4], canon2[4];
+                    int local2[4];
+                    outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                    same2 = Canonicalize(ids2, n, canon2, byRank);
+                }
                 if (same2 == same) {
                     // Reported after the loop, for the lowest cell whatever the order.
                     static std::mutex overlapMutex;
@@ -810,6 +961,11 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                     continue;
                 }
                 rec.cell[same2 ? 0 : 1] = nb;
+            }
+            const int p = mesh.cellOrder[c];
+            if (n == 3 && p == 1) {
+                rec.kind = FaceKind::Triangle;  // a straight triangle: nothing to measure
+                continue;
             }
             // Local corner of each canonical corner.
             int canonLocal[4];
@@ -830,7 +986,6 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
             double size = std::sqrt(Dist2(lo, hi));
             const double tol = options.straightTolerance * size;
             // Straight? Compare every face node with the (bi)linear face of the corners.
-            const int p = mesh.cellOrder[c];
             const CellFamily family = mesh.cellFamily[c];
             const FaceBasis basis = n == 3 ? FaceBasis::Triangle
                                     : family == CellFamily::Serendipity

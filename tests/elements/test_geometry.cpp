@@ -581,5 +581,57 @@ TEST(Geometry, DerivedLinearTetsEqualStoredGeometry) {
     EXPECT_EQ(allTets.affineCells, cube.CellCount());
 }
 
+// GeometryBoxEnclosure holds the exact box of Lagrange tetrahedra of every order it
+// covers (perturbed lattices, far from the origin and near it, flat ones), and is
+// infinite for other bases; MeshGeometry's bounds of a mesh of linear tetrahedra (which
+// skip the exact box of cells whose enclosure is inside the bounds so far) are the union
+// of every cell's exact box.
+TEST(Geometry, BoxEnclosureHoldsTheGeometryBox) {
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> uni(-1, 1);
+    for (int p = 1; p <= 4; ++p) {
+        const BasisTable& basis = GetBasis(CellShape::Tet, p, CellFamily::Lagrange);
+        for (int trial = 0; trial < 400; ++trial) {
+            const double offset = trial % 4 == 0 ? 0 : (trial % 4 == 1 ? 1e6 : -3.5);
+            const double scale = trial % 3 == 0 ? 1e-9 : 1;
+            const double noise = trial % 5 == 0 ? 0 : 0.2 / p;
+            std::vector<double> xyz(3 * basis.nodeCount);
+            for (int m = 0; m < basis.nodeCount; ++m)
+                for (int d = 0; d < 3; ++d) {
+                    const double flat = trial % 7 == 0 && d == 2 ? 0 : 1;
+                    xyz[3 * m + d] =
+                        offset + scale * flat * (basis.refNodes[m][d] + noise * uni(rng));
+                }
+            const Box exact = GeometryBox(basis, xyz.data());
+            const Box outer = GeometryBoxEnclosure(basis, xyz.data());
+            for (int d = 0; d < 3; ++d) {
+                EXPECT_LE(outer.lo[d], exact.lo[d]) << p << " " << trial;
+                EXPECT_GE(outer.hi[d], exact.hi[d]) << p << " " << trial;
+            }
+        }
+    }
+    const BasisTable& hex = GetBasis(CellShape::Hex, 1, CellFamily::Lagrange);
+    std::vector<double> xyz(3 * hex.nodeCount, 0.5);
+    EXPECT_EQ(GeometryBoxEnclosure(hex, xyz.data()).lo[0], -INFINITY);
+    EXPECT_EQ(GeometryBoxEnclosure(hex, xyz.data()).hi[2], INFINITY);
+
+    const Mesh cube = ReadMesh("builtin:cube-tets-12");
+    const MeshGeometry geometry = MeshGeometry::Build(cube);
+    Box bounds{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+    for (std::int64_t c = 0; c < cube.CellCount(); ++c) {
+        double corners[12];
+        for (int m = 0; m < 4; ++m)
+            for (int d = 0; d < 3; ++d)
+                corners[3 * m + d] = cube.points[3 * cube.CellNodes(c)[m] + d];
+        const Box box = GeometryBox(geometry.Basis(c), corners);
+        for (int d = 0; d < 3; ++d) {
+            bounds.lo[d] = std::min(bounds.lo[d], box.lo[d]);
+            bounds.hi[d] = std::max(bounds.hi[d], box.hi[d]);
+        }
+    }
+    EXPECT_EQ(geometry.bounds.lo, bounds.lo);
+    EXPECT_EQ(geometry.bounds.hi, bounds.hi);
+}
+
 }  // namespace
 }  // namespace hpray

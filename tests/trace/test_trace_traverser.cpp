@@ -14,6 +14,7 @@
 
 #include "mesh/builtin.h"
 #include "trace/brick_traverser.h"
+#include "util/error.h"
 #include "trace_test_meshes.h"
 
 namespace hpray {
@@ -584,6 +585,41 @@ TEST(BrickTraverser, InvertedCellsAreTraversedLikePositiveOnes) {
             EXPECT_EQ(sa[k].cell, sb[k].cell) << i;
         EXPECT_NEAR(Sum(sa), Sum(sb), 1e-13);
     }
+}
+
+// Two tetrahedra on one shared triangle, the second's apex at (0.2, 0.2, z), each with
+// its corners given in either orientation: the pair is valid exactly when the apexes lie
+// on opposite sides of the triangle, whichever way each cell lists its corners.
+TEST(BrickTraverser, TetsOnTheSameSideOfTheirSharedFaceAreRejected) {
+    for (double z : {-0.5, 0.5})
+        for (int flipA = 0; flipA < 2; ++flipA)
+            for (int flipB = 0; flipB < 2; ++flipB) {
+                Mesh mesh;
+                mesh.points = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.2, 0.2, z};
+                std::int64_t a[4] = {0, 1, 2, 3}, b[4] = {1, 0, 2, 4};
+                if (flipA) std::swap(a[1], a[2]);
+                if (flipB) std::swap(b[1], b[2]);
+                mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, a, 4);
+                mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, b, 4);
+                const std::string what = "z " + std::to_string(z) + " flips " +
+                                         std::to_string(flipA) + std::to_string(flipB);
+                if (z > 0) {
+                    EXPECT_THROW(BrickTraverser{Brick::WholeMesh(mesh)}, InputError) << what;
+                    continue;
+                }
+                const BrickTraverser tr(Brick::WholeMesh(mesh));
+                EXPECT_EQ(tr.Stats().faces, 7) << what;
+                EXPECT_EQ(tr.Stats().boundaryFaces, 6) << what;
+                // Up through both cells: below the shared face, then above it.
+                std::vector<Segment> segs;
+                tr.Trace(MakeRay({0.15, 0.15, -1}, {0.15, 0.15, 1}), -INFINITY, INFINITY,
+                         segs);
+                ASSERT_EQ(segs.size(), 2u) << what;
+                EXPECT_EQ(segs[0].cell, 1) << what;
+                EXPECT_EQ(segs[1].cell, 0) << what;
+                EXPECT_DOUBLE_EQ(segs[0].tExit, 1.0) << what;
+                EXPECT_EQ(segs[0].tExit, segs[1].tEnter) << what;
+            }
 }
 
 TEST(BrickTraverser, ConcurrentQueriesMatchSerialOnes) {
