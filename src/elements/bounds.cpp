@@ -270,6 +270,20 @@ void ApplyAxis(const Matrix& m, int n1, int axis, std::vector<double>& x,
         }
 }
 
+// Row r of a simplex's Lagrange-to-Bernstein transform applied to f (s) and its absolute
+// value to af (as), summed in column order.
+inline void SimplexRow(const BernsteinTable& t, int n, int r, const double* f,
+                       const double* af, double& s, double& as) {
+    s = 0.0;
+    as = 0.0;
+    const double* row = t.simplex.v.data() + static_cast<std::size_t>(r) * n;
+    const double* arow = t.simplex.abs.data() + static_cast<std::size_t>(r) * n;
+    for (int c = 0; c < n; ++c) {
+        s += row[c] * f[c];
+        as += arow[c] * af[c];
+    }
+}
+
 // Bernstein coefficients (and |T| |f|) of order-p Lagrange nodal values of a shape.
 // `af` bounds |f| entry-wise (it may be larger, to carry the input's own error bound).
 void Bernstein(const BernsteinTable& t, const BasisTable& basis, const std::vector<double>& f,
@@ -286,17 +300,8 @@ void Bernstein(const BernsteinTable& t, const BasisTable& basis, const std::vect
         case CellShape::Tet:
             out.assign(n, 0.0);
             outAbs.assign(n, 0.0);
-            for (int r = 0; r < n; ++r) {
-                double s = 0.0, as = 0.0;
-                const double* row = t.simplex.v.data() + static_cast<std::size_t>(r) * n;
-                const double* arow = t.simplex.abs.data() + static_cast<std::size_t>(r) * n;
-                for (int c = 0; c < n; ++c) {
-                    s += row[c] * f[c];
-                    as += arow[c] * af[c];
-                }
-                out[r] = s;
-                outAbs[r] = as;
-            }
+            for (int r = 0; r < n; ++r)
+                SimplexRow(t, n, r, f.data(), af.data(), out[r], outAbs[r]);
             return;
         case CellShape::Wedge: {
             const int n2 = t.simplex.rows;
@@ -424,13 +429,8 @@ Interval SmallTetBoundsN(const BasisTable& basis, const double* coeffsIn, int st
     const double inf = std::numeric_limits<double>::infinity();
     Interval out{inf, -inf};
     for (int r = 0; r < n; ++r) {
-        double s = 0.0, as = 0.0;
-        const double* row = t.simplex.v.data() + static_cast<std::size_t>(r) * n;
-        const double* arow = t.simplex.abs.data() + static_cast<std::size_t>(r) * n;
-        for (int c = 0; c < n; ++c) {
-            s += row[c] * f[c];
-            as += arow[c] * af[c];
-        }
+        double s, as;
+        SimplexRow(t, n, r, f, af, s, as);
         const double margin = gamma * as;
         out.lo = std::min(out.lo, s - margin);
         out.hi = std::max(out.hi, s + margin);
@@ -564,8 +564,8 @@ Box GeometryBoxEnclosure(const BasisTable& basis, const double* nodeXyz) {
             lo = std::min(lo, nodeXyz[3 * m + d]);
             hi = std::max(hi, nodeXyz[3 * m + d]);
         }
-        const double w = 2.1 * rowSum * (hi - lo) + 1e-12 * (std::abs(lo) + std::abs(hi)) +
-                         1e-300;
+        const double w =
+            2.1 * rowSum * (hi - lo) + 1e-12 * (std::abs(lo) + std::abs(hi)) + 1e-300;
         box.lo[d] = lo - w;
         box.hi[d] = hi + w;
     }

@@ -4,6 +4,7 @@
 
 #include <mpi.h>
 #include <tbb/info.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -15,8 +16,6 @@
 #include <optional>
 #include <set>
 #include <thread>
-
-#include <unistd.h>
 
 #include "compositor.h"
 #include "io/mesh_io.h"

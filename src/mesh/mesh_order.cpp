@@ -92,7 +92,8 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
         });
         tbb::parallel_sort(pointKey.begin(), pointKey.end());
         ParallelFor(nPoints, [&](std::int64_t i) {
-            pointOld[i] = static_cast<std::int64_t>(pointKey[i] & ((std::uint64_t(1) << 31) - 1));
+            pointOld[i] =
+                static_cast<std::int64_t>(pointKey[i] & ((std::uint64_t(1) << 31) - 1));
             newPoint[pointOld[i]] = i;
         });
     } else {

@@ -13,9 +13,9 @@ namespace hpray {
 /// Renumbers the cells of `mesh` along a Morton (Z-order) curve of their centres (the
 /// mean of their nodes, on a 2^11 grid over the bounds; ties keep their order) and its
 /// points along the same curve by their positions. Every per-cell and per-point array
-/// moves along (fields, shapes, orders, families, ghost flags, VTK types); each cell keeps
-/// its nodes in their order, so every cell is the same cell. Returns the old index of
-/// each new cell.
+/// moves along (fields, shapes, orders, families, ghost flags, VTK types); each cell
+/// keeps its nodes in their order, so every cell is the same cell. Returns the old index
+/// of each new cell.
 std::vector<std::int64_t> OrderSpatially(Mesh& mesh);
 
 }  // namespace hpray

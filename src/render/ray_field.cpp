@@ -146,7 +146,8 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
                                    basis.refNodes[m][2]};
             EvalBasis(basis, ref, s.ws.values.data(), s.ws.dRef.data());
             for (int q = 0; q < n; ++q)
-                for (int a = 0; a < 3; ++a) deriv[a][m] += nodal[q] * s.ws.dRef[3 * q + a];
+                for (int a = 0; a < 3; ++a)
+                    deriv[a][m] += nodal[q] * s.ws.dRef[3 * q + a];
         }
     }
     for (int a = 0; a < 3; ++a) {
@@ -157,8 +158,10 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 }
 }  // namespace
 
-const double* FieldCellData::CellValues(std::int64_t c, std::vector<double>& scratch) const {
-    if (!values.empty() || pointValues.empty()) return values.data() + mesh->cellOffsets[c];
+const double* FieldCellData::CellValues(std::int64_t c,
+                                        std::vector<double>& scratch) const {
+    if (!values.empty() || pointValues.empty())
+        return values.data() + mesh->cellOffsets[c];
     const int count = mesh->CellNodeCount(c);
     scratch.resize(count);
     const std::int64_t* nodes = mesh->CellNodes(c);
@@ -198,7 +201,8 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
                           [&](const tbb::blocked_range<std::int64_t>& range) {
                               for (std::int64_t c = range.begin(); c < range.end(); ++c)
-                                  if (LinearTetDegenerate(mesh, c)) found.local().push_back(c);
+                                  if (LinearTetDegenerate(mesh, c))
+                                      found.local().push_back(c);
                           });
         for (const auto& part : found)
             d.fallbackCells.insert(d.fallbackCells.end(), part.begin(), part.end());
@@ -212,18 +216,20 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
     }
     d.values.resize(mesh.connectivity.size());
     d.refGradBound.assign(cells, {inf, inf, inf});
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 256),
-                      [&](const tbb::blocked_range<std::int64_t>& range) {
-        std::vector<double> nodal;
-        BoundScratch scratch;
-        for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-            GatherCellValues(mesh, *field.field, field.component, c, nodal);
-            std::copy(nodal.begin(), nodal.end(), d.values.begin() + mesh.cellOffsets[c]);
-            // A derived tetrahedron's bound is read only where BeginLinearTet fails.
-            if (geometry.IsDerived(c) && !LinearTetDegenerate(mesh, c)) continue;
-            d.refGradBound[c] = CellRefGradBound(geometry, c, nodal.data(), scratch);
-        }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, cells, 256),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::vector<double> nodal;
+            BoundScratch scratch;
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                GatherCellValues(mesh, *field.field, field.component, c, nodal);
+                std::copy(nodal.begin(), nodal.end(),
+                          d.values.begin() + mesh.cellOffsets[c]);
+                // A derived tetrahedron's bound is read only where BeginLinearTet fails.
+                if (geometry.IsDerived(c) && !LinearTetDegenerate(mesh, c)) continue;
+                d.refGradBound[c] = CellRefGradBound(geometry, c, nodal.data(), scratch);
+            }
+        });
     ReduceHexOrders(mesh, field, d);
     return d;
 }
@@ -238,19 +244,13 @@ bool SegmentField::BeginLinearTet(const Mesh& mesh, std::int64_t c, const double
         for (int d = 0; d < 3; ++d) e[i][d] = p[d] - p0[d];
         du[i] = nodal[i + 1] - nodal[0];
     }
-    // Solve E g = du (rows of E: the edges from corner 0) by Cramer's rule: E^-1 has the
-    // cross products of E's rows as columns, over det E.
-    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
-                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
-                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
-    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    // Solve E g = du (rows of E: the edges from corner 0) by Cramer's rule.
+    double cof[3][3];
+    const double det = EdgeCofactors(e, cof);
     if (det == 0 || !std::isfinite(det)) return false;
-    const double c1[3] = {e[2][1] * e[0][2] - e[2][2] * e[0][1],
-                          e[2][2] * e[0][0] - e[2][0] * e[0][2],
-                          e[2][0] * e[0][1] - e[2][1] * e[0][0]};
-    const double c2[3] = {e[0][1] * e[1][2] - e[0][2] * e[1][1],
-                          e[0][2] * e[1][0] - e[0][0] * e[1][2],
-                          e[0][0] * e[1][1] - e[0][1] * e[1][0]};
+    const double* c0 = cof[0];
+    const double* c1 = cof[1];
+    const double* c2 = cof[2];
     const double inv = 1.0 / det;
     double rel = 0, slope = 0;
     for (int d = 0; d < 3; ++d) {
@@ -275,7 +275,8 @@ void SegmentField::Begin(const FieldCellData& data, const MeshGeometry& geometry
                          const InversionOptions& inversion) {
     (void)field;  // `data` was built for this field
     linearTet_ = false;
-    if (geometry.IsDerived(c) && BeginLinearTet(*data.mesh, c, data.CellValues(c, nodal_), ray))
+    if (geometry.IsDerived(c) &&
+        BeginLinearTet(*data.mesh, c, data.CellValues(c, nodal_), ray))
         return;
     BeginCommon(geometry, c, ray, inversion);
     scalar_.nodal = data.CellValues(c, nodal_);

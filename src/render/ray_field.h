@@ -33,9 +33,9 @@ struct FieldCellData {
     double reductionTolerance = 0;
     /// A point field on a mesh of linear tetrahedra only (every cell derived, see
     /// MeshGeometry::IsDerived) keeps nothing per cell: `values` and `refGradBound` stay
-    /// empty, each tetrahedron reads its four values from `pointValues` (the field at every
-    /// point), and only the tetrahedra that SegmentField::BeginLinearTet cannot take
-    /// (degenerate ones) keep a derivative bound: `fallbackBounds[k]` is cell
+    /// empty, each tetrahedron reads its four values from `pointValues` (the field at
+    /// every point), and only the tetrahedra that SegmentField::BeginLinearTet cannot
+    /// take (degenerate ones) keep a derivative bound: `fallbackBounds[k]` is cell
     /// `fallbackCells[k]`'s (sorted by cell).
     std::vector<double> pointValues;
     std::vector<std::int64_t> fallbackCells;
@@ -50,6 +50,23 @@ struct FieldCellData {
     static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
                                const ScalarSelector& field);
 };
+
+/// The cofactors of the 3x3 matrix E (rows e[0..2]) as the columns of its adjugate:
+/// c[0] = e1 x e2, c[1] = e2 x e0, c[2] = e0 x e1, so E^-1 = [c0 c1 c2] / det E; returns
+/// det E = e0 . c0. Cramer's rule for the gradient of a linear field from a tetrahedron's
+/// edges.
+inline double EdgeCofactors(const double e[3][3], double c[3][3]) {
+    c[0][0] = e[1][1] * e[2][2] - e[1][2] * e[2][1];
+    c[0][1] = e[1][2] * e[2][0] - e[1][0] * e[2][2];
+    c[0][2] = e[1][0] * e[2][1] - e[1][1] * e[2][0];
+    c[1][0] = e[2][1] * e[0][2] - e[2][2] * e[0][1];
+    c[1][1] = e[2][2] * e[0][0] - e[2][0] * e[0][2];
+    c[1][2] = e[2][0] * e[0][1] - e[2][1] * e[0][0];
+    c[2][0] = e[0][1] * e[1][2] - e[0][2] * e[1][1];
+    c[2][1] = e[0][2] * e[1][0] - e[0][0] * e[1][2];
+    c[2][2] = e[0][0] * e[1][1] - e[0][1] * e[1][0];
+    return e[0][0] * c[0][0] + e[0][1] * c[0][1] + e[0][2] * c[0][2];
+}
 
 /// Per-thread evaluator of one scalar field along a ray inside one cell. Reused across
 /// segments without allocation once its buffers have grown to the largest cell.

@@ -94,8 +94,8 @@ inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) co
     for (int c = 0; c < channels_; ++c) {
         slope[c] = (v1[c] - v0[c]) / (s1 - s0);
         // Anchored at the end nearer zero, so the offset carries no large cancellation.
-        offset[c] = std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0
-                                                 : v1[c] - slope[c] * s1;
+        offset[c] =
+            std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0 : v1[c] - slope[c] * s1;
     }
 }
 

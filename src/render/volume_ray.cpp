@@ -241,11 +241,12 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
         } else {
             std::vector<double>& v = s.pointScalars[f];
             v.resize(mesh.PointCount());
-            tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, mesh.PointCount(), 4096),
-                              [&](const tbb::blocked_range<std::int64_t>& range) {
-                                  for (std::int64_t i = range.begin(); i < range.end(); ++i)
-                                      v[i] = ScalarValue(sel, i);
-                              });
+            tbb::parallel_for(
+                tbb::blocked_range<std::int64_t>(0, mesh.PointCount(), 4096),
+                [&](const tbb::blocked_range<std::int64_t>& range) {
+                    for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                        v[i] = ScalarValue(sel, i);
+                });
             s.pointValues[f] = v.data();
         }
     }
@@ -336,7 +337,8 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     // Each ray starts from the same state: its pixel must not depend on the rays the
     // thread integrated before (tiles and threads may take any rays).
     levelHint_ = kStartLevel;
-    for (FacePointSums& sums : faceSums_) sums.t = std::numeric_limits<double>::quiet_NaN();
+    for (FacePointSums& sums : faceSums_)
+        sums.t = std::numeric_limits<double>::quiet_NaN();
     startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
 }
@@ -398,24 +400,20 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
     if (extra < 0) return false;
     // The field's gradient in the ray frame by Cramer's rule on the edges from the entry
     // face's first corner. It only bounds how far the face points may lie off the ray.
-    const double e[3][3] = {{in.x[1] - in.x[0], in.y[1] - in.y[0], in.z[1] - in.z[0]},
-                            {in.x[2] - in.x[0], in.y[2] - in.y[0], in.z[2] - in.z[0]},
-                            {out.x[extra] - in.x[0], out.y[extra] - in.y[0],
-                             out.z[extra] - in.z[0]}};
+    const double e[3][3] = {
+        {in.x[1] - in.x[0], in.y[1] - in.y[0], in.z[1] - in.z[0]},
+        {in.x[2] - in.x[0], in.y[2] - in.y[0], in.z[2] - in.z[0]},
+        {out.x[extra] - in.x[0], out.y[extra] - in.y[0], out.z[extra] - in.z[0]}};
     const double u0 = u[in.v[0]];
     const double du[3] = {u[in.v[1]] - u0, u[in.v[2]] - u0, u[out.v[extra]] - u0};
-    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
-                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
-                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
-    const double c1[3] = {e[2][1] * e[0][2] - e[2][2] * e[0][1],
-                          e[2][2] * e[0][0] - e[2][0] * e[0][2],
-                          e[2][0] * e[0][1] - e[2][1] * e[0][0]};
-    const double c2[3] = {e[0][1] * e[1][2] - e[0][2] * e[1][1],
-                          e[0][2] * e[1][0] - e[0][0] * e[1][2],
-                          e[0][0] * e[1][1] - e[0][1] * e[1][0]};
-    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    double cof[3][3];
+    const double det = EdgeCofactors(e, cof);
+    const double* c0 = cof[0];
+    const double* c1 = cof[1];
+    const double* c2 = cof[2];
     double scale = 1;
-    for (const auto& row : e) scale *= std::abs(row[0]) + std::abs(row[1]) + std::abs(row[2]);
+    for (const auto& row : e)
+        scale *= std::abs(row[0]) + std::abs(row[1]) + std::abs(row[2]);
     // A sliver whose gradient the rounded frame cannot resolve to 1e-6: the cell's own
     // path.
     if (!(std::abs(det) > 1e-6 * scale)) return false;
@@ -453,7 +451,8 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
             for (int m = 0; m < 3; ++m) sums.v[m] = q.v[m];
         }
         value[k] = sums.value;
-        const double off = grad[0] * sums.offX + grad[1] * sums.offY + grad[2] * sums.offZ;
+        const double off =
+            grad[0] * sums.offX + grad[1] * sums.offY + grad[2] * sums.offZ;
         // Twice: the gradient itself carries rounding (at most 1e-6 relative here, and
         // the reciprocal of det one more).
         error = std::max(error, 2 * off + sums.rounding);
@@ -699,12 +698,13 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)).
         forEachBreakpoint(std::min(st.valueEnter, st.valueExit),
                           std::max(st.valueEnter, st.valueExit), [&](double b) {
-            const double x = (b - st.valueEnter) / dv;
-            if (x > 0 && x < 1) {
-                const double t = seg.tEnter + x * length;
-                if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
-            }
-        });
+                              const double x = (b - st.valueEnter) / dv;
+                              if (x > 0 && x < 1) {
+                                  const double t = seg.tEnter + x * length;
+                                  if (t > seg.tEnter && t < seg.tExit)
+                                      crossings_.push_back(t);
+                              }
+                          });
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];

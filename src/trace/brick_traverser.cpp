@@ -119,8 +119,8 @@ void MakeFacePoint(const std::int32_t* ids, const ShearedPoint& a, const Sheared
         fp.z[k] = p[k]->z;
         // The offset's rounding (|a_d| each, |a_kx| <= |x| + |a_kz| as |sx| <= 1), the
         // shear's fused multiply-add and its result's rounding.
-        err = std::max(err, std::abs(p[k]->x) + std::abs(p[k]->y) +
-                                2 * std::abs(p[k]->z) * dirKz);
+        err = std::max(
+            err, std::abs(p[k]->x) + std::abs(p[k]->y) + 2 * std::abs(p[k]->z) * dirKz);
     }
     fp.cornerError = 4 * kU * err;
     fp.t = x.t;
@@ -579,7 +579,8 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             std::uint32_t cf;  // cell << 4 | face << 1 | parity
             void Set(const std::int32_t* key, std::int64_t c, int f, int parity) {
                 k[0] = key[0], k[1] = key[1], k[2] = key[2];
-                cf = std::uint32_t(c) << 4 | std::uint32_t(f) << 1 | std::uint32_t(parity);
+                cf =
+                    std::uint32_t(c) << 4 | std::uint32_t(f) << 1 | std::uint32_t(parity);
             }
             std::int32_t Cell() const { return std::int32_t(cf >> 4); }
             int Face() const { return int(cf >> 1 & 7); }
@@ -638,7 +639,8 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
                     std::int32_t smallest = key[0];
                     for (int a = 1; a < n; ++a) {
                         smallest = std::min(smallest, key[a]);
-                        for (int b = 0; b < a; ++b) repeated = repeated || key[a] == key[b];
+                        for (int b = 0; b < a; ++b)
+                            repeated = repeated || key[a] == key[b];
                     }
                     if (repeated) {
                         nbCell[6 * c + f] = kDegenerate;
@@ -660,68 +662,75 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             bucket[v + 1] = at;
         }
         auto fillAndMatch = [&](auto keyType) {
-        using FaceKey = decltype(keyType);
-        // Not value-initialised: every key is written below (in parallel, so the pages
-        // are first touched by both threads).
-        std::unique_ptr<FaceKey[]> keys(new FaceKey[bucket.back()]);
-        tbb::parallel_for(0, kChunks, [&](int k) {
-            std::vector<std::int64_t>& fill = count[k];
-            std::int32_t key[4];
-            const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
-            for (std::int64_t c = k * chunkCells; c < end; ++c) {
-                const CellTopology& s = Topology(mesh.cellShape[c]);
-                for (int f = 0; f < s.faces; ++f) {
-                    if (nbCell[6 * c + f] == kDegenerate) continue;
-                    const int n = sortedKey(c, f, key);
-                    if (n == 3) key[3] = -1;
-                    int parity = 0;
-                    if (n == 3) {
-                        // The outward cycle (as BuildFaceRecords walks it): its inversions.
-                        std::int32_t o[3];
-                        for (int q = 0; q < 3; ++q)
-                            o[q] = corners[8 * c + s.face[f][t.orient[c] > 0 ? q : (3 - q) % 3]];
-                        parity = ((o[0] > o[1]) + (o[0] > o[2]) + (o[1] > o[2])) & 1;
-                    }
-                    keys[fill[key[0]]++].Set(key + 1, c, f, parity);
-                }
-            }
-        });
-        count.clear();
-        count.shrink_to_fit();
-        tbb::parallel_for(
-            tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
-            [&](const tbb::blocked_range<std::int64_t>& range) {
-                for (std::int64_t v = range.begin(); v < range.end(); ++v) {
-                    FaceKey* first = keys.get() + bucket[v];
-                    FaceKey* last = keys.get() + bucket[v + 1];
-                    std::sort(first, last);
-                    for (FaceKey* run = first; run < last;) {
-                        FaceKey* end = run + 1;
-                        while (end < last && end->SameFace(*run)) ++end;
-                        if (end - run == 2 && run[0].Cell() != run[1].Cell()) {
-                            const std::int64_t a = 6 * std::int64_t(run[0].Cell()) + run[0].Face();
-                            const std::int64_t b = 6 * std::int64_t(run[1].Cell()) + run[1].Face();
-                            nbCell[a] = run[1].Cell();
-                            nbFace[a] = std::int8_t(run[1].Face());
-                            nbCell[b] = run[0].Cell();
-                            nbFace[b] = std::int8_t(run[0].Face());
-                            if (run->k[2] < 0) {
-                                // Two cycles of the same three corners turn the same way
-                                // exactly when their parities agree.
-                                const std::uint8_t same = run[0].Parity() == run[1].Parity();
-                                t.nbSameSense[a] = t.nbSameSense[b] = same;
-                            }
-                        } else if (end - run > 2) {
-                            // Sorted by cell within the run: the first names the lowest.
-                            std::int64_t cur = badCell.load();
-                            while (run->Cell() < cur &&
-                                   !badCell.compare_exchange_weak(cur, run->Cell())) {
-                            }
+            using FaceKey = decltype(keyType);
+            // Not value-initialised: every key is written below (in parallel, so the
+            // pages are first touched by both threads).
+            std::unique_ptr<FaceKey[]> keys(new FaceKey[bucket.back()]);
+            tbb::parallel_for(0, kChunks, [&](int k) {
+                std::vector<std::int64_t>& fill = count[k];
+                std::int32_t key[4];
+                const std::int64_t end = std::min(nCells, (k + 1) * chunkCells);
+                for (std::int64_t c = k * chunkCells; c < end; ++c) {
+                    const CellTopology& s = Topology(mesh.cellShape[c]);
+                    for (int f = 0; f < s.faces; ++f) {
+                        if (nbCell[6 * c + f] == kDegenerate) continue;
+                        const int n = sortedKey(c, f, key);
+                        if (n == 3) key[3] = -1;
+                        int parity = 0;
+                        if (n == 3) {
+                            // The outward cycle (as BuildFaceRecords walks it): its
+                            // inversions.
+                            std::int32_t o[3];
+                            for (int q = 0; q < 3; ++q)
+                                o[q] =
+                                    corners[8 * c +
+                                            s.face[f][t.orient[c] > 0 ? q : (3 - q) % 3]];
+                            parity = ((o[0] > o[1]) + (o[0] > o[2]) + (o[1] > o[2])) & 1;
                         }
-                        run = end;
+                        keys[fill[key[0]]++].Set(key + 1, c, f, parity);
                     }
                 }
             });
+            count.clear();
+            count.shrink_to_fit();
+            tbb::parallel_for(
+                tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
+                [&](const tbb::blocked_range<std::int64_t>& range) {
+                    for (std::int64_t v = range.begin(); v < range.end(); ++v) {
+                        FaceKey* first = keys.get() + bucket[v];
+                        FaceKey* last = keys.get() + bucket[v + 1];
+                        std::sort(first, last);
+                        for (FaceKey* run = first; run < last;) {
+                            FaceKey* end = run + 1;
+                            while (end < last && end->SameFace(*run)) ++end;
+                            if (end - run == 2 && run[0].Cell() != run[1].Cell()) {
+                                const std::int64_t a =
+                                    6 * std::int64_t(run[0].Cell()) + run[0].Face();
+                                const std::int64_t b =
+                                    6 * std::int64_t(run[1].Cell()) + run[1].Face();
+                                nbCell[a] = run[1].Cell();
+                                nbFace[a] = std::int8_t(run[1].Face());
+                                nbCell[b] = run[0].Cell();
+                                nbFace[b] = std::int8_t(run[0].Face());
+                                if (run->k[2] < 0) {
+                                    // Two cycles of the same three corners turn the same
+                                    // way exactly when their parities agree.
+                                    const std::uint8_t same =
+                                        run[0].Parity() == run[1].Parity();
+                                    t.nbSameSense[a] = t.nbSameSense[b] = same;
+                                }
+                            } else if (end - run > 2) {
+                                // Sorted by cell within the run: the first names the
+                                // lowest.
+                                std::int64_t cur = badCell.load();
+                                while (run->Cell() < cur &&
+                                       !badCell.compare_exchange_weak(cur, run->Cell())) {
+                                }
+                            }
+                            run = end;
+                        }
+                    }
+                });
         };
         if (nCells < (std::int64_t(1) << 28))
             fillAndMatch(NarrowFaceKey{});
@@ -825,7 +834,9 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                                   rank[order[i]] = std::int32_t(i);
                           });
     }
-    const auto byRank = [&rank](std::int32_t a, std::int32_t b) { return rank[a] < rank[b]; };
+    const auto byRank = [&rank](std::int32_t a, std::int32_t b) {
+        return rank[a] < rank[b];
+    };
     // Boundary edge e of a face lattice, as merged ids in the edge's canonical direction
     // (from its lower corner by position), so that every face holding the edge sees the
     // same sequence; returns whether that reverses the face's counter-clockwise order.
@@ -1492,18 +1503,16 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
     if (exitPoint) exitPoint->v[0] = -1;
     // A brick of planar tets only needs none of the checks (each of them a load from
     // memory that the walk would wait for).
-    const std::int32_t* cf =
-        &cellFaces[planarTetsOnly ? 4 * c : cellFaceOffset[c]];
+    const std::int32_t* cf = &cellFaces[planarTetsOnly ? 4 * c : cellFaceOffset[c]];
     if (planarTetsOnly)
         for (int k = 0; k < 4; ++k) __builtin_prefetch(&faces[cf[k]]);
-    const int nf = planarTetsOnly ? 4 : static_cast<int>(cellFaceOffset[c + 1] -
-                                                         cellFaceOffset[c]);
-    if (planarTetsOnly ||
-        (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
-         faces[cf[0]].kind == FaceKind::Triangle &&
-         faces[cf[1]].kind == FaceKind::Triangle &&
-         faces[cf[2]].kind == FaceKind::Triangle &&
-         faces[cf[3]].kind == FaceKind::Triangle)) {
+    const int nf =
+        planarTetsOnly ? 4 : static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
+    if (planarTetsOnly || (nf == 4 && brick.mesh->cellShape[c] == CellShape::Tet &&
+                           faces[cf[0]].kind == FaceKind::Triangle &&
+                           faces[cf[1]].kind == FaceKind::Triangle &&
+                           faces[cf[2]].kind == FaceKind::Triangle &&
+                           faces[cf[3]].kind == FaceKind::Triangle)) {
         // A planar tet seen along the (perturbed) ray covers the ray with exactly one
         // entering and one leaving face (exact predicates on the projected corners), so
         // the first leaving face is the exit.
@@ -1664,7 +1673,8 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
 }
 
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
-                           std::vector<Segment>& out, std::vector<SegmentEnds>* ends) const {
+                           std::vector<Segment>& out,
+                           std::vector<SegmentEnds>* ends) const {
     out.clear();
     if (ends) ends->clear();
     const Impl& im = *impl_;

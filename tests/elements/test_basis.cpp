@@ -227,15 +227,17 @@ TEST(Basis, LinearPyramidEqualsTheAnyOrderPathBitwise) {
     ASSERT_EQ(b.nodeCount, 5);
     std::mt19937_64 rng(5);
     std::uniform_real_distribution<double> uni(-0.5, 1.5);
-    std::vector<std::array<double, 3>> points = {{0, 0, 0}, {1, 1, 0}, {0.5, 0.5, 1},
-                                                 {0.2, 0.7, 1}, {0.25, 0.25, 0.5}};
+    std::vector<std::array<double, 3>> points = {
+        {0, 0, 0}, {1, 1, 0}, {0.5, 0.5, 1}, {0.2, 0.7, 1}, {0.25, 0.25, 0.5}};
     for (int i = 0; i < 2000; ++i) points.push_back({uni(rng), uni(rng), uni(rng)});
     for (const auto& x : points) {
         double v[5], d[15], vg[5], dg[15];
         EvalBasis(b, x.data(), v, d);
         EvalPyramidAnyOrder(b, x.data(), vg, dg);
-        for (int m = 0; m < 5; ++m) EXPECT_EQ(v[m], vg[m]) << x[0] << " " << x[1] << " " << x[2];
-        for (int m = 0; m < 15; ++m) EXPECT_EQ(d[m], dg[m]) << x[0] << " " << x[1] << " " << x[2];
+        for (int m = 0; m < 5; ++m)
+            EXPECT_EQ(v[m], vg[m]) << x[0] << " " << x[1] << " " << x[2];
+        for (int m = 0; m < 15; ++m)
+            EXPECT_EQ(d[m], dg[m]) << x[0] << " " << x[1] << " " << x[2];
         double vo[5];
         EvalBasis(b, x.data(), vo, nullptr);
         for (int m = 0; m < 5; ++m) EXPECT_EQ(vo[m], vg[m]);

@@ -32,7 +32,8 @@ Mesh ShuffledCubeTets(int n, unsigned seed) {
         for (int d = 0; d < 3; ++d) out.points[3 * pointOf[p] + d] = in.points[3 * p + d];
     Field cellId{"id", Association::Cell, 1, {}};
     for (std::int64_t c : cellOrder) {
-        std::vector<std::int64_t> nodes(in.CellNodes(c), in.CellNodes(c) + in.CellNodeCount(c));
+        std::vector<std::int64_t> nodes(in.CellNodes(c),
+                                        in.CellNodes(c) + in.CellNodeCount(c));
         for (std::int64_t& v : nodes) v = pointOf[v];
         out.AddCell(in.cellShape[c], in.cellOrder[c], in.cellFamily[c], nodes.data(),
                     static_cast<int>(nodes.size()));

@@ -14,8 +14,8 @@
 
 #include "mesh/builtin.h"
 #include "trace/brick_traverser.h"
-#include "util/error.h"
 #include "trace_test_meshes.h"
+#include "util/error.h"
 
 namespace hpray {
 namespace {
@@ -527,15 +527,16 @@ TEST(BrickTraverser, FacePointsOfTetsLieOnTheRayAndAreSharedByNeighbours) {
                         EXPECT_GE(p->w[m], 0.0);
                         sum += p->w[m];
                         EXPECT_TRUE(std::find(nodes, nodes + 4, p->v[m]) != nodes + 4)
-                            << "corner " << p->v[m] << " is not a node of cell " << s.cell;
+                            << "corner " << p->v[m] << " is not a node of cell "
+                            << s.cell;
                         for (int d = 0; d < 3; ++d)
                             x[d] += p->w[m] * mesh.points[3 * p->v[m] + d];
                     }
                     EXPECT_NEAR(sum, 1.0, 1e-15);
                     double dist = 0;
                     for (int d = 0; d < 3; ++d)
-                        dist = std::max(dist,
-                                        std::abs(x[d] - (ray.origin[d] + p->t * ray.dir[d])));
+                        dist = std::max(
+                            dist, std::abs(x[d] - (ray.origin[d] + p->t * ray.dir[d])));
                     EXPECT_LE(dist, 1e-14) << i << " " << k;
                     EXPECT_GT(p->cornerError, 0.0);
                     EXPECT_LE(p->cornerError, 1e-14);
@@ -560,7 +561,8 @@ TEST(BrickTraverser, FacePointsOfTetsLieOnTheRayAndAreSharedByNeighbours) {
     EXPECT_FALSE(merged.FacePoints());
     std::vector<Segment> segs;
     std::vector<SegmentEnds> ends;
-    merged.Trace(MakeRay({0.3, 0.4, -1}, {0.6, 0.5, 2}), -INFINITY, INFINITY, segs, &ends);
+    merged.Trace(MakeRay({0.3, 0.4, -1}, {0.6, 0.5, 2}), -INFINITY, INFINITY, segs,
+                 &ends);
     ASSERT_FALSE(segs.empty());
     for (const SegmentEnds& e : ends) EXPECT_FALSE(e.enter.Valid() || e.exit.Valid());
 }
@@ -604,7 +606,8 @@ TEST(BrickTraverser, TetsOnTheSameSideOfTheirSharedFaceAreRejected) {
                 const std::string what = "z " + std::to_string(z) + " flips " +
                                          std::to_string(flipA) + std::to_string(flipB);
                 if (z > 0) {
-                    EXPECT_THROW(BrickTraverser{Brick::WholeMesh(mesh)}, InputError) << what;
+                    EXPECT_THROW(BrickTraverser{Brick::WholeMesh(mesh)}, InputError)
+                        << what;
                     continue;
                 }
                 const BrickTraverser tr(Brick::WholeMesh(mesh));
