@@ -57,19 +57,27 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
     for (int d = 0; d < 3; ++d) extent = std::max(extent, box.hi[d] - box.lo[d]);
     const double top = double((1 << kBits) - 1);
     const double scale = extent > 0 ? top / extent : 0.0;
+    // The sort key of item `index` at position x.
+    auto keyOf = [&](const double x[3], std::int64_t index) {
+        std::uint64_t key = 0;
+        for (int d = 0; d < 3; ++d) {
+            const double q = (x[d] - box.lo[d]) * scale;
+            key |= Spread3(static_cast<std::uint64_t>(std::clamp(q, 0.0, top))) << d;
+        }
+        return key << 31 | static_cast<std::uint64_t>(index);
+    };
     std::vector<std::uint64_t> keyed(nCells);
     ParallelFor(nCells, [&](std::int64_t c) {
         const std::int64_t* nodes = mesh.CellNodes(c);
         const int n = mesh.CellNodeCount(c);
-        double centre[3] = {0, 0, 0};
-        for (int k = 0; k < n; ++k)
-            for (int d = 0; d < 3; ++d) centre[d] += mesh.points[3 * nodes[k] + d];
-        std::uint64_t key = 0;
-        for (int d = 0; d < 3; ++d) {
-            const double q = n > 0 ? (centre[d] / n - box.lo[d]) * scale : 0.0;
-            key |= Spread3(static_cast<std::uint64_t>(std::clamp(q, 0.0, top))) << d;
+        double centre[3] = {box.lo[0], box.lo[1], box.lo[2]};
+        if (n > 0) {
+            centre[0] = centre[1] = centre[2] = 0;
+            for (int k = 0; k < n; ++k)
+                for (int d = 0; d < 3; ++d) centre[d] += mesh.points[3 * nodes[k] + d];
+            for (double& x : centre) x /= n;
         }
-        keyed[c] = key << 31 | static_cast<std::uint64_t>(c);
+        keyed[c] = keyOf(centre, c);
     });
     tbb::parallel_sort(keyed.begin(), keyed.end());
     ParallelFor(nCells, [&](std::int64_t i) {
@@ -82,14 +90,8 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
     std::vector<std::int64_t> newPoint(nPoints), pointOld(nPoints);
     if (nPoints < (std::int64_t(1) << 31)) {
         std::vector<std::uint64_t> pointKey(nPoints);
-        ParallelFor(nPoints, [&](std::int64_t p) {
-            std::uint64_t key = 0;
-            for (int d = 0; d < 3; ++d) {
-                const double q = (mesh.points[3 * p + d] - box.lo[d]) * scale;
-                key |= Spread3(static_cast<std::uint64_t>(std::clamp(q, 0.0, top))) << d;
-            }
-            pointKey[p] = key << 31 | static_cast<std::uint64_t>(p);
-        });
+        ParallelFor(nPoints,
+                    [&](std::int64_t p) { pointKey[p] = keyOf(&mesh.points[3 * p], p); });
         tbb::parallel_sort(pointKey.begin(), pointKey.end());
         ParallelFor(nPoints, [&](std::int64_t i) {
             pointOld[i] =

@@ -160,12 +160,12 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 
 const double* FieldCellData::CellValues(std::int64_t c,
                                         std::vector<double>& scratch) const {
-    if (!values.empty() || pointValues.empty())
-        return values.data() + mesh->cellOffsets[c];
+    const double* points = PointValues();
+    if (!values.empty() || !points) return values.data() + mesh->cellOffsets[c];
     const int count = mesh->CellNodeCount(c);
     scratch.resize(count);
     const std::int64_t* nodes = mesh->CellNodes(c);
-    for (int m = 0; m < count; ++m) scratch[m] = pointValues[nodes[m]];
+    for (int m = 0; m < count; ++m) scratch[m] = points[nodes[m]];
     return scratch.data();
 }
 
@@ -187,16 +187,19 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
         d.refGradBound.assign(cells, {inf, inf, inf});
         return d;
     }
+    if (field.field->components == 1 && field.component == 0) {
+        d.pointField = field.field->values.data();
+    } else {
+        d.pointStorage.resize(mesh.PointCount());
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, mesh.PointCount(), 4096),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t i = range.begin(); i < range.end(); ++i)
+                                  d.pointStorage[i] = ScalarValue(field, i);
+                          });
+    }
     if (cells > 0 && geometry.derivedCells == cells) {
         // Linear tetrahedra only: the field per point, and the bounds of the tetrahedra
         // without a closed form.
-        const std::int64_t points = mesh.PointCount();
-        d.pointValues.resize(points);
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, points, 4096),
-                          [&](const tbb::blocked_range<std::int64_t>& range) {
-                              for (std::int64_t i = range.begin(); i < range.end(); ++i)
-                                  d.pointValues[i] = ScalarValue(field, i);
-                          });
         tbb::enumerable_thread_specific<std::vector<std::int64_t>> found;
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
                           [&](const tbb::blocked_range<std::int64_t>& range) {

@@ -31,17 +31,24 @@ struct FieldCellData {
     /// Largest bound, over the reduced cells, of |reduced interpolant - cell's| (absolute):
     /// the Lebesgue constant cubed times the nodal rounding.
     double reductionTolerance = 0;
+    /// A point field's value at every point (PointValues): the field's own array for a
+    /// one-component field (`pointField`), else the selected component or the magnitude
+    /// gathered once into `pointStorage`. Null for a cell field.
+    const double* pointField = nullptr;
+    std::vector<double> pointStorage;
+    const double* PointValues() const {
+        return pointStorage.empty() ? pointField : pointStorage.data();
+    }
     /// A point field on a mesh of linear tetrahedra only (every cell derived, see
     /// MeshGeometry::IsDerived) keeps nothing per cell: `values` and `refGradBound` stay
-    /// empty, each tetrahedron reads its four values from `pointValues` (the field at
-    /// every point), and only the tetrahedra that SegmentField::BeginLinearTet cannot
-    /// take (degenerate ones) keep a derivative bound: `fallbackBounds[k]` is cell
-    /// `fallbackCells[k]`'s (sorted by cell).
-    std::vector<double> pointValues;
+    /// empty, each tetrahedron reads its four values from PointValues(), and only the
+    /// tetrahedra that SegmentField::BeginLinearTet cannot take (degenerate ones) keep a
+    /// derivative bound: `fallbackBounds[k]` is cell `fallbackCells[k]`'s (sorted by
+    /// cell).
     std::vector<std::int64_t> fallbackCells;
     std::vector<std::array<double, 3>> fallbackBounds;
 
-    /// Cell c's nodal values: in `values`, or gathered from `pointValues` into `scratch`
+    /// Cell c's nodal values: in `values`, or gathered from PointValues() into `scratch`
     /// (then valid until `scratch` changes).
     const double* CellValues(std::int64_t c, std::vector<double>& scratch) const;
     /// Cell c's derivative bound; nullptr where none is kept.

@@ -235,20 +235,7 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
                                                                        : nullptr);
         const auto r = sel.field->Range(sel.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
-        if (sel.field->association != Association::Point) continue;
-        if (sel.field->components == 1 && sel.component == 0) {
-            s.pointValues[f] = sel.field->values.data();
-        } else {
-            std::vector<double>& v = s.pointScalars[f];
-            v.resize(mesh.PointCount());
-            tbb::parallel_for(
-                tbb::blocked_range<std::int64_t>(0, mesh.PointCount(), 4096),
-                [&](const tbb::blocked_range<std::int64_t>& range) {
-                    for (std::int64_t i = range.begin(); i < range.end(); ++i)
-                        v[i] = ScalarValue(sel, i);
-                });
-            s.pointValues[f] = v.data();
-        }
+        if (s.data[f]) s.pointValues[f] = s.data[f]->PointValues();
     }
     // The top coefficient of each Lagrange hexahedron (see VolumeSetup::topCoefficient):
     // the tensor divided difference of the nodal values at the equispaced y nodes.

@@ -45,12 +45,10 @@ struct VolumeSetup {
     /// 3p coefficient c dy1^p dy2^p dy3^p / l, the only one of that degree.
     std::vector<std::vector<double>> topCoefficient;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
-    /// Per point field: its value at each point of the mesh (the field's own array for a
-    /// one-component field, else the selected component or the magnitude gathered once),
+    /// Per point field: its value at each point of the mesh (data[f]->PointValues()),
     /// for linear tetrahedra integrated from the traversal's face points; null for a cell
     /// field.
     const double* pointValues[2] = {nullptr, nullptr};
-    std::vector<double> pointScalars[2];  ///< storage of pointValues where gathered
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
     /// Wilhelms-Van Gelder, glow zero), both transfer functions constant over the range
