@@ -39,6 +39,13 @@ class PiecewiseLinearTf {
     void AffineOn(int k, double* offset, double* slope) const;
     /// max over channels of |slope| of piece k (AffineOn's), tabulated.
     double SteepestOn(int k) const { return steepest_[k + 1]; }
+    /// max of SteepestOn over the pieces that hold some s in [lo, hi].
+    double SteepestOver(double lo, double hi) const {
+        double m = 0;
+        for (int k = IntervalOf(lo), e = IntervalOf(hi); k <= e; ++k)
+            m = std::max(m, SteepestOn(k));
+        return m;
+    }
 
     /// Over all s in [lo, hi]: the minimum and maximum of each channel (exact: at the
     /// ends or at control points inside). `minOut`, `maxOut` get Channels() values.

@@ -44,6 +44,17 @@ struct VolumeSetup {
     /// whose y move by dy_d over its Legendre variable, the field's series has the degree
     /// 3p coefficient c dy1^p dy2^p dy3^p / l, the only one of that degree.
     std::vector<std::vector<double>> topCoefficient;
+    /// Per field, for Lagrange hexahedra (else empty): degreeTail[f][tailStride * c + m]
+    /// for m = 0..3p bounds the sum of |a_ijk| over i + j + k > m, where a_ijk are the
+    /// coefficients of the field in the products P_i(y1) P_j(y2) P_k(y3) of Legendre
+    /// polynomials in the cell's y = 2 ref - 1 (the long-double transform's rounding
+    /// added). Along any segment in the cell the part of the field of total degree above
+    /// m is at most that in magnitude (|P_k| <= 1 on [-1, 1]) and the rest is a
+    /// polynomial of degree m in t, so interpolation at degree m misses at most (1 + the
+    /// Lebesgue constant) times degreeTail: the volume samples a segment at the lowest
+    /// degree whose miss fits its share of volume_tolerance.
+    std::vector<std::vector<double>> degreeTail;
+    int tailStride = 0;
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
     /// Per point field: its value at each point of the mesh (data[f]->PointValues()),
     /// for linear tetrahedra integrated from the traversal's face points; null for a cell
@@ -81,6 +92,10 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
                      const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
                      LegendreSeries& derivative, std::vector<double>& out);
+
+/// VolumeSetup::degreeTail of one Lagrange hexahedron of order p (1..kMaxOrder) from its
+/// nodal values u (lattice order of mesh/cell.h, i fastest): tail[m] for m = 0..3p.
+void LagrangeHexDegreeTail(int p, const double* u, double* tail);
 
 /// The colour transfer function of a scene (`volume.color_tf`, `slices.#.color_tf`).
 PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);

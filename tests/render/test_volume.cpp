@@ -13,9 +13,11 @@
 
 #include "mesh/builtin.h"
 #include "render/brick_renderer.h"
+#include "render/legendre.h"
 #include "render/render_job.h"
 #include "render/test_volume_reference.h"
 #include "render/volume.h"
+#include "render/volume_ray.h"
 #include "scene/camera.h"
 #include "scene/scene.h"
 #include "trace/trace_test_meshes.h"
@@ -794,6 +796,124 @@ TEST(VolumeRender, MissingVolumeOrSliceFieldIsAnInputError) {
     } catch (const InputError& e) {
         EXPECT_EQ(e.where(), "slices.0.field");
     }
+}
+
+namespace {
+// Legendre polynomial P_k(y) in long double by its recurrence.
+long double LegendreP(int k, long double y) {
+    long double prev = 1, cur = y;
+    if (k == 0) return 1;
+    for (int j = 2; j <= k; ++j) {
+        const long double next = ((2 * j - 1) * y * cur - (j - 1) * prev) / j;
+        prev = cur;
+        cur = next;
+    }
+    return cur;
+}
+
+// Degree-p equispaced Lagrange interpolation on [0, 1] in long double: the hexahedron's
+// field at reference point r from its nodal values (i fastest).
+long double HexValue(int p, const double* u, const long double r[3]) {
+    long double l[3][11];
+    for (int d = 0; d < 3; ++d)
+        for (int i = 0; i <= p; ++i) {
+            long double w = 1;
+            for (int m = 0; m <= p; ++m)
+                if (m != i) w *= (r[d] - (long double)m / p) / ((long double)(i - m) / p);
+            l[d][i] = w;
+        }
+    long double sum = 0;
+    const int n = p + 1;
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i)
+                sum += l[0][i] * l[1][j] * l[2][k] * u[i + n * (j + n * k)];
+    return sum;
+}
+
+}  // namespace
+
+TEST(VolumeDegreeTail, ProductsOfLegendrePolynomialsGiveTheirCoefficientsBack) {
+    // u = 0.7 P2(y1) P1(y2) P3(y3) - 0.3 P4(y1) P4(y2) P4(y3) + 0.05 P0, y = 2 ref - 1:
+    // total degrees 6 and 12, so tail[m] = 1.0 below 6, 0.3 from 6 to 11, 0 from 12.
+    const int p = 4, n = p + 1;
+    std::vector<double> u(n * n * n);
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                const long double y[3] = {2.0L * i / p - 1, 2.0L * j / p - 1,
+                                          2.0L * k / p - 1};
+                u[i + n * (j + n * k)] = double(
+                    0.7L * LegendreP(2, y[0]) * LegendreP(1, y[1]) * LegendreP(3, y[2]) -
+                    0.3L * LegendreP(4, y[0]) * LegendreP(4, y[1]) * LegendreP(4, y[2]) +
+                    0.05L);
+            }
+    double tail[3 * p + 1];
+    LagrangeHexDegreeTail(p, u.data(), tail);
+    for (int m = 0; m <= 3 * p; ++m) {
+        const double want = m < 6 ? 1.0 : m < 12 ? 0.3 : 0.0;
+        EXPECT_NEAR(tail[m], want, 1e-14) << "m = " << m;
+        // Every |coefficient| is rounded up (the node values carry rounding of 1e-16).
+        if (m < 3 * p) EXPECT_GE(tail[m], want - 1e-15) << "m = " << m;
+    }
+    EXPECT_EQ(tail[3 * p], 0.0);
+}
+
+TEST(VolumeDegreeTail, BoundsTheInterpolationErrorAlongLinesOfNkSincCells) {
+    // The volume samples an affine hexahedron's field along a segment at the
+    // Legendre-Gauss-Lobatto nodes of a degree m below its exact 3p and counts
+    // kLebesgueBound (4) times tail[m] as the field's error: check that bound on chords
+    // through nk-sinc's order-8 cells, against the field interpolated in long double.
+    const Mesh mesh = MakeBuiltin("builtin:nk-sinc");
+    const Field* field = mesh.FindField("u");
+    ASSERT_NE(field, nullptr);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int checked = 0, tight = 0;
+    for (std::int64_t c = 0; c < mesh.CellCount(); c += 7) {
+        const int p = mesh.cellOrder[c], n = p + 1;
+        ASSERT_EQ(mesh.cellShape[c], CellShape::Hex);
+        std::vector<double> u(n * n * n);
+        for (int q = 0; q < n * n * n; ++q)
+            u[q] = field->values[mesh.connectivity[mesh.cellOffsets[c] + q]];
+        std::vector<double> tail(3 * p + 1);
+        LagrangeHexDegreeTail(p, u.data(), tail.data());
+        for (int line = 0; line < 4; ++line) {
+            // A chord between points on two different faces of [0, 1]^3.
+            long double a[3], b[3];
+            for (int d = 0; d < 3; ++d) a[d] = unit(rng), b[d] = unit(rng);
+            a[line % 3] = 0;
+            b[(line + 1) % 3] = 1;
+            for (int m : {3, 7, 11, 15}) {
+                const LglRule& rule = LglNodes(m);
+                std::vector<double> values(m + 1);
+                for (int i = 0; i <= m; ++i) {
+                    const long double s = 0.5L * (1 + rule.nodes[i]);
+                    long double r[3];
+                    for (int d = 0; d < 3; ++d) r[d] = a[d] + s * (b[d] - a[d]);
+                    values[i] = double(HexValue(p, u.data(), r));
+                }
+                LegendreSeries series;
+                InterpolateLgl(values.data(), m, 0.0, 1.0, series);
+                double worst = 0;
+                for (int k = 0; k <= 200; ++k) {
+                    const long double s = k / 200.0L;
+                    long double r[3];
+                    for (int d = 0; d < 3; ++d) r[d] = a[d] + s * (b[d] - a[d]);
+                    worst = std::max(worst, double(std::abs(HexValue(p, u.data(), r) -
+                                                            series(double(s)))));
+                }
+                // Rounding of the samples and the transform aside (1e-14 of the values).
+                EXPECT_LE(worst, 4 * tail[m] + 1e-14)
+                    << "cell " << c << " line " << line << " degree " << m;
+                ++checked;
+                if (worst > 1e-3 * tail[m]) ++tight;
+            }
+        }
+    }
+    EXPECT_GT(checked, 200);
+    // The bound is not vacuous: on many lines the error is within 1000x of it.
+    EXPECT_GT(tight, checked / 4);
 }
 
 }  // namespace
