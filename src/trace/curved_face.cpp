@@ -2,9 +2,15 @@
 #include "trace/curved_face.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
+#include <utility>
 #include <vector>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 
 #include "util/check.h"
 
@@ -278,34 +284,68 @@ bool Excluded(const Patch& q, int n) {
 // derivatives along any segment of the parameter region are never parallel). Cross
 // products within rounding of zero fail the test.
 bool Injective(const Patch& q, bool tri, int p) {
-    P2 d1[kMaxNet], d2[kMaxNet];
+    // Structure of arrays, so that the all-pairs loop below is branch-free and vectorises.
+    double d1x[kMaxNet], d1y[kMaxNet], d2x[kMaxNet + 4], d2y[kMaxNet + 4];
     int n = 0;
     for (int j = 0; j <= (tri ? p - 1 : p); ++j)
         for (int i = 0; i <= (tri ? p - 1 - j : p - 1); ++i) {
             const P2 a = q.b[tri ? TriIndex(p, i, j) : QuadIndex(p, i, j)];
             const P2 b = q.b[tri ? TriIndex(p, i + 1, j) : QuadIndex(p, i + 1, j)];
-            d1[n++] = {b.x - a.x, b.y - a.y};
+            d1x[n] = b.x - a.x;
+            d1y[n++] = b.y - a.y;
         }
     int m = 0;
     for (int j = 0; j <= p - 1; ++j)
         for (int i = 0; i <= (tri ? p - 1 - j : p); ++i) {
             const P2 a = q.b[tri ? TriIndex(p, i, j) : QuadIndex(p, i, j)];
             const P2 b = q.b[tri ? TriIndex(p, i, j + 1) : QuadIndex(p, i, j + 1)];
-            d2[m++] = {b.x - a.x, b.y - a.y};
+            d2x[m] = b.x - a.x;
+            d2y[m++] = b.y - a.y;
         }
-    int sign = 0;
-    for (int a = 0; a < n; ++a)
+    if (n == 0 || m == 0) return false;
+    // Every cross product above its rounding margin, all of one sign (a pair within the
+    // margin, or NaN, fails both).
+    bool allPositive = true, allNegative = true;
+#if defined(__AVX2__)
+    // Four pairs at a time; the last vector is padded by repeating the last d2.
+    const int m4 = (m + 3) / 4 * 4;
+    for (int b = m; b < m4; ++b) d2x[b] = d2x[m - 1], d2y[b] = d2y[m - 1];
+    const __m256d absMask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffffLL));
+    const __m256d rel = _mm256_set1_pd(1e-12);
+    __m256d pos = _mm256_castsi256_pd(_mm256_set1_epi64x(-1)), neg = pos;
+    for (int a = 0; a < n; ++a) {
+        const __m256d ax = _mm256_set1_pd(d1x[a]), ay = _mm256_set1_pd(d1y[a]);
+        for (int b = 0; b < m4; b += 4) {
+            const __m256d px = _mm256_mul_pd(ax, _mm256_loadu_pd(d2y + b));
+            const __m256d py = _mm256_mul_pd(ay, _mm256_loadu_pd(d2x + b));
+            const __m256d c = _mm256_sub_pd(px, py);
+            const __m256d margin = _mm256_mul_pd(
+                rel, _mm256_add_pd(_mm256_and_pd(px, absMask), _mm256_and_pd(py, absMask)));
+            pos = _mm256_and_pd(pos, _mm256_cmp_pd(c, margin, _CMP_GT_OQ));
+            neg = _mm256_and_pd(neg, _mm256_cmp_pd(c, _mm256_sub_pd(_mm256_setzero_pd(), margin),
+                                                   _CMP_LT_OQ));
+        }
+        allPositive = _mm256_movemask_pd(pos) == 0xf;
+        allNegative = _mm256_movemask_pd(neg) == 0xf;
+        if (!allPositive && !allNegative) return false;
+    }
+#else
+    for (int a = 0; a < n; ++a) {
+        const double ax = d1x[a], ay = d1y[a];
+        bool pos = true, neg = true;
         for (int b = 0; b < m; ++b) {
-            const double px = d1[a].x * d2[b].y, py = d1[a].y * d2[b].x;
+            const double px = ax * d2y[b], py = ay * d2x[b];
             const double c = px - py;
-            if (!(std::fabs(c) > 1e-12 * (std::fabs(px) + std::fabs(py)))) return false;
-            const int s = c > 0 ? 1 : -1;
-            if (sign == 0)
-                sign = s;
-            else if (s != sign)
-                return false;
+            const double margin = 1e-12 * (std::fabs(px) + std::fabs(py));
+            pos &= c > margin;
+            neg &= c < -margin;
         }
-    return sign != 0;
+        allPositive &= pos;
+        allNegative &= neg;
+        if (!allPositive && !allNegative) return false;
+    }
+#endif
+    return allPositive || allNegative;
 }
 
 void SplitQuad(const Patch& q, int p, bool alongU, Patch& lo, Patch& hi) {
@@ -619,68 +659,119 @@ void FaceBernstein(bool triangle, int p, const double* nodal, double* net) {
     }
 }
 
+namespace {
+
+// Bernstein basis of degree P at s (b) and its derivative (db), by the recurrence
+// B_i^d = (1 - s) B_i^(d-1) + s B_(i-1)^(d-1) up to degree P - 1, whose values give the
+// derivative d/ds B_i^P = P (B_(i-1)^(P-1) - B_i^(P-1)).
+template <int P>
+inline void BernsteinWithDerivative(double s, double* b, double* db) {
+    double low[P + 1];
+    low[0] = 1;
+    const double r = 1 - s;
+    for (int d = 1; d < P; ++d) {
+        low[d] = s * low[d - 1];
+        for (int i = d - 1; i > 0; --i) low[i] = r * low[i] + s * low[i - 1];
+        low[0] = r * low[0];
+    }
+    // low[0..P-1]: degree P - 1.
+    b[0] = r * low[0];
+    b[P] = s * low[P - 1];
+    db[0] = -P * low[0];
+    db[P] = P * low[P - 1];
+    for (int i = 1; i < P; ++i) {
+        b[i] = r * low[i] + s * low[i - 1];
+        db[i] = P * (low[i - 1] - low[i]);
+    }
+}
+
+template <int P>
+void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3], double dU[3],
+                 double dV[3]) {
+    double bu[P + 1], du[P + 1], bv[P + 1], dv[P + 1];
+    BernsteinWithDerivative<P>(u, bu, du);
+    BernsteinWithDerivative<P>(v, bv, dv);
+    double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
+    for (int j = 0; j <= P; ++j) {
+        // Row j contracted along u, then weighted along v.
+        double r[3] = {0, 0, 0}, dr[3] = {0, 0, 0};
+        for (int i = 0; i <= P; ++i) {
+            const ShearedPoint& q = net[j * (P + 1) + i];
+            r[0] += bu[i] * q.x;
+            r[1] += bu[i] * q.y;
+            r[2] += bu[i] * q.z;
+            dr[0] += du[i] * q.x;
+            dr[1] += du[i] * q.y;
+            dr[2] += du[i] * q.z;
+        }
+        for (int c = 0; c < 3; ++c) {
+            f[c] += bv[j] * r[c];
+            fu[c] += bv[j] * dr[c];
+            fv[c] += dv[j] * r[c];
+        }
+    }
+    for (int c = 0; c < 3; ++c) value[c] = f[c], dU[c] = fu[c], dV[c] = fv[c];
+}
+
+template <int P>
+void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3],
+                     double dU[3], double dV[3]) {
+    const Tables& tab = GetTables();
+    const double w = 1 - u - v;
+    double pu[P + 1], pv[P + 1], pw[P + 1];
+    pu[0] = pv[0] = pw[0] = 1;
+    for (int k = 1; k <= P; ++k) {
+        pu[k] = pu[k - 1] * u;
+        pv[k] = pv[k - 1] * v;
+        pw[k] = pw[k - 1] * w;
+    }
+    double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
+    for (int j = 0; j <= P; ++j)
+        for (int i = 0; i <= P - j; ++i) {
+            const double b = tab.binom[P][i] * tab.binom[P - i][j] * pu[i] * pv[j] * pw[P - i - j];
+            const ShearedPoint& q = net[TriIndex(P, i, j)];
+            f[0] += b * q.x;
+            f[1] += b * q.y;
+            f[2] += b * q.z;
+        }
+    // Derivatives: P * sum over the degree P - 1 basis of the forward differences.
+    constexpr int Q = P - 1;
+    for (int j = 0; j <= Q; ++j)
+        for (int i = 0; i <= Q - j; ++i) {
+            const double b =
+                P * tab.binom[Q][i] * tab.binom[Q - i][j] * pu[i] * pv[j] * pw[Q - i - j];
+            const ShearedPoint& o = net[TriIndex(P, i, j)];
+            const ShearedPoint& a = net[TriIndex(P, i + 1, j)];
+            const ShearedPoint& c = net[TriIndex(P, i, j + 1)];
+            fu[0] += b * (a.x - o.x);
+            fu[1] += b * (a.y - o.y);
+            fu[2] += b * (a.z - o.z);
+            fv[0] += b * (c.x - o.x);
+            fv[1] += b * (c.y - o.y);
+            fv[2] += b * (c.z - o.z);
+        }
+    for (int c = 0; c < 3; ++c) value[c] = f[c], dU[c] = fu[c], dV[c] = fv[c];
+}
+
+using NetEvaluator = void (*)(const ShearedPoint*, double, double, double*, double*,
+                              double*);
+template <int... Ps>
+constexpr std::array<NetEvaluator, kMaxOrder + 1> QuadTable(std::integer_sequence<int, Ps...>) {
+    return {nullptr, &EvalQuadNet<Ps + 1>...};
+}
+template <int... Ps>
+constexpr std::array<NetEvaluator, kMaxOrder + 1> TriangleTable(
+    std::integer_sequence<int, Ps...>) {
+    return {nullptr, &EvalTriangleNet<Ps + 1>...};
+}
+constexpr auto kQuadNet = QuadTable(std::make_integer_sequence<int, kMaxOrder>{});
+constexpr auto kTriangleNet = TriangleTable(std::make_integer_sequence<int, kMaxOrder>{});
+
+}  // namespace
+
 void EvalNet(bool triangle, int p, const ShearedPoint* net, double u, double v,
              double value[3], double dU[3], double dV[3]) {
-    const Tables& tab = GetTables();
-    for (int d = 0; d < 3; ++d) value[d] = dU[d] = dV[d] = 0;
-    auto add = [](double* acc, double w, const ShearedPoint& q) {
-        acc[0] += w * q.x;
-        acc[1] += w * q.y;
-        acc[2] += w * q.z;
-    };
-    if (triangle) {
-        const double w = 1 - u - v;
-        double pu[kMaxOrder + 1], pv[kMaxOrder + 1], pw[kMaxOrder + 1];
-        pu[0] = pv[0] = pw[0] = 1;
-        for (int k = 1; k <= p; ++k) {
-            pu[k] = pu[k - 1] * u;
-            pv[k] = pv[k - 1] * v;
-            pw[k] = pw[k - 1] * w;
-        }
-        for (int j = 0; j <= p; ++j)
-            for (int i = 0; i <= p - j; ++i)
-                add(value,
-                    tab.binom[p][i] * tab.binom[p - i][j] * pu[i] * pv[j] * pw[p - i - j],
-                    net[TriIndex(p, i, j)]);
-        // Derivatives: p * sum over the degree p-1 basis of the forward differences.
-        const int q = p - 1;
-        for (int j = 0; j <= q; ++j)
-            for (int i = 0; i <= q - j; ++i) {
-                const double b = p * tab.binom[q][i] * tab.binom[q - i][j] * pu[i] *
-                                 pv[j] * pw[q - i - j];
-                const ShearedPoint& o = net[TriIndex(p, i, j)];
-                const ShearedPoint& a = net[TriIndex(p, i + 1, j)];
-                const ShearedPoint& c = net[TriIndex(p, i, j + 1)];
-                add(dU, b, ShearedPoint{a.x - o.x, a.y - o.y, a.z - o.z});
-                add(dV, b, ShearedPoint{c.x - o.x, c.y - o.y, c.z - o.z});
-            }
-        return;
-    }
-    double bu[kMaxOrder + 1], bv[kMaxOrder + 1], du[kMaxOrder + 1], dv[kMaxOrder + 1];
-    auto basis = [&](double s, double* b, double* db) {
-        double ps[kMaxOrder + 1], qs[kMaxOrder + 1];
-        ps[0] = qs[0] = 1;
-        for (int k = 1; k <= p; ++k) {
-            ps[k] = ps[k - 1] * s;
-            qs[k] = qs[k - 1] * (1 - s);
-        }
-        for (int i = 0; i <= p; ++i) {
-            b[i] = tab.binom[p][i] * ps[i] * qs[p - i];
-            // d/ds B_i^p = p (B_{i-1}^{p-1} - B_i^{p-1})
-            const double lo = i > 0 ? tab.binom[p - 1][i - 1] * ps[i - 1] * qs[p - i] : 0;
-            const double hi = i < p ? tab.binom[p - 1][i] * ps[i] * qs[p - 1 - i] : 0;
-            db[i] = p * (lo - hi);
-        }
-    };
-    basis(u, bu, du);
-    basis(v, bv, dv);
-    for (int j = 0; j <= p; ++j)
-        for (int i = 0; i <= p; ++i) {
-            const ShearedPoint& q = net[QuadIndex(p, i, j)];
-            add(value, bu[i] * bv[j], q);
-            add(dU, du[i] * bv[j], q);
-            add(dV, bu[i] * dv[j], q);
-        }
+    (triangle ? kTriangleNet : kQuadNet)[p](net, u, v, value, dU, dV);
 }
 
 int CrossCurvedFace(const CurvedFace& face, const RayFrame& frame,
