@@ -93,37 +93,33 @@ double ValueGradient(const double* u, const double ref[3], double dRef[3]) {
 
 template <int P, bool Jacobian>
 void MapImpl(const double* xyz, const double ref[3], double world[3], double* jacobian) {
-    constexpr int n = P + 1;
+    constexpr int n = P + 1, m = 3 * n;
     double l[3][n], dl[3][n];
     for (int d = 0; d < 3; ++d) Lagrange1D<P, Jacobian>(ref[d], l[d], dl[d]);
-    double x[3] = {0, 0, 0}, dr[3] = {0, 0, 0}, ds[3] = {0, 0, 0}, dt[3] = {0, 0, 0};
-    for (int k = 0; k < n; ++k) {
-        double xk[3] = {0, 0, 0}, drk[3] = {0, 0, 0}, dsk[3] = {0, 0, 0};
+    double r[m] = {}, rs[m] = {}, rt[m] = {};
+    for (int k = 0; k < n; ++k)
         for (int j = 0; j < n; ++j) {
-            const double* row = xyz + 3 * n * (j + n * k);
-            double xj[3] = {0, 0, 0}, drj[3] = {0, 0, 0};
-            for (int i = 0; i < n; ++i)
-                for (int c = 0; c < 3; ++c) {
-                    xj[c] += row[3 * i + c] * l[0][i];
-                    if constexpr (Jacobian) drj[c] += row[3 * i + c] * dl[0][i];
-                }
-            for (int c = 0; c < 3; ++c) {
-                xk[c] += xj[c] * l[1][j];
-                if constexpr (Jacobian) {
-                    drk[c] += drj[c] * l[1][j];
-                    dsk[c] += xj[c] * dl[1][j];
-                }
-            }
-        }
-        for (int c = 0; c < 3; ++c) {
-            x[c] += xk[c] * l[2][k];
+            const double* row = xyz + m * (j + n * k);
+            const double w = l[1][j] * l[2][k];
+            for (int q = 0; q < m; ++q) r[q] += w * row[q];
             if constexpr (Jacobian) {
-                dr[c] += drk[c] * l[2][k];
-                ds[c] += dsk[c] * l[2][k];
-                dt[c] += xk[c] * dl[2][k];
+                const double ws = dl[1][j] * l[2][k], wt = l[1][j] * dl[2][k];
+                for (int q = 0; q < m; ++q) {
+                    rs[q] += ws * row[q];
+                    rt[q] += wt * row[q];
+                }
             }
         }
-    }
+    double x[3] = {0, 0, 0}, dr[3] = {0, 0, 0}, ds[3] = {0, 0, 0}, dt[3] = {0, 0, 0};
+    for (int i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) {
+            x[c] += r[3 * i + c] * l[0][i];
+            if constexpr (Jacobian) {
+                dr[c] += r[3 * i + c] * dl[0][i];
+                ds[c] += rs[3 * i + c] * l[0][i];
+                dt[c] += rt[3 * i + c] * l[0][i];
+            }
+        }
     for (int c = 0; c < 3; ++c) world[c] = x[c];
     if constexpr (Jacobian) {
         for (int c = 0; c < 3; ++c) {
