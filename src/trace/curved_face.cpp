@@ -533,7 +533,11 @@ bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& o
         const double du = (f[0] * fv[1] - f[1] * fv[0]) / det;
         const double dv = (fu[0] * f[1] - fu[1] * f[0]) / det;
         const double step = std::fabs(du) + std::fabs(dv);
-        if (converged && !(step < 0.25 * lastStep)) break;  // at rounding: keep (u, v)
+        if (converged && !(step < 0.25 * lastStep)) {
+            // At rounding: keep (u, v), where f was just evaluated.
+            t = f[2];
+            return std::isfinite(t);
+        }
         u -= du;
         v -= dv;
         if (!(std::fabs(u) < 4 && std::fabs(v) < 4)) return false;
