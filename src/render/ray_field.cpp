@@ -338,7 +338,7 @@ void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, con
     gradBound_ = nullptr;
     affine_ = cell_->affine && cell_->linearInvertible;
     exact_ = affine_ && cell_->basis->polynomial;
-    guessCount_ = 0;
+    histCount_ = 0;
     contraction_ = 0;
     if (affine_) {
         // ref(t) = L^-1 (o + t d - origin): linear in t.
@@ -380,22 +380,32 @@ void SegmentField::RefAt(double t, double ref[3]) {
     double world[3];
     for (int i = 0; i < 3; ++i) world[i] = ray_.origin[i] + t * ray_.dir[i];
     InversionOptions options = inversion_;
-    // Start Newton from the cubic Hermite prediction through the last two inverted points
-    // along the ray and their slopes d ref / dt = J^-1 d (the reference path is smooth),
-    // else from the tangent line at the last one.
+    // Start Newton from the cubic Hermite interpolant through the two inverted points
+    // that bracket t (or the two nearest on one side) with their slopes d ref / dt = J^-1
+    // d: the reference path is smooth, and between samples the prediction is far closer
+    // than extrapolated from the last ones.
     double start[3];
-    if (guessCount_ >= 2 && guessT_[1] != guessT_[0]) {
-        const double h = guessT_[1] - guessT_[0], s = (t - guessT_[0]) / h;
-        const double s2 = s * s, s3 = s2 * s;
-        const double h00 = 2 * s3 - 3 * s2 + 1, h10 = (s3 - 2 * s2 + s) * h,
-                     h01 = -2 * s3 + 3 * s2, h11 = (s3 - s2) * h;
+    const int n = histCount_;
+    // First index with histT_ > t.
+    int hi = 0;
+    while (hi < n && !(histT_[hi] > t)) ++hi;
+    if (n >= 2) {
+        const int i0 = hi == 0 ? 0 : hi == n ? n - 2 : hi - 1;
+        const int i1 = i0 + 1;
+        const double h = histT_[i1] - histT_[i0];
+        if (h != 0) {
+            const double s = (t - histT_[i0]) / h;
+            const double s2 = s * s, s3 = s2 * s;
+            const double h00 = 2 * s3 - 3 * s2 + 1, h10 = (s3 - 2 * s2 + s) * h,
+                         h01 = -2 * s3 + 3 * s2, h11 = (s3 - s2) * h;
+            for (int i = 0; i < 3; ++i)
+                start[i] = h00 * histRef_[i0][i] + h10 * histSlope_[i0][i] +
+                           h01 * histRef_[i1][i] + h11 * histSlope_[i1][i];
+            options.initialGuess = start;
+        }
+    } else if (n == 1) {
         for (int i = 0; i < 3; ++i)
-            start[i] = h00 * guessRef_[0][i] + h10 * guessSlope_[0][i] +
-                       h01 * guessRef_[1][i] + h11 * guessSlope_[1][i];
-        options.initialGuess = start;
-    } else if (guessCount_ == 1) {
-        for (int i = 0; i < 3; ++i)
-            start[i] = guessRef_[1][i] + (t - guessT_[1]) * guessSlope_[1][i];
+            start[i] = histRef_[0][i] + (t - histT_[0]) * histSlope_[0][i];
         options.initialGuess = start;
     }
     // Newton's contraction measured in this cell along this ray, with a margin of 4.
@@ -406,20 +416,23 @@ void SegmentField::RefAt(double t, double ref[3]) {
     iterations_ += r.iterations;
     if (!r.converged) failures_ += 1;
     for (int i = 0; i < 3; ++i) ref[i] = r.ref[i];
-    if (r.converged) {
-        guessT_[0] = guessT_[1];
-        for (int i = 0; i < 3; ++i) {
-            guessRef_[0][i] = guessRef_[1][i];
-            guessSlope_[0][i] = guessSlope_[1][i];
+    if (r.converged && n < kHistory && (hi == 0 || histT_[hi - 1] != t)) {
+        // Insert at hi, keeping the history sorted.
+        for (int k = n; k > hi; --k) {
+            histT_[k] = histT_[k - 1];
+            for (int i = 0; i < 3; ++i) {
+                histRef_[k][i] = histRef_[k - 1][i];
+                histSlope_[k][i] = histSlope_[k - 1][i];
+            }
         }
-        guessT_[1] = t;
+        histT_[hi] = t;
         const auto& inv = r.inverseJacobian;
         for (int i = 0; i < 3; ++i) {
-            guessRef_[1][i] = r.ref[i];
-            guessSlope_[1][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
+            histRef_[hi][i] = r.ref[i];
+            histSlope_[hi][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
                                 inv[3 * i + 2] * ray_.dir[2];
         }
-        guessCount_ = std::min(guessCount_ + 1, 2);
+        histCount_ = n + 1;
     }
 }
 

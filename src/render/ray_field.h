@@ -138,12 +138,15 @@ private:
     bool exact_ = false;
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
-    // The last two converged inversions (t, ref, d ref / dt) along the ray: Newton's
-    // predictor.
-    double guessT_[2] = {0, 0};
-    double guessRef_[2][3] = {{0, 0, 0}, {0, 0, 0}};
-    double guessSlope_[2][3] = {{0, 0, 0}, {0, 0, 0}};
-    int guessCount_ = 0;
+    // Converged inversions (t, ref, d ref / dt) in this segment, sorted by t: Newton's
+    // predictor, the cubic Hermite interpolant between the two that bracket a new t (or
+    // through the two nearest on one side). At most kHistory are kept; later ones are
+    // not.
+    static constexpr int kHistory = 48;
+    double histT_[kHistory];
+    double histRef_[kHistory][3];
+    double histSlope_[kHistory][3];
+    int histCount_ = 0;
     double contraction_ = 0;  ///< largest Newton contraction measured in this segment
     EvalWorkspace ws_;
     std::vector<double> batchScratch_;
