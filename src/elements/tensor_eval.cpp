@@ -96,11 +96,11 @@ void HexMapValueJacobian(int p, const double* xyz, const double ref[3], double w
     double l[3][kMaxOrder + 1], dl[3][kMaxOrder + 1];
     for (int d = 0; d < 3; ++d) LagrangeEquispaced1D(p, ref[d], l[d], jacobian ? dl[d] : nullptr);
     const int n = p + 1, m = 3 * n;
-    // The rows along r (3 n contiguous coordinates each) summed with their weights in s and
-    // t first: one contiguous multiply-add per coordinate and row (what vectorises), then
-    // the r direction once on the three sums.
+    // The rows along r (3 n contiguous coordinates each) summed with their weights in s
+    // and t first: one contiguous multiply-add per coordinate and row (what vectorises),
+    // then the r direction once on the three sums.
     double r[3 * (kMaxOrder + 1)] = {}, rs[3 * (kMaxOrder + 1)] = {},
-           rt[3 * (kMaxOrder + 1)] = {};
+                              rt[3 * (kMaxOrder + 1)] = {};
     for (int k = 0; k < n; ++k)
         for (int j = 0; j < n; ++j) {
             const double* row = xyz + m * (j + n * k);

@@ -284,7 +284,8 @@ bool Excluded(const Patch& q, int n) {
 // derivatives along any segment of the parameter region are never parallel). Cross
 // products within rounding of zero fail the test.
 bool Injective(const Patch& q, bool tri, int p) {
-    // Structure of arrays, so that the all-pairs loop below is branch-free and vectorises.
+    // Structure of arrays, so that the all-pairs loop below is branch-free and
+    // vectorises.
     double d1x[kMaxNet], d1y[kMaxNet], d2x[kMaxNet + 4], d2y[kMaxNet + 4];
     int n = 0;
     for (int j = 0; j <= (tri ? p - 1 : p); ++j)
@@ -320,10 +321,12 @@ bool Injective(const Patch& q, bool tri, int p) {
             const __m256d py = _mm256_mul_pd(ay, _mm256_loadu_pd(d2x + b));
             const __m256d c = _mm256_sub_pd(px, py);
             const __m256d margin = _mm256_mul_pd(
-                rel, _mm256_add_pd(_mm256_and_pd(px, absMask), _mm256_and_pd(py, absMask)));
+                rel,
+                _mm256_add_pd(_mm256_and_pd(px, absMask), _mm256_and_pd(py, absMask)));
             pos = _mm256_and_pd(pos, _mm256_cmp_pd(c, margin, _CMP_GT_OQ));
-            neg = _mm256_and_pd(neg, _mm256_cmp_pd(c, _mm256_sub_pd(_mm256_setzero_pd(), margin),
-                                                   _CMP_LT_OQ));
+            neg = _mm256_and_pd(
+                neg,
+                _mm256_cmp_pd(c, _mm256_sub_pd(_mm256_setzero_pd(), margin), _CMP_LT_OQ));
         }
         allPositive = _mm256_movemask_pd(pos) == 0xf;
         allNegative = _mm256_movemask_pd(neg) == 0xf;
@@ -690,8 +693,8 @@ inline void BernsteinWithDerivative(double s, double* b, double* db) {
 }
 
 template <int P>
-void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3], double dU[3],
-                 double dV[3]) {
+void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3],
+                 double dU[3], double dV[3]) {
     double bu[P + 1], du[P + 1], bv[P + 1], dv[P + 1];
     BernsteinWithDerivative<P>(u, bu, du);
     BernsteinWithDerivative<P>(v, bv, dv);
@@ -732,7 +735,8 @@ void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3
     double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
     for (int j = 0; j <= P; ++j)
         for (int i = 0; i <= P - j; ++i) {
-            const double b = tab.binom[P][i] * tab.binom[P - i][j] * pu[i] * pv[j] * pw[P - i - j];
+            const double b =
+                tab.binom[P][i] * tab.binom[P - i][j] * pu[i] * pv[j] * pw[P - i - j];
             const ShearedPoint& q = net[TriIndex(P, i, j)];
             f[0] += b * q.x;
             f[1] += b * q.y;
@@ -760,7 +764,8 @@ void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3
 using NetEvaluator = void (*)(const ShearedPoint*, double, double, double*, double*,
                               double*);
 template <int... Ps>
-constexpr std::array<NetEvaluator, kMaxOrder + 1> QuadTable(std::integer_sequence<int, Ps...>) {
+constexpr std::array<NetEvaluator, kMaxOrder + 1> QuadTable(
+    std::integer_sequence<int, Ps...>) {
     return {nullptr, &EvalQuadNet<Ps + 1>...};
 }
 template <int... Ps>
