@@ -4,6 +4,7 @@
 #include <algorithm>
 
 #include "elements/tensor_eval.h"
+#include "elements/tet_kernels.h"
 
 namespace hpray {
 
@@ -19,6 +20,8 @@ double FieldValue(const CellGeometry& cell, const CellScalar& field, const doubl
         return v[0] * (1.0 - ref[0] - ref[1] - ref[2]) + v[1] * ref[0] + v[2] * ref[1] +
                v[3] * ref[2];
     }
+    if (cell.basis->kind == BasisKind::TetLagrange)
+        return TetKernelsFor(cell.basis->order).value(field.nodal, ref);
     const int n = cell.basis->nodeCount;
     EvalBasis(*cell.basis, ref, ws.values.data(), nullptr);
     double v = 0.0;
@@ -37,10 +40,14 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     const int n = cell.basis->nodeCount;
     const double* d = ws.dRef.data();
     double f = 0.0, g[3] = {0.0, 0.0, 0.0};
+    // Kernels per order (hexahedra, tetrahedra): the Jacobian then comes from the map's.
     const bool tensor = cell.basis->kind == BasisKind::HexLagrange;
+    const bool kernel = tensor || cell.basis->kind == BasisKind::TetLagrange;
     if (tensor) {
         f = HexKernelsFor(field.hexOrder ? field.hexOrder : cell.basis->order)
                 .valueGradient(field.nodal, ref, g);
+    } else if (kernel) {
+        f = TetKernelsFor(cell.basis->order).valueGradient(field.nodal, ref, g);
     } else {
         const double* v = ws.values.data();
         EvalBasis(*cell.basis, ref, ws.values.data(), ws.dRef.data());
@@ -56,7 +63,7 @@ bool FieldValueGradient(const CellGeometry& cell, const CellScalar& field,
     double jac[9], inv[9];
     if (cell.affine) {
         std::copy(cell.inverseLinear.begin(), cell.inverseLinear.end(), inv);
-    } else if (tensor) {
+    } else if (kernel) {
         double world[3];
         WorldFromRef(cell, ref, ws, world, jac);
         if (Invert3x3(jac, inv) == 0.0) return false;

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "elements/tensor_eval.h"
+#include "elements/tet_kernels.h"
 #include "util/check.h"
 
 namespace hpray {
@@ -196,6 +197,7 @@ CellGeometry MakeCellGeometry(const BasisTable& basis, const double* nodeXyz,
         g.mapOrder = basis.order;
         g.mapNodes = nodeXyz;
     }
+    if (basis.kind == BasisKind::TetLagrange) g.tetMap = &TetKernelsFor(basis.order);
     const int n = basis.nodeCount;
     if (basis.shape == CellShape::Tet && basis.order == 1) {
         // The linear tetrahedron (reference corners 0, e1, e2, e3): the map through its
@@ -276,6 +278,10 @@ void WorldFromRef(const CellGeometry& cell, const double ref[3], EvalWorkspace& 
     }
     if (cell.hexMap) {
         cell.hexMap->map(cell.mapNodes, ref, world, jacobian);
+        return;
+    }
+    if (cell.tetMap) {
+        cell.tetMap->map(cell.nodes, ref, world, jacobian);
         return;
     }
     const int n = cell.basis->nodeCount;

@@ -8,6 +8,7 @@
 
 #include "elements/basis.h"
 #include "elements/hex_kernels.h"
+#include "elements/tet_kernels.h"
 
 namespace hpray {
 
@@ -51,6 +52,9 @@ struct CellGeometry {
     const HexKernels* hexMap = nullptr;
     int mapOrder = 0;
     const double* mapNodes = nullptr;
+    /// Lagrange tetrahedra: the kernels of their order, which evaluate the map from
+    /// `nodes`. Null for other cells.
+    const TetKernels* tetMap = nullptr;
 };
 
 /// The lowest order q < p (q <= maxOrder) whose tensor Lagrange interpolant reproduces every

@@ -12,6 +12,7 @@
 #include "elements/hex_kernels.h"
 #include "elements/mesh_geometry.h"
 #include "elements/tensor_eval.h"
+#include "elements/tet_kernels.h"
 #include "mesh/cell.h"
 #include "mesh/mesh.h"
 
@@ -55,6 +56,47 @@ TEST(HexKernels, EverySpecialisedKernelEqualsTheGenericPathBitwise) {
             for (int s = 0; s < count; ++s)
                 EXPECT_EQ(out[s], HexFieldValue(p, u.data(), &refs[3 * s]))
                     << "p " << p << " count " << count << " sample " << s;
+        }
+    }
+}
+
+// The tetrahedron kernels fuse the basis with the node sums; they must give bitwise what
+// the generic path gives: EvalBasis into arrays, then the sums over the nodes in order.
+TEST(TetKernels, EverySpecialisedKernelEqualsTheGenericPathBitwise) {
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<double> value(-2, 2), point(-0.2, 0.6);
+    for (int p = 1; p <= kMaxOrder; ++p) {
+        const TetKernels& k = TetKernelsFor(p);
+        ASSERT_EQ(k.order, p);
+        const BasisTable& basis = GetBasis(CellShape::Tet, p, CellFamily::Lagrange);
+        const int n = basis.nodeCount;
+        ASSERT_EQ(n, (p + 1) * (p + 2) * (p + 3) / 6);
+        std::vector<double> u(n), xyz(3 * n), v(n), d(3 * n);
+        for (double& x : u) x = value(rng);
+        for (double& x : xyz) x = value(rng);
+        for (int s = 0; s < 13; ++s) {
+            const double ref[3] = {point(rng), point(rng), point(rng)};
+            EvalBasis(basis, ref, v.data(), d.data());
+            double f = 0, g[3] = {0, 0, 0}, w[3] = {0, 0, 0}, jac[9] = {};
+            for (int m = 0; m < n; ++m) {
+                f += u[m] * v[m];
+                for (int c = 0; c < 3; ++c) g[c] += u[m] * d[3 * m + c];
+                for (int c = 0; c < 3; ++c) w[c] += v[m] * xyz[3 * m + c];
+            }
+            for (int m = 0; m < n; ++m)
+                for (int i = 0; i < 3; ++i)
+                    for (int j = 0; j < 3; ++j)
+                        jac[3 * i + j] += xyz[3 * m + i] * d[3 * m + j];
+            EXPECT_EQ(k.value(u.data(), ref), f) << "p " << p;
+            double g1[3];
+            EXPECT_EQ(k.valueGradient(u.data(), ref, g1), f) << "p " << p;
+            for (int c = 0; c < 3; ++c) EXPECT_EQ(g1[c], g[c]) << "p " << p;
+            double w1[3], j1[9];
+            k.map(xyz.data(), ref, w1, j1);
+            for (int c = 0; c < 3; ++c) EXPECT_EQ(w1[c], w[c]) << "p " << p;
+            for (int c = 0; c < 9; ++c) EXPECT_EQ(j1[c], jac[c]) << "p " << p;
+            k.map(xyz.data(), ref, w1, nullptr);
+            for (int c = 0; c < 3; ++c) EXPECT_EQ(w1[c], w[c]) << "p " << p;
         }
     }
 }
