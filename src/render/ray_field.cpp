@@ -389,9 +389,36 @@ void SegmentField::RefAt(double t, double ref[3]) {
     // First index with histT_ > t.
     int hi = 0;
     while (hi < n && !(histT_[hi] > t)) ++hi;
-    if (n >= 2) {
-        const int i0 = hi == 0 ? 0 : hi == n ? n - 2 : hi - 1;
-        const int i1 = i0 + 1;
+    if (n >= 3) {
+        // The quintic Hermite interpolant through the three nearest: the bracketing pair
+        // and the nearer of their outer neighbours (confluent divided differences).
+        int i0 = hi == 0 ? 0 : hi == n ? n - 2 : hi - 1;
+        if (i0 + 2 >= n || (i0 > 0 && t - histT_[i0 - 1] < histT_[i0 + 2] - t)) --i0;
+        i0 = std::max(0, std::min(i0, n - 3));
+        // H_k = (1 - 2 L_k'(t_k) (t - t_k)) L_k^2 and K_k = (t - t_k) L_k^2 with L_k the
+        // quadratic Lagrange basis on the three points.
+        const double t0 = histT_[i0], t1 = histT_[i0 + 1], t2 = histT_[i0 + 2];
+        if (t0 != t1 && t1 != t2 && t0 != t2) {
+            const double r01 = 1 / (t0 - t1), r02 = 1 / (t0 - t2), r12 = 1 / (t1 - t2);
+            const double a0 = t - t0, a1 = t - t1, a2 = t - t2;
+            const double l[3] = {a1 * a2 * r01 * r02, -a0 * a2 * r01 * r12,
+                                 a0 * a1 * r02 * r12};
+            const double dl[3] = {r01 + r02, r12 - r01, -r02 - r12};  // L_k'(t_k)
+            const double a[3] = {a0, a1, a2};
+            double wv[3], ws[3];
+            for (int k = 0; k < 3; ++k) {
+                const double l2 = l[k] * l[k];
+                wv[k] = (1 - 2 * dl[k] * a[k]) * l2;
+                ws[k] = a[k] * l2;
+            }
+            for (int i = 0; i < 3; ++i)
+                start[i] = wv[0] * histRef_[i0][i] + ws[0] * histSlope_[i0][i] +
+                           wv[1] * histRef_[i0 + 1][i] + ws[1] * histSlope_[i0 + 1][i] +
+                           wv[2] * histRef_[i0 + 2][i] + ws[2] * histSlope_[i0 + 2][i];
+            options.initialGuess = start;
+        }
+    } else if (n == 2) {
+        const int i0 = 0, i1 = 1;
         const double h = histT_[i1] - histT_[i0];
         if (h != 0) {
             const double s = (t - histT_[i0]) / h;
