@@ -1457,7 +1457,9 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
                 if (o < cr.box.lo[d] || o > cr.box.hi[d]) return;
                 continue;
             }
-            double t0 = (cr.box.lo[d] - o) / dd, t1 = (cr.box.hi[d] - o) / dd;
+            // By the reciprocal: the margin below is far above its rounding.
+            double t0 = (cr.box.lo[d] - o) * frame.invDir[d],
+                   t1 = (cr.box.hi[d] - o) * frame.invDir[d];
             if (t0 > t1) std::swap(t0, t1);
             lo = std::max(lo, t0);
             hi = std::min(hi, t1);

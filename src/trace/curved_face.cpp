@@ -528,11 +528,19 @@ bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& o
     // fast (quadratic convergence): near tangency the Jacobian is nearly singular and a
     // residual at the tolerance still leaves t off by residual / sin(angle to the face).
     double lastStep = INFINITY;
+    // The last step was predicted to land within rounding of the root: accepted if the
+    // residual there is within the tolerance.
+    bool predicted = false;
     for (int it = 0; it < options.maxNewtonIterations; ++it) {
         EvalNet(tri, p, net, u, v, f, fu, fv);
         const double det = fu[0] * fv[1] - fu[1] * fv[0];
         if (det == 0 || !std::isfinite(det)) return false;
         const double res = std::sqrt(f[0] * f[0] + f[1] * f[1]);
+        if (predicted && res <= options.tolerance) {
+            t = f[2];
+            return std::isfinite(t);
+        }
+        predicted = false;
         const double du = (f[0] * fv[1] - f[1] * fv[0]) / det;
         const double dv = (fu[0] * f[1] - fu[1] * f[0]) / det;
         const double step = std::fabs(du) + std::fabs(dv);
@@ -547,6 +555,12 @@ bool Newton(bool tri, int p, const ShearedPoint* net, const CurvedFaceOptions& o
         if (res <= options.tolerance) {
             if (converged && step < 1e-15) break;
             converged = true;
+        } else if (lastStep <= 1e-2 &&
+                   step * step * step <= 1e-16 * lastStep * lastStep) {
+            // Quadratic convergence measured on the last two steps: the error left after
+            // this one is about K step^2 with K = step / lastStep^2, far below the
+            // tolerance (near tangency K is large and this does not apply).
+            predicted = true;
         }
         lastStep = step;
     }

@@ -36,11 +36,13 @@ struct RayFrame {
     double dir[3] = {0, 0, 1};
     int kx = 0, ky = 1, kz = 2;
     double sx = 0, sy = 0, sz = 1;
+    double invDir[3] = {0, 0, 1};  ///< 1 / dir (infinite where dir is 0), for slab tests
 
     explicit RayFrame(const Ray& ray) {
         for (int a = 0; a < 3; ++a) {
             org[a] = ray.origin[a];
             dir[a] = ray.dir[a];
+            invDir[a] = 1.0 / dir[a];
         }
         kz = 0;
         if (std::fabs(dir[1]) > std::fabs(dir[kz])) kz = 1;
