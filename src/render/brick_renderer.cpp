@@ -486,8 +486,11 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 any |= relevant_[k] && setup.isos[k].field == int(f) &&
                        (setup.isos[k].opacity >= 1) == (pass == 0);
             if (!any) continue;
-            field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell, ray,
-                         setup.inversion);
+            // The second pass over the same field keeps the first's set-up and the points it
+            // inverted (Newton's predictor).
+            if (fieldLoaded_ != int(f))
+                field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
+                             ray, setup.inversion);
             fieldLoaded_ = int(f);
             if (fieldUsed_[f] == 1) {  // project once per field and segment
                 fieldUsed_[f] = 2;
