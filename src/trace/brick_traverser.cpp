@@ -90,6 +90,7 @@ struct CurvedCacheEntry {
 struct Scratch {
     std::vector<Crossing> boundary;
     std::vector<Crossing> cell;
+    std::vector<std::int64_t> candidates;  // cells whose box holds a located point
     std::vector<trace::FaceCrossing> face;
     std::uint64_t ray = 0;  // id of the current Trace call on this thread
     CurvedCacheEntry cache[8];
@@ -294,12 +295,24 @@ struct BrickTraverser::Impl {
     RTCDevice device = nullptr;
     RTCScene scene = nullptr;
     std::atomic<std::int64_t> embreeBytes{0};
+    // Cells boxed like the boundary faces, for locating where a span that starts inside
+    // the mesh begins (see LocateStart); built the first time one does.
+    mutable std::once_flag cellSceneOnce;
+    mutable RTCScene cellScene = nullptr;
+    mutable std::vector<float> cellBoxes;
+    mutable std::atomic<bool> cellSceneReady{false};
+    // Cells walked before the span they were walked for: once they are as many as the
+    // brick's cells, the cell scene (whose build costs about as much as visiting each
+    // cell once) is built and spans start at located cells from then on.
+    mutable std::atomic<std::int64_t> walkedBefore{0};
 
     mutable std::atomic<std::int64_t> newtonFailures{0};
     mutable std::atomic<std::int64_t> walkRepairs{0};
     mutable std::atomic<std::int64_t> walkFailures{0};
+    mutable std::atomic<std::int64_t> locatedStarts{0};
 
     ~Impl() {
+        if (cellScene) rtcReleaseScene(cellScene);
         if (scene) rtcReleaseScene(scene);
         if (device) rtcReleaseDevice(device);
     }
@@ -346,6 +359,14 @@ struct BrickTraverser::Impl {
     bool Leaves(const Crossing& x, std::int64_t c) const {
         return faces[x.face].cell[x.side > 0 ? 0 : 1] == c;
     }
+    // The cell whose segment of the ray line holds t (entering crossing at or before t,
+    // its paired leaving one after it, as FindExit pairs them), with that entering
+    // crossing: where a walk from the mesh boundary would be at t, found without walking
+    // there. False if no cell holds t (outside the mesh, or within rounding of a face
+    // where the pairs do not meet).
+    bool LocateStart(double t, const Ray& ray, const RayFrame& frame, std::int64_t& cell,
+                     Crossing& entry) const;
+    void BuildCellScene() const;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -1497,6 +1518,165 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
 }
 
 // ---------------------------------------------------------------------------------------
+// Locating a start inside the mesh
+
+namespace {
+struct CellQueryContext {
+    RTCIntersectContext base;  // first member: Embree passes &base back to the callbacks
+    std::vector<std::int64_t>* candidates;
+};
+}  // namespace
+
+void BrickTraverser::Impl::BuildCellScene() const {
+    const std::int64_t cells = static_cast<std::int64_t>(cellFaceOffset.size()) - 1;
+    cellBoxes.assign(6 * static_cast<std::size_t>(std::max<std::int64_t>(cells, 0)),
+                     0.0f);
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, cells, 1024),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            std::vector<std::array<std::int32_t, 3>> tris;
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
+                for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k) {
+                    const FaceRec& rec = faces[cellFaces[k]];
+                    if (rec.kind == FaceKind::Curved) {
+                        const CurvedRec& cr = curved[rec.curved];
+                        for (int d = 0; d < 3; ++d) {
+                            lo[d] = std::min(lo[d], cr.box.lo[d]);
+                            hi[d] = std::max(hi[d], cr.box.hi[d]);
+                        }
+                    }
+                    Tessellation(cellFaces[k], tris);
+                    for (const auto& tri : tris)
+                        for (std::int32_t id : tri)
+                            for (int d = 0; d < 3; ++d) {
+                                lo[d] = std::min(lo[d], P(id)[d]);
+                                hi[d] = std::max(hi[d], P(id)[d]);
+                            }
+                }
+                float* b = &cellBoxes[6 * static_cast<std::size_t>(c)];
+                for (int d = 0; d < 3; ++d) {
+                    // An empty cell (no faces) gets an empty box.
+                    b[d] = lo[d] <= hi[d]
+                               ? std::nextafter(float(lo[d] - queryPad), -INFINITY)
+                               : INFINITY;
+                    b[3 + d] = lo[d] <= hi[d]
+                                   ? std::nextafter(float(hi[d] + queryPad), INFINITY)
+                                   : -INFINITY;
+                }
+            }
+        });
+    RTCScene s = rtcNewScene(device);
+    rtcSetSceneFlags(s, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_COMPACT);
+    rtcSetSceneBuildQuality(s, RTC_BUILD_QUALITY_LOW);
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(
+        geom, static_cast<unsigned>(std::max<std::int64_t>(cells, 0)));
+    rtcSetGeometryUserData(geom, const_cast<Impl*>(this));
+    rtcSetGeometryBoundsFunction(
+        geom,
+        [](const RTCBoundsFunctionArguments* args) {
+            const auto* self = static_cast<const Impl*>(args->geometryUserPtr);
+            const float* b = &self->cellBoxes[6 * std::size_t(args->primID)];
+            args->bounds_o->lower_x = b[0];
+            args->bounds_o->lower_y = b[1];
+            args->bounds_o->lower_z = b[2];
+            args->bounds_o->upper_x = b[3];
+            args->bounds_o->upper_y = b[4];
+            args->bounds_o->upper_z = b[5];
+        },
+        nullptr);
+    rtcSetGeometryIntersectFunction(geom, [](const RTCIntersectFunctionNArguments* args) {
+        if (!args->valid[0]) return;
+        const auto* ctx = reinterpret_cast<const CellQueryContext*>(args->context);
+        ctx->candidates->push_back(args->primID);
+    });
+    rtcSetGeometryOccludedFunction(geom, [](const RTCOccludedFunctionNArguments*) {});
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(s, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(s);
+    const RTCError err = rtcGetDeviceError(device);
+    if (err != RTC_ERROR_NONE) {
+        std::ostringstream os;
+        os << "Embree cell scene build failed (error " << int(err) << ")";
+        throw InternalError(os.str());
+    }
+    cellScene = s;
+}
+
+bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame& frame,
+                                       std::int64_t& cell, Crossing& entry) const {
+    if (!cellSceneReady.load(std::memory_order_acquire)) {
+        if (walkedBefore.load(std::memory_order_relaxed) < stats.cells) return false;
+        std::call_once(cellSceneOnce, [this] {
+            BuildCellScene();
+            cellSceneReady.store(true, std::memory_order_release);
+        });
+    }
+    // The boxes that a short float ray about the point at t passes through (they are
+    // padded by queryPad, far above the float rounding of the ray).
+    std::vector<std::int64_t>& cand = tScratch.candidates;
+    cand.clear();
+    CellQueryContext ctx;
+    rtcInitIntersectContext(&ctx.base);
+    ctx.candidates = &cand;
+    RTCRayHit rh;
+    const double s0 = t - 0.5 * queryPad;
+    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
+    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
+    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
+    rh.ray.dir_x = float(ray.dir[0]);
+    rh.ray.dir_y = float(ray.dir[1]);
+    rh.ray.dir_z = float(ray.dir[2]);
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = float(queryPad);
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(cellScene, &ctx.base, &rh);
+    std::sort(cand.begin(), cand.end());
+    cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+    std::vector<Crossing>& xs = tScratch.cell;
+    for (std::int64_t c : cand) {
+        // All crossings of the cell's faces, sorted and paired as in FindExit.
+        xs.clear();
+        for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
+            AppendCrossings(cellFaces[k], frame, xs);
+        std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
+            if (a.t != b.t) return a.t < b.t;
+            if (a.face != b.face) return a.face < b.face;
+            return a.side < b.side;
+        });
+        int openIn[64], openOut[64];
+        int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
+        for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
+            int in = -1, out = -1;
+            if (Leaves(xs[i], c)) {
+                if (headIn < nIn)
+                    in = openIn[headIn++], out = i;
+                else
+                    openOut[nOut++] = i;
+            } else {
+                if (headOut < nOut)
+                    in = i, out = openOut[headOut++];
+                else
+                    openIn[nIn++] = i;
+            }
+            if (in >= 0 && xs[in].t <= t && t < xs[out].t) {
+                cell = c;
+                entry = xs[in];
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
+// ---------------------------------------------------------------------------------------
 // The walk
 
 bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, double entryT,
@@ -1664,6 +1844,7 @@ TraceCounters BrickTraverser::Counters() const {
     c.newtonFailures = impl_->newtonFailures.load();
     c.walkRepairs = impl_->walkRepairs.load();
     c.walkFailures = impl_->walkFailures.load();
+    c.locatedStarts = impl_->locatedStarts.load();
     return c;
 }
 
@@ -1738,18 +1919,11 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     // 2. Walk from each entry through neighbouring cells until the ray leaves the mesh.
     double tCur = -kInf;
     constexpr int kMaxZeroSteps = 4096;
-    for (std::size_t i = 0; i < hits.size(); ++i) {
-        const Crossing& entry = hits[i];
-        std::int64_t c = entered(entry);
-        if (c < 0) continue;
-        if (alternating && hits[i + 1].t <= tLo) {
-            tCur = std::max(tCur, hits[i + 1].t);
-            continue;
-        }
-        double tIn = std::max(entry.t, tCur);
-        if (tIn >= tHi) return;
-        std::int32_t entryFace = entry.face;
-        double entryT = entry.t;
+    std::int64_t before = 0;  // cells walked before tLo
+    // One walk from cell c, entered by the crossing of entryFace at entryT, at tIn (>=
+    // entryT). True when the span is done.
+    auto walk = [&](std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
+                    const Crossing& entry) {
         int zeroSteps = 0;
         SegmentEnds se;
         if (ends) im.EntryPoint(entry, frame, se.enter);
@@ -1758,10 +1932,11 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex,
                              ends ? &se.exit : nullptr)) {
                 im.walkFailures.fetch_add(1, std::memory_order_relaxed);
-                break;
+                return false;
             }
             const double tOut = std::max(ex.t, tIn);
             const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
+            before += tOut <= tLo;
             if (a < b) {
                 out.push_back({c, a, b});
                 if (ends) {
@@ -1771,13 +1946,13 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             }
             if (ends) se.enter = se.exit;
             tCur = tOut;
-            if (tOut >= tHi) return;
+            if (tOut >= tHi) return true;
             const std::int64_t next = im.faces[ex.face].cell[ex.side > 0 ? 1 : 0];
-            if (next < 0) break;
+            if (next < 0) return false;
             if (tOut == tIn) {
                 if (++zeroSteps > kMaxZeroSteps) {
                     im.walkFailures.fetch_add(1, std::memory_order_relaxed);
-                    break;
+                    return false;
                 }
             } else {
                 zeroSteps = 0;
@@ -1787,6 +1962,43 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             entryT = ex.t;
             tIn = tOut;
         }
+    };
+    // A span cut by the caller (a clip box) that starts inside the mesh: start at the
+    // cell holding its start instead of walking the cells before it from the boundary.
+    // Only where the caller's tMin, not the brick's box, starts the span, so that every
+    // brick decomposition starts such a span the same way.
+    bool located = false;
+    if (tLo == tMin && tLo > hits.front().t) {
+        std::int64_t c0;
+        Crossing e0;
+        if (im.LocateStart(tLo, ray, frame, c0, e0)) {
+            located = true;
+            im.locatedStarts.fetch_add(1, std::memory_order_relaxed);
+            if (walk(c0, e0.face, e0.t, e0.t, e0)) return;
+        }
+    }
+    // Cells walked before the span, counted once the ray is done.
+    struct CountBefore {
+        const Impl& im;
+        const std::int64_t& before;
+        ~CountBefore() {
+            if (before) im.walkedBefore.fetch_add(before, std::memory_order_relaxed);
+        }
+    } countBefore{im, before};
+    for (std::size_t i = 0; i < hits.size(); ++i) {
+        const Crossing& entry = hits[i];
+        // After a located walk, the boundary's entries up to where it left the mesh are
+        // those of walks before the span or of the located one.
+        if (located && entry.t < tCur) continue;
+        std::int64_t c = entered(entry);
+        if (c < 0) continue;
+        if (alternating && hits[i + 1].t <= tLo) {
+            tCur = std::max(tCur, hits[i + 1].t);
+            continue;
+        }
+        const double tIn = std::max(entry.t, tCur);
+        if (tIn >= tHi) return;
+        if (walk(c, entry.face, entry.t, tIn, entry)) return;
     }
 }
 

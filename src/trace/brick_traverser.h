@@ -79,6 +79,9 @@ struct TraceCounters {
     std::int64_t newtonFailures = 0;
     std::int64_t walkRepairs = 0;   ///< cells left through a tolerant exit search
     std::int64_t walkFailures = 0;  ///< walks abandoned (rest found by the next entry)
+    /// Spans that started inside the mesh (tMin past the mesh boundary, a clip box) begun
+    /// at the cell located there instead of walked to from the boundary.
+    std::int64_t locatedStarts = 0;
 };
 
 /// Where a ray crosses a planar triangular face: the face's corners (point indices of the

@@ -1132,5 +1132,60 @@ TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
     }
 }
 
+// A span that starts inside the mesh (tMin past the boundary, as a clip box makes it) is
+// begun at the cell located there: its segments must be bitwise those of a walk from the
+// boundary cut at tMin, on straight, curved and mixed meshes, and the located start must
+// be what happened (its counter).
+TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
+    };
+    std::vector<std::pair<std::string, Mesh>> meshes;
+    meshes.emplace_back("q2 hexes", GridHexes(3, map));
+    meshes.emplace_back("ball-p2", MakeBuiltin("builtin:ball-p2?n=3"));
+    meshes.emplace_back("mixed", MakeCubeMesh("mixed"));
+    for (const auto& [name, mesh] : meshes) {
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        const Box box = Brick::WholeMesh(mesh).box;
+        std::mt19937_64 rng(41);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> segs, all;
+        int inside = 0;
+        for (int i = 0; i < 3000; ++i) {
+            // From outside the box towards a point inside it; tMin somewhere along the
+            // chord through the box.
+            Vec3 target, from;
+            for (int d = 0; d < 3; ++d) {
+                target[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * uni(rng);
+                from[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * (3 * uni(rng) - 1);
+            }
+            from[i % 3] = box.hi[i % 3] + 1;
+            const Ray ray = MakeRay(from, target);
+            double t0, t1;
+            if (!BoxChord(ray, box, t0, t1)) continue;
+            const double tMin = t0 + (t1 - t0) * uni(rng);
+            tr.Trace(ray, tMin, INFINITY, segs);
+            tr.Trace(ray, -INFINITY, INFINITY, all);
+            std::vector<Segment> cut;
+            for (const auto& g : all) {
+                const double x = std::max(g.tEnter, tMin), y = g.tExit;
+                if (x < y) cut.push_back({g.cell, x, y});
+            }
+            ASSERT_EQ(cut.size(), segs.size()) << name << " ray " << i;
+            for (std::size_t k = 0; k < cut.size(); ++k) {
+                EXPECT_EQ(cut[k].cell, segs[k].cell) << name << " ray " << i;
+                EXPECT_EQ(cut[k].tEnter, segs[k].tEnter) << name << " ray " << i;
+                EXPECT_EQ(cut[k].tExit, segs[k].tExit) << name << " ray " << i;
+            }
+            inside += !all.empty() && all.front().tEnter < tMin && !segs.empty() &&
+                      segs.front().tEnter == tMin;
+        }
+        // Most spans that start inside the mesh were begun at a located cell.
+        EXPECT_GT(inside, 300) << name;
+        EXPECT_GE(tr.Counters().locatedStarts, inside * 9 / 10) << name;
+        EXPECT_EQ(tr.Counters().walkFailures, 0) << name;
+    }
+}
+
 }  // namespace
 }  // namespace hpray
