@@ -113,6 +113,27 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         slice.opacity = in.opacity;
         s.slices.push_back(std::move(slice));
     }
+    // Isosurfaces alone need only the cells whose guaranteed range holds an isovalue:
+    // where those are few, rays visit them through a tree of their boxes instead of
+    // walking every cell on the way (the segments of those cells are the walk's).
+    if (!s.isos.empty() && !s.volume && s.slices.empty()) {
+        const std::int64_t cells = mesh.CellCount();
+        std::vector<std::uint8_t> keep(cells, 0);
+        std::int64_t kept = 0;
+        for (std::int64_t c = 0; c < cells; ++c) {
+            for (const BrickSetup::Iso& iso : s.isos) {
+                const Interval& r = (*s.cellRanges[iso.field])[c];
+                if (iso.value >= r.lo && iso.value <= r.hi) {
+                    keep[c] = 1;
+                    break;
+                }
+            }
+            kept += keep[c];
+        }
+        // Measured: 15% of the cells (deal.II step-65) renders 1.5x faster, 36% (nk-sinc)
+        // 1.4x, 45% (MFEM escher) 1.07x; 90% (ball-p2) 1.5x slower.
+        if (2 * kept <= cells) s.isoCells = traverser.MakeCellFilter(keep);
+    }
     return s;
 }
 
@@ -337,7 +358,10 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         costSamples ? CostClock::now() : CostClock::time_point{};
     // Linear tetrahedra take their volume fields from the face points of the walk.
     const bool facePoints = hasVolume && setup.traverser->FacePoints();
-    setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr);
+    if (setup.isoCells)
+        setup.traverser->Trace(ray, tMin, tMax, segments_, *setup.isoCells);
+    else
+        setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr);
     counters.segments += static_cast<double>(segments_.size());
     SegmentCostRecorder recorder(
         costSamples, ray, segments_,

@@ -81,6 +81,9 @@ struct BrickSetup {
         PiecewiseLinearTf colorTf;
         double opacity = 1;
     };
+    /// Scenes of isosurfaces alone, where few cells hold an isovalue: those cells (rays
+    /// visit only them, see BrickTraverser::MakeCellFilter); null otherwise.
+    std::shared_ptr<const CellFilter> isoCells;
     std::vector<Slice> slices;
 
     /// Cooperative cancellation: when set, asked before each tile (from any rendering

@@ -367,6 +367,21 @@ struct BrickTraverser::Impl {
     bool LocateStart(double t, const Ray& ray, const RayFrame& frame, std::int64_t& cell,
                      Crossing& entry) const;
     void BuildCellScene() const;
+    // The box of cell c (its faces' corners and curved faces' control nets) padded for
+    // float queries, as 6 floats (an empty box for a cell without faces).
+    void CellBox(std::int64_t c, std::vector<std::array<std::int32_t, 3>>& tris,
+                 float* box) const;
+    // An Embree scene of `count` user primitives boxed by boxes[6 i .. 6 i + 5] whose
+    // intersector appends the primitive's index to the query's candidates.
+    RTCScene MakeBoxScene(const float* boxes, std::size_t count) const;
+    // Cells (primitive indices of a box scene) whose boxes a float ray over [t0, t1]
+    // about the ray passes through, sorted, into `out`.
+    void BoxCandidates(RTCScene boxScene, const Ray& ray, double t0, double t1,
+                       std::vector<std::int64_t>& out) const;
+    // Appends to `out` the segments of cell c in [tLo, tHi]: its faces' crossings paired
+    // as FindExit pairs them.
+    void CellSegments(std::int64_t c, const RayFrame& frame, double tLo, double tHi,
+                      std::vector<Segment>& out) const;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -1531,53 +1546,56 @@ void BrickTraverser::Impl::BuildCellScene() const {
     const std::int64_t cells = static_cast<std::int64_t>(cellFaceOffset.size()) - 1;
     cellBoxes.assign(6 * static_cast<std::size_t>(std::max<std::int64_t>(cells, 0)),
                      0.0f);
-    tbb::parallel_for(
-        tbb::blocked_range<std::int64_t>(0, cells, 1024),
-        [&](const tbb::blocked_range<std::int64_t>& range) {
-            std::vector<std::array<std::int32_t, 3>> tris;
-            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
-                for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k) {
-                    const FaceRec& rec = faces[cellFaces[k]];
-                    if (rec.kind == FaceKind::Curved) {
-                        const CurvedRec& cr = curved[rec.curved];
-                        for (int d = 0; d < 3; ++d) {
-                            lo[d] = std::min(lo[d], cr.box.lo[d]);
-                            hi[d] = std::max(hi[d], cr.box.hi[d]);
-                        }
-                    }
-                    Tessellation(cellFaces[k], tris);
-                    for (const auto& tri : tris)
-                        for (std::int32_t id : tri)
-                            for (int d = 0; d < 3; ++d) {
-                                lo[d] = std::min(lo[d], P(id)[d]);
-                                hi[d] = std::max(hi[d], P(id)[d]);
-                            }
-                }
-                float* b = &cellBoxes[6 * static_cast<std::size_t>(c)];
-                for (int d = 0; d < 3; ++d) {
-                    // An empty cell (no faces) gets an empty box.
-                    b[d] = lo[d] <= hi[d]
-                               ? std::nextafter(float(lo[d] - queryPad), -INFINITY)
-                               : INFINITY;
-                    b[3 + d] = lo[d] <= hi[d]
-                                   ? std::nextafter(float(hi[d] + queryPad), INFINITY)
-                                   : -INFINITY;
-                }
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 1024),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          std::vector<std::array<std::int32_t, 3>> tris;
+                          for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                              CellBox(c, tris,
+                                      &cellBoxes[6 * static_cast<std::size_t>(c)]);
+                      });
+    cellScene = MakeBoxScene(cellBoxes.data(), cellBoxes.size() / 6);
+}
+
+void BrickTraverser::Impl::CellBox(std::int64_t c,
+                                   std::vector<std::array<std::int32_t, 3>>& tris,
+                                   float* b) const {
+    double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
+    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k) {
+        const FaceRec& rec = faces[cellFaces[k]];
+        if (rec.kind == FaceKind::Curved) {
+            const CurvedRec& cr = curved[rec.curved];
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = std::min(lo[d], cr.box.lo[d]);
+                hi[d] = std::max(hi[d], cr.box.hi[d]);
             }
-        });
+        }
+        Tessellation(cellFaces[k], tris);
+        for (const auto& tri : tris)
+            for (std::int32_t id : tri)
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], P(id)[d]);
+                    hi[d] = std::max(hi[d], P(id)[d]);
+                }
+    }
+    for (int d = 0; d < 3; ++d) {
+        const bool empty = !(lo[d] <= hi[d]);
+        b[d] = empty ? INFINITY : std::nextafter(float(lo[d] - queryPad), -INFINITY);
+        b[3 + d] = empty ? -INFINITY : std::nextafter(float(hi[d] + queryPad), INFINITY);
+    }
+}
+
+RTCScene BrickTraverser::Impl::MakeBoxScene(const float* boxes, std::size_t count) const {
     RTCScene s = rtcNewScene(device);
     rtcSetSceneFlags(s, RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_COMPACT);
     rtcSetSceneBuildQuality(s, RTC_BUILD_QUALITY_LOW);
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
-    rtcSetGeometryUserPrimitiveCount(
-        geom, static_cast<unsigned>(std::max<std::int64_t>(cells, 0)));
-    rtcSetGeometryUserData(geom, const_cast<Impl*>(this));
+    rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(count));
+    rtcSetGeometryUserData(geom, const_cast<float*>(boxes));
     rtcSetGeometryBoundsFunction(
         geom,
         [](const RTCBoundsFunctionArguments* args) {
-            const auto* self = static_cast<const Impl*>(args->geometryUserPtr);
-            const float* b = &self->cellBoxes[6 * std::size_t(args->primID)];
+            const float* b = static_cast<const float*>(args->geometryUserPtr) +
+                             6 * std::size_t(args->primID);
             args->bounds_o->lower_x = b[0];
             args->bounds_o->lower_y = b[1];
             args->bounds_o->lower_z = b[2];
@@ -1602,7 +1620,69 @@ void BrickTraverser::Impl::BuildCellScene() const {
         os << "Embree cell scene build failed (error " << int(err) << ")";
         throw InternalError(os.str());
     }
-    cellScene = s;
+    return s;
+}
+
+void BrickTraverser::Impl::BoxCandidates(RTCScene boxScene, const Ray& ray, double t0,
+                                         double t1,
+                                         std::vector<std::int64_t>& out) const {
+    out.clear();
+    CellQueryContext ctx;
+    rtcInitIntersectContext(&ctx.base);
+    ctx.candidates = &out;
+    RTCRayHit rh;
+    const double s0 = t0 - queryPad;
+    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
+    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
+    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
+    rh.ray.dir_x = float(ray.dir[0]);
+    rh.ray.dir_y = float(ray.dir[1]);
+    rh.ray.dir_z = float(ray.dir[2]);
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = float((t1 - t0) + 2 * queryPad) * (1 + 1e-6f);
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(boxScene, &ctx.base, &rh);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+void BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
+                                        double tHi, std::vector<Segment>& out) const {
+    std::vector<Crossing>& xs = tScratch.cell;
+    xs.clear();
+    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
+        AppendCrossings(cellFaces[k], frame, xs);
+    std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
+        if (a.t != b.t) return a.t < b.t;
+        if (a.face != b.face) return a.face < b.face;
+        return a.side < b.side;
+    });
+    int openIn[64], openOut[64];
+    int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
+    for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
+        int in = -1, outIdx = -1;
+        if (Leaves(xs[i], c)) {
+            if (headIn < nIn)
+                in = openIn[headIn++], outIdx = i;
+            else
+                openOut[nOut++] = i;
+        } else {
+            if (headOut < nOut)
+                in = i, outIdx = openOut[headOut++];
+            else
+                openIn[nIn++] = i;
+        }
+        if (in < 0) continue;
+        // As the walk: the exit no earlier than the entry.
+        const double tIn = xs[in].t, tOut = std::max(xs[outIdx].t, tIn);
+        const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
+        if (a < b) out.push_back({c, a, b});
+    }
 }
 
 bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame& frame,
@@ -1617,29 +1697,7 @@ bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame&
     // The boxes that a short float ray about the point at t passes through (they are
     // padded by queryPad, far above the float rounding of the ray).
     std::vector<std::int64_t>& cand = tScratch.candidates;
-    cand.clear();
-    CellQueryContext ctx;
-    rtcInitIntersectContext(&ctx.base);
-    ctx.candidates = &cand;
-    RTCRayHit rh;
-    const double s0 = t - 0.5 * queryPad;
-    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
-    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
-    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
-    rh.ray.dir_x = float(ray.dir[0]);
-    rh.ray.dir_y = float(ray.dir[1]);
-    rh.ray.dir_z = float(ray.dir[2]);
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = float(queryPad);
-    rh.ray.time = 0.0f;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(cellScene, &ctx.base, &rh);
-    std::sort(cand.begin(), cand.end());
-    cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+    BoxCandidates(cellScene, ray, t, t, cand);
     std::vector<Crossing>& xs = tScratch.cell;
     for (std::int64_t c : cand) {
         // All crossings of the cell's faces, sorted and paired as in FindExit.
@@ -2000,6 +2058,60 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
         if (tIn >= tHi) return;
         if (walk(c, entry.face, entry.t, tIn, entry)) return;
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Cell filters
+
+class CellFilter {
+  public:
+    ~CellFilter() {
+        if (scene) rtcReleaseScene(scene);
+    }
+    const void* owner = nullptr;      // the traverser's Impl
+    std::vector<std::int64_t> cells;  // primitive index -> cell
+    std::vector<float> boxes;         // 6 per primitive
+    RTCScene scene = nullptr;
+};
+
+std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
+    const std::vector<std::uint8_t>& keep) const {
+    const Impl& im = *impl_;
+    auto filter = std::make_shared<CellFilter>();
+    filter->owner = &im;
+    const std::int64_t cells = static_cast<std::int64_t>(im.cellFaceOffset.size()) - 1;
+    HPRAY_CHECK(static_cast<std::int64_t>(keep.size()) == cells);
+    for (std::int64_t c = 0; c < cells; ++c)
+        if (keep[c]) filter->cells.push_back(c);
+    filter->boxes.resize(6 * filter->cells.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filter->cells.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          std::vector<std::array<std::int32_t, 3>> tris;
+                          for (std::size_t i = range.begin(); i < range.end(); ++i)
+                              im.CellBox(filter->cells[i], tris, &filter->boxes[6 * i]);
+                      });
+    filter->scene = im.MakeBoxScene(filter->boxes.data(), filter->cells.size());
+    return filter;
+}
+
+void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
+                           std::vector<Segment>& out, const CellFilter& filter) const {
+    out.clear();
+    const Impl& im = *impl_;
+    HPRAY_CHECK(filter.owner == &im);
+    RaySpan span{tMin, tMax};
+    if (!(tMin <= tMax) || !ClipRayToBox(ray, im.brick.box, span)) return;
+    const double tLo = span.t0, tHi = span.t1;
+    if (filter.cells.empty()) return;
+    const RayFrame frame(ray);
+    ++tScratch.ray;  // a new ray for the curved-face cache
+    std::vector<std::int64_t>& cand = tScratch.candidates;
+    im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
+    for (std::int64_t i : cand) im.CellSegments(filter.cells[i], frame, tLo, tHi, out);
+    std::sort(out.begin(), out.end(), [](const Segment& a, const Segment& b) {
+        if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
+        return a.cell < b.cell;
+    });
 }
 
 }  // namespace hpray

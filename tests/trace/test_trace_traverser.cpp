@@ -1187,5 +1187,61 @@ TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
     }
 }
 
+// A cell filter's Trace gives the segments of the filter's cells only: bitwise the walk's
+// segments of those cells (their faces' crossings paired as the walk pairs them), found
+// without walking the others, on straight, curved and mixed meshes.
+TEST(BrickTraverser, FilteredTraceGivesTheWalksSegmentsOfTheKeptCells) {
+    const auto map = [](Vec3 x) {
+        return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
+    };
+    std::vector<std::pair<std::string, Mesh>> meshes;
+    meshes.emplace_back("q2 hexes", GridHexes(3, map));
+    meshes.emplace_back("ball-p2", MakeBuiltin("builtin:ball-p2?n=3"));
+    meshes.emplace_back("mixed", MakeCubeMesh("mixed"));
+    for (const auto& [name, mesh] : meshes) {
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        const Box box = Brick::WholeMesh(mesh).box;
+        // Every third cell, and the cells of one corner octant (a connected block).
+        const std::int64_t cells = mesh.CellCount();
+        std::vector<std::uint8_t> keep(cells, 0);
+        for (std::int64_t c = 0; c < cells; ++c) {
+            const std::int64_t* nodes = mesh.CellNodes(c);
+            bool octant = true;
+            for (int d = 0; d < 3; ++d)
+                octant = octant &&
+                         mesh.points[3 * nodes[0] + d] < 0.5 * (box.lo[d] + box.hi[d]);
+            keep[c] = c % 3 == 0 || octant;
+        }
+        const auto filter = tr.MakeCellFilter(keep);
+        std::mt19937_64 rng(43);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> segs, all;
+        std::size_t total = 0;
+        for (int i = 0; i < 3000; ++i) {
+            Vec3 target, from;
+            for (int d = 0; d < 3; ++d) {
+                target[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * uni(rng);
+                from[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * (3 * uni(rng) - 1);
+            }
+            from[i % 3] = box.hi[i % 3] + 1;
+            const Ray ray = MakeRay(from, target);
+            const double tMin = i % 2 ? 0.0 : 1.0 + uni(rng);
+            tr.Trace(ray, tMin, INFINITY, segs, *filter);
+            tr.Trace(ray, tMin, INFINITY, all);
+            std::vector<Segment> kept;
+            for (const auto& g : all)
+                if (keep[g.cell]) kept.push_back(g);
+            ASSERT_EQ(kept.size(), segs.size()) << name << " ray " << i;
+            for (std::size_t k = 0; k < kept.size(); ++k) {
+                EXPECT_EQ(kept[k].cell, segs[k].cell) << name << " ray " << i;
+                EXPECT_EQ(kept[k].tEnter, segs[k].tEnter) << name << " ray " << i;
+                EXPECT_EQ(kept[k].tExit, segs[k].tExit) << name << " ray " << i;
+            }
+            total += segs.size();
+        }
+        EXPECT_GT(total, 2000u) << name;
+    }
+}
+
 }  // namespace
 }  // namespace hpray
