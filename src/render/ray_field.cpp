@@ -386,9 +386,10 @@ void SegmentField::RefAt(double t, double ref[3]) {
     // than extrapolated from the last ones.
     double start[3];
     const int n = histCount_;
-    // First index with histT_ > t.
-    int hi = 0;
-    while (hi < n && !(histT_[hi] > t)) ++hi;
+    // First index with histT_ > t (points mostly come in increasing t: search from the
+    // end).
+    int hi = n;
+    while (hi > 0 && histT_[hi - 1] > t) --hi;
     if (n >= 3) {
         // The quintic Hermite interpolant through the three nearest: the bracketing pair
         // and the nearer of their outer neighbours (confluent divided differences).
@@ -399,7 +400,10 @@ void SegmentField::RefAt(double t, double ref[3]) {
         // quadratic Lagrange basis on the three points.
         const double t0 = histT_[i0], t1 = histT_[i0 + 1], t2 = histT_[i0 + 2];
         if (t0 != t1 && t1 != t2 && t0 != t2) {
-            const double r01 = 1 / (t0 - t1), r02 = 1 / (t0 - t2), r12 = 1 / (t1 - t2);
+            const double d01 = t0 - t1, d02 = t0 - t2, d12 = t1 - t2;
+            const double inv = 1 / (d01 * d02 * d12);
+            const double r01 = d02 * d12 * inv, r02 = d01 * d12 * inv,
+                         r12 = d01 * d02 * inv;
             const double a0 = t - t0, a1 = t - t1, a2 = t - t2;
             const double l[3] = {a1 * a2 * r01 * r02, -a0 * a2 * r01 * r12,
                                  a0 * a1 * r02 * r12};
