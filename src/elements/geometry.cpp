@@ -331,6 +331,55 @@ int ReducedHexMapOrder(const BasisTable& basis, const double* nodeXyz, double to
     return 0;
 }
 
+bool HexNewtonFullSteps(const CellGeometry& cell, const double target[3],
+                        const double start[3], const InversionOptions& opt, double ref[3],
+                        int& iterations, double& contraction, double inverseJacobian[9]) {
+    // Newton() above, operation for operation, on the path where every step is full.
+    const double roundLevel = 8.0 * kEps * (MaxAbs3(target) + cell.size);
+    for (int d = 0; d < 3; ++d) ref[d] = start[d];
+    double x[3], jac[9], f[3];
+    cell.hexMap->map(cell.mapNodes, ref, x, jac);
+    for (int d = 0; d < 3; ++d) f[d] = x[d] - target[d];
+    double fn = MaxAbs3(f);
+    double previousStep = 0;
+    iterations = 0;
+    contraction = 0;
+    for (int it = 0; it < opt.maxIterations; ++it) {
+        double inv[9];
+        const double det = Invert3x3(jac, inv);
+        double jn = 0.0;
+        for (double v : jac) jn = std::max(jn, std::abs(v));
+        if (!(std::abs(det) > 1e-14 * jn * jn * jn) || !std::isfinite(det)) return false;
+        double delta[3];
+        MatVec(inv, f, delta);
+        for (double& v : delta) v = -v;
+        ++iterations;
+        const double step = MaxAbs3(delta);
+        if (previousStep > 0 && previousStep <= 10 * kQuadraticRegime)
+            contraction = std::max(contraction, step / (previousStep * previousStep));
+        if (step <= opt.tolerance || fn <= roundLevel ||
+            (opt.contraction > 0 && step <= kQuadraticRegime &&
+             opt.contraction * step * step <= opt.tolerance / 16)) {
+            for (int d = 0; d < 3; ++d) ref[d] += delta[d];
+            std::copy(inv, inv + 9, inverseJacobian);
+            return true;
+        }
+        double cand[3], xc[3], jc[9], fc[3];
+        for (int d = 0; d < 3; ++d) cand[d] = ref[d] + 1.0 * delta[d];
+        cell.hexMap->map(cell.mapNodes, cand, xc, jc);
+        for (int d = 0; d < 3; ++d) fc[d] = xc[d] - target[d];
+        const double fcn = MaxAbs3(fc);
+        if (!(fcn < fn || step <= opt.tolerance) || !std::isfinite(fcn)) return false;
+        previousStep = step;
+        std::copy(cand, cand + 3, ref);
+        std::copy(jc, jc + 9, jac);
+        std::copy(fc, fc + 3, f);
+        fn = fcn;
+        if (RefOutsideDistance(CellShape::Hex, ref) > opt.leaveDistance) return false;
+    }
+    return false;
+}
+
 InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
                              EvalWorkspace& ws, const InversionOptions& options) {
     InversionResult res;

@@ -441,13 +441,30 @@ void SegmentField::RefAt(double t, double ref[3]) {
     }
     // Newton's contraction measured in this cell along this ray, with a margin of 4.
     options.contraction = 4 * contraction_;
-    const InversionResult r = RefFromWorld(*cell_, world, ws_, options);
-    contraction_ = std::max(contraction_, r.contraction);
+    // Curved hexahedra from a predicted start: the common path of RefFromWorld (full
+    // Newton steps) without its general set-up, else RefFromWorld itself.
+    double outRef[3], outInverse[9];
+    int outIterations = 0;
+    double outContraction = 0;
+    bool converged;
+    if (cell_->hexMap && options.initialGuess &&
+        HexNewtonFullSteps(*cell_, world, options.initialGuess, options, outRef,
+                           outIterations, outContraction, outInverse)) {
+        converged = true;
+    } else {
+        const InversionResult r = RefFromWorld(*cell_, world, ws_, options);
+        converged = r.converged;
+        outIterations = r.iterations;
+        outContraction = r.contraction;
+        std::copy(r.ref.begin(), r.ref.end(), outRef);
+        std::copy(r.inverseJacobian.begin(), r.inverseJacobian.end(), outInverse);
+    }
+    contraction_ = std::max(contraction_, outContraction);
     inversions_ += 1;
-    iterations_ += r.iterations;
-    if (!r.converged) failures_ += 1;
-    for (int i = 0; i < 3; ++i) ref[i] = r.ref[i];
-    if (r.converged && n < kHistory && (hi == 0 || histT_[hi - 1] != t)) {
+    iterations_ += outIterations;
+    if (!converged) failures_ += 1;
+    for (int i = 0; i < 3; ++i) ref[i] = outRef[i];
+    if (converged && n < kHistory && (hi == 0 || histT_[hi - 1] != t)) {
         // Insert at hi, keeping the history sorted.
         for (int k = n; k > hi; --k) {
             histT_[k] = histT_[k - 1];
@@ -457,9 +474,9 @@ void SegmentField::RefAt(double t, double ref[3]) {
             }
         }
         histT_[hi] = t;
-        const auto& inv = r.inverseJacobian;
+        const double* inv = outInverse;
         for (int i = 0; i < 3; ++i) {
-            histRef_[hi][i] = r.ref[i];
+            histRef_[hi][i] = outRef[i];
             histSlope_[hi][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
                                 inv[3 * i + 2] * ray_.dir[2];
         }
