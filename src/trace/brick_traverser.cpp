@@ -378,6 +378,11 @@ struct BrickTraverser::Impl {
     // about the ray passes through, sorted, into `out`.
     void BoxCandidates(RTCScene boxScene, const Ray& ray, double t0, double t1,
                        std::vector<std::int64_t>& out) const;
+    // The crossings of cell c's faces along the ray line, sorted and paired entering ->
+    // leaving as FindExit pairs them: visit(in, out) for each pair in order, true to stop
+    // (then ForEachPair returns true).
+    template <typename Visit>
+    bool ForEachPair(std::int64_t c, const RayFrame& frame, Visit&& visit) const;
     // Appends to `out` the segments of cell c in [tLo, tHi]: its faces' crossings paired
     // as FindExit pairs them.
     void CellSegments(std::int64_t c, const RayFrame& frame, double tLo, double tHi,
@@ -1651,8 +1656,9 @@ void BrickTraverser::Impl::BoxCandidates(RTCScene boxScene, const Ray& ray, doub
     out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
-void BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
-                                        double tHi, std::vector<Segment>& out) const {
+template <typename Visit>
+bool BrickTraverser::Impl::ForEachPair(std::int64_t c, const RayFrame& frame,
+                                       Visit&& visit) const {
     std::vector<Crossing>& xs = tScratch.cell;
     xs.clear();
     for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
@@ -1662,27 +1668,38 @@ void BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, d
         if (a.face != b.face) return a.face < b.face;
         return a.side < b.side;
     });
+    // As FindExit: in order, a leaving crossing closes the oldest open entering one, and
+    // an entering one that rounding put after its leaving one closes the oldest open
+    // leaving one.
     int openIn[64], openOut[64];
     int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
     for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
-        int in = -1, outIdx = -1;
+        int in = -1, out = -1;
         if (Leaves(xs[i], c)) {
             if (headIn < nIn)
-                in = openIn[headIn++], outIdx = i;
+                in = openIn[headIn++], out = i;
             else
                 openOut[nOut++] = i;
         } else {
             if (headOut < nOut)
-                in = i, outIdx = openOut[headOut++];
+                in = i, out = openOut[headOut++];
             else
                 openIn[nIn++] = i;
         }
-        if (in < 0) continue;
+        if (in >= 0 && visit(xs[in], xs[out])) return true;
+    }
+    return false;
+}
+
+void BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
+                                        double tHi, std::vector<Segment>& out) const {
+    ForEachPair(c, frame, [&](const Crossing& in, const Crossing& exit) {
         // As the walk: the exit no earlier than the entry.
-        const double tIn = xs[in].t, tOut = std::max(xs[outIdx].t, tIn);
+        const double tIn = in.t, tOut = std::max(exit.t, tIn);
         const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
         if (a < b) out.push_back({c, a, b});
-    }
+        return false;
+    });
 }
 
 bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame& frame,
@@ -1698,38 +1715,15 @@ bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame&
     // padded by queryPad, far above the float rounding of the ray).
     std::vector<std::int64_t>& cand = tScratch.candidates;
     BoxCandidates(cellScene, ray, t, t, cand);
-    std::vector<Crossing>& xs = tScratch.cell;
     for (std::int64_t c : cand) {
-        // All crossings of the cell's faces, sorted and paired as in FindExit.
-        xs.clear();
-        for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
-            AppendCrossings(cellFaces[k], frame, xs);
-        std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
-            if (a.t != b.t) return a.t < b.t;
-            if (a.face != b.face) return a.face < b.face;
-            return a.side < b.side;
-        });
-        int openIn[64], openOut[64];
-        int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
-        for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
-            int in = -1, out = -1;
-            if (Leaves(xs[i], c)) {
-                if (headIn < nIn)
-                    in = openIn[headIn++], out = i;
-                else
-                    openOut[nOut++] = i;
-            } else {
-                if (headOut < nOut)
-                    in = i, out = openOut[headOut++];
-                else
-                    openIn[nIn++] = i;
-            }
-            if (in >= 0 && xs[in].t <= t && t < xs[out].t) {
+        const bool found =
+            ForEachPair(c, frame, [&](const Crossing& in, const Crossing& out) {
+                if (!(in.t <= t && t < out.t)) return false;
                 cell = c;
-                entry = xs[in];
+                entry = in;
                 return true;
-            }
-        }
+            });
+        if (found) return true;
     }
     return false;
 }

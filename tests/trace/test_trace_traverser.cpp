@@ -1132,11 +1132,8 @@ TEST(BrickTraverser, RaysLeaveAndReenterTheSameCurvedCell) {
     }
 }
 
-// A span that starts inside the mesh (tMin past the boundary, as a clip box makes it) is
-// begun at the cell located there: its segments must be bitwise those of a walk from the
-// boundary cut at tMin, on straight, curved and mixed meshes, and the located start must
-// be what happened (its counter).
-TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
+// Straight, curved and mixed meshes for the located-start and filtered queries.
+std::vector<std::pair<std::string, Mesh>> StartMeshes() {
     const auto map = [](Vec3 x) {
         return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
     };
@@ -1144,7 +1141,28 @@ TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
     meshes.emplace_back("q2 hexes", GridHexes(3, map));
     meshes.emplace_back("ball-p2", MakeBuiltin("builtin:ball-p2?n=3"));
     meshes.emplace_back("mixed", MakeCubeMesh("mixed"));
-    for (const auto& [name, mesh] : meshes) {
+    return meshes;
+}
+
+// Ray i of a set through a box: from outside it (beyond the face across axis i % 3)
+// towards a random point inside.
+Ray RayIntoBox(const Box& box, int i, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> uni(0, 1);
+    Vec3 target, from;
+    for (int d = 0; d < 3; ++d) {
+        target[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * uni(rng);
+        from[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * (3 * uni(rng) - 1);
+    }
+    from[i % 3] = box.hi[i % 3] + 1;
+    return MakeRay(from, target);
+}
+
+// A span that starts inside the mesh (tMin past the boundary, as a clip box makes it) is
+// begun at the cell located there: its segments must be bitwise those of a walk from the
+// boundary cut at tMin, on straight, curved and mixed meshes, and the located start must
+// be what happened (its counter).
+TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
+    for (const auto& [name, mesh] : StartMeshes()) {
         const BrickTraverser tr(Brick::WholeMesh(mesh));
         const Box box = Brick::WholeMesh(mesh).box;
         std::mt19937_64 rng(41);
@@ -1154,13 +1172,7 @@ TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
         for (int i = 0; i < 3000; ++i) {
             // From outside the box towards a point inside it; tMin somewhere along the
             // chord through the box.
-            Vec3 target, from;
-            for (int d = 0; d < 3; ++d) {
-                target[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * uni(rng);
-                from[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * (3 * uni(rng) - 1);
-            }
-            from[i % 3] = box.hi[i % 3] + 1;
-            const Ray ray = MakeRay(from, target);
+            const Ray ray = RayIntoBox(box, i, rng);
             double t0, t1;
             if (!BoxChord(ray, box, t0, t1)) continue;
             const double tMin = t0 + (t1 - t0) * uni(rng);
@@ -1191,14 +1203,7 @@ TEST(BrickTraverser, SpansStartingInsideTheMeshMatchTheWalkFromTheBoundary) {
 // segments of those cells (their faces' crossings paired as the walk pairs them), found
 // without walking the others, on straight, curved and mixed meshes.
 TEST(BrickTraverser, FilteredTraceGivesTheWalksSegmentsOfTheKeptCells) {
-    const auto map = [](Vec3 x) {
-        return Vec3{x[0], x[1], x[2] + x[0] * x[0] + x[1] * x[1]};
-    };
-    std::vector<std::pair<std::string, Mesh>> meshes;
-    meshes.emplace_back("q2 hexes", GridHexes(3, map));
-    meshes.emplace_back("ball-p2", MakeBuiltin("builtin:ball-p2?n=3"));
-    meshes.emplace_back("mixed", MakeCubeMesh("mixed"));
-    for (const auto& [name, mesh] : meshes) {
+    for (const auto& [name, mesh] : StartMeshes()) {
         const BrickTraverser tr(Brick::WholeMesh(mesh));
         const Box box = Brick::WholeMesh(mesh).box;
         // Every third cell, and the cells of one corner octant (a connected block).
@@ -1218,13 +1223,7 @@ TEST(BrickTraverser, FilteredTraceGivesTheWalksSegmentsOfTheKeptCells) {
         std::vector<Segment> segs, all;
         std::size_t total = 0;
         for (int i = 0; i < 3000; ++i) {
-            Vec3 target, from;
-            for (int d = 0; d < 3; ++d) {
-                target[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * uni(rng);
-                from[d] = box.lo[d] + (box.hi[d] - box.lo[d]) * (3 * uni(rng) - 1);
-            }
-            from[i % 3] = box.hi[i % 3] + 1;
-            const Ray ray = MakeRay(from, target);
+            const Ray ray = RayIntoBox(box, i, rng);
             const double tMin = i % 2 ? 0.0 : 1.0 + uni(rng);
             tr.Trace(ray, tMin, INFINITY, segs, *filter);
             tr.Trace(ray, tMin, INFINITY, all);
