@@ -331,14 +331,22 @@ int ReducedHexMapOrder(const BasisTable& basis, const double* nodeXyz, double to
     return 0;
 }
 
-bool HexNewtonFullSteps(const CellGeometry& cell, const double target[3],
-                        const double start[3], const InversionOptions& opt, double ref[3],
-                        int& iterations, double& contraction, double inverseJacobian[9]) {
-    // Newton() above, operation for operation, on the path where every step is full.
+bool NewtonFullSteps(const CellGeometry& cell, const double target[3],
+                     const double start[3], const InversionOptions& opt, double ref[3],
+                     int& iterations, double& contraction, double inverseJacobian[9]) {
+    // Newton() above, operation for operation, on the path where every step is full (no
+    // pyramid: its steps may be shortened towards the apex).
+    HPRAY_CHECK(cell.hexMap || cell.tetMap);
+    const auto map = [&](const double* r, double* x, double* j) {
+        if (cell.hexMap)
+            cell.hexMap->map(cell.mapNodes, r, x, j);
+        else
+            cell.tetMap->map(cell.nodes, r, x, j);
+    };
     const double roundLevel = 8.0 * kEps * (MaxAbs3(target) + cell.size);
     for (int d = 0; d < 3; ++d) ref[d] = start[d];
     double x[3], jac[9], f[3];
-    cell.hexMap->map(cell.mapNodes, ref, x, jac);
+    map(ref, x, jac);
     for (int d = 0; d < 3; ++d) f[d] = x[d] - target[d];
     double fn = MaxAbs3(f);
     double previousStep = 0;
@@ -366,7 +374,7 @@ bool HexNewtonFullSteps(const CellGeometry& cell, const double target[3],
         }
         double cand[3], xc[3], jc[9], fc[3];
         for (int d = 0; d < 3; ++d) cand[d] = ref[d] + 1.0 * delta[d];
-        cell.hexMap->map(cell.mapNodes, cand, xc, jc);
+        map(cand, xc, jc);
         for (int d = 0; d < 3; ++d) fc[d] = xc[d] - target[d];
         const double fcn = MaxAbs3(fc);
         if (!(fcn < fn || step <= opt.tolerance) || !std::isfinite(fcn)) return false;
@@ -375,7 +383,7 @@ bool HexNewtonFullSteps(const CellGeometry& cell, const double target[3],
         std::copy(jc, jc + 9, jac);
         std::copy(fc, fc + 3, f);
         fn = fcn;
-        if (RefOutsideDistance(CellShape::Hex, ref) > opt.leaveDistance) return false;
+        if (RefOutsideDistance(cell.basis->shape, ref) > opt.leaveDistance) return false;
     }
     return false;
 }

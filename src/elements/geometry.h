@@ -127,17 +127,17 @@ struct InversionOptions {
 InversionResult RefFromWorld(const CellGeometry& cell, const double world[3],
                              EvalWorkspace& ws, const InversionOptions& options = {});
 
-/// RefFromWorld for a curved Lagrange hexahedron (cell.hexMap set, not affine) from the
-/// initial guess `start`, on its common path only: Newton converges by full steps within
-/// options.maxIterations. Returns false wherever RefFromWorld would do anything else (a
-/// damped step, a singular Jacobian, an iterate leaving the cell, no convergence); the
-/// caller then calls RefFromWorld. When true, `ref`, `iterations`, `contraction` and
-/// `inverseJacobian` are bitwise what RefFromWorld returns (converged), without its
-/// general set-up.
-bool HexNewtonFullSteps(const CellGeometry& cell, const double world[3],
-                        const double start[3], const InversionOptions& options,
-                        double ref[3], int& iterations, double& contraction,
-                        double inverseJacobian[9]);
+/// RefFromWorld for a curved Lagrange hexahedron or tetrahedron (cell.hexMap or
+/// cell.tetMap set, not affine) from the initial guess `start`, on its common path only:
+/// Newton converges by full steps within options.maxIterations. Returns false wherever
+/// RefFromWorld would do anything else (a damped step, a singular Jacobian, an iterate
+/// leaving the cell, no convergence); the caller then calls RefFromWorld. When true,
+/// `ref`, `iterations`, `contraction` and `inverseJacobian` are bitwise what RefFromWorld
+/// returns (converged), without its general set-up.
+bool NewtonFullSteps(const CellGeometry& cell, const double world[3],
+                     const double start[3], const InversionOptions& options,
+                     double ref[3], int& iterations, double& contraction,
+                     double inverseJacobian[9]);
 
 /// Inverse of a 3x3 row-major matrix; returns its determinant (0: `inverse` untouched).
 double Invert3x3(const double m[9], double inverse[9]);

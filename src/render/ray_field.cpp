@@ -441,15 +441,15 @@ void SegmentField::RefAt(double t, double ref[3]) {
     }
     // Newton's contraction measured in this cell along this ray, with a margin of 4.
     options.contraction = 4 * contraction_;
-    // Curved hexahedra from a predicted start: the common path of RefFromWorld (full
-    // Newton steps) without its general set-up, else RefFromWorld itself.
+    // Curved hexahedra and tetrahedra from a predicted start: the common path of
+    // RefFromWorld (full Newton steps) without its general set-up, else RefFromWorld.
     double outRef[3], outInverse[9];
     int outIterations = 0;
     double outContraction = 0;
     bool converged;
-    if (cell_->hexMap && options.initialGuess &&
-        HexNewtonFullSteps(*cell_, world, options.initialGuess, options, outRef,
-                           outIterations, outContraction, outInverse)) {
+    if ((cell_->hexMap || cell_->tetMap) && options.initialGuess &&
+        NewtonFullSteps(*cell_, world, options.initialGuess, options, outRef,
+                        outIterations, outContraction, outInverse)) {
         converged = true;
     } else {
         const InversionResult r = RefFromWorld(*cell_, world, ws_, options);

@@ -209,61 +209,71 @@ TEST(HexKernels, MeshGeometryInvertsThroughTheReducedMap) {
     }
 }
 
-// HexNewtonFullSteps is RefFromWorld's common path without its set-up: wherever it
+// NewtonFullSteps is RefFromWorld's common path without its set-up: wherever it
 // returns true, its result must be bitwise RefFromWorld's from the same start, and it
 // must return true on most inversions from good starts (what ray sampling gives it).
 TEST(HexKernels, NewtonFullStepsEqualsRefFromWorldBitwise) {
     std::mt19937_64 rng(17);
     std::uniform_real_distribution<double> jitter(-0.06, 0.06), point(0.02, 0.98),
         nudge(-1e-3, 1e-3);
-    int agreed = 0, tried = 0;
-    for (int p : {1, 2, 3, 4}) {
-        double c[8][3];
-        for (int v = 0; v < 8; ++v)
-            for (int d = 0; d < 3; ++d) c[v][d] = ((v >> d) & 1) + jitter(rng);
-        const double bend = jitter(rng);
-        auto map = [&](const double* r, double* x) {
-            for (int d = 0; d < 3; ++d) {
-                double s = 0;
-                for (int v = 0; v < 8; ++v) {
-                    double w = 1;
-                    for (int e = 0; e < 3; ++e) w *= (v >> e) & 1 ? r[e] : 1 - r[e];
-                    s += w * c[v][d];
+    for (CellShape shape : {CellShape::Hex, CellShape::Tet}) {
+        int agreed = 0, tried = 0;
+        for (int p : {1, 2, 3, 4}) {
+            double c[8][3];
+            for (int v = 0; v < 8; ++v)
+                for (int d = 0; d < 3; ++d) c[v][d] = ((v >> d) & 1) + jitter(rng);
+            const double bend = jitter(rng);
+            // A trilinear map plus, from order 2, a quadratic bend (the tetrahedron lies
+            // in the corner r + s + t <= 1 of the same map).
+            auto map = [&](const double* r, double* x) {
+                for (int d = 0; d < 3; ++d) {
+                    double s = 0;
+                    for (int v = 0; v < 8; ++v) {
+                        double w = 1;
+                        for (int e = 0; e < 3; ++e) w *= (v >> e) & 1 ? r[e] : 1 - r[e];
+                        s += w * c[v][d];
+                    }
+                    x[d] = s + (p > 1 ? bend * r[(d + 1) % 3] * r[(d + 1) % 3] : 0.0);
                 }
-                x[d] = s + (p > 1 ? bend * r[(d + 1) % 3] * r[(d + 1) % 3] : 0.0);
+            };
+            if (shape == CellShape::Tet && p == 1) continue;  // affine: no Newton
+            const BasisTable& basis = GetBasis(shape, p, CellFamily::Lagrange);
+            std::vector<double> xyz(3 * basis.nodeCount);
+            for (int m = 0; m < basis.nodeCount; ++m)
+                map(basis.refNodes[m].data(), &xyz[3 * m]);
+            const CellGeometry cell = MakeCellGeometry(basis, xyz.data());
+            ASSERT_FALSE(cell.affine);
+            ASSERT_TRUE(shape == CellShape::Hex ? cell.hexMap != nullptr
+                                                : cell.tetMap != nullptr);
+            EvalWorkspace ws;
+            for (int k = 0; k < 200; ++k) {
+                double truth[3] = {point(rng), point(rng), point(rng)};
+                if (shape == CellShape::Tet)
+                    for (double& x : truth) x /= 3;  // inside the tetrahedron
+                double world[3];
+                map(truth, world);
+                const double start[3] = {truth[0] + nudge(rng), truth[1] + nudge(rng),
+                                         truth[2] + nudge(rng)};
+                InversionOptions options;
+                options.initialGuess = start;
+                options.contraction = k % 2 ? 4.0 : 0.0;
+                const InversionResult r = RefFromWorld(cell, world, ws, options);
+                double ref[3], inverse[9], contraction;
+                int iterations;
+                ++tried;
+                if (!NewtonFullSteps(cell, world, start, options, ref, iterations,
+                                     contraction, inverse))
+                    continue;
+                ++agreed;
+                ASSERT_TRUE(r.converged);
+                for (int d = 0; d < 3; ++d) EXPECT_EQ(ref[d], r.ref[d]) << "p " << p;
+                for (int d = 0; d < 9; ++d) EXPECT_EQ(inverse[d], r.inverseJacobian[d]);
+                EXPECT_EQ(iterations, r.iterations);
+                EXPECT_EQ(contraction, r.contraction);
             }
-        };
-        const BasisTable& basis = GetBasis(CellShape::Hex, p, CellFamily::Lagrange);
-        const std::vector<double> xyz = HexNodes(p, map);
-        const CellGeometry cell = MakeCellGeometry(basis, xyz.data());
-        ASSERT_FALSE(cell.affine);
-        ASSERT_NE(cell.hexMap, nullptr);
-        EvalWorkspace ws;
-        for (int k = 0; k < 200; ++k) {
-            const double truth[3] = {point(rng), point(rng), point(rng)};
-            double world[3];
-            map(truth, world);
-            const double start[3] = {truth[0] + nudge(rng), truth[1] + nudge(rng),
-                                     truth[2] + nudge(rng)};
-            InversionOptions options;
-            options.initialGuess = start;
-            options.contraction = k % 2 ? 4.0 : 0.0;
-            const InversionResult r = RefFromWorld(cell, world, ws, options);
-            double ref[3], inverse[9], contraction;
-            int iterations;
-            ++tried;
-            if (!HexNewtonFullSteps(cell, world, start, options, ref, iterations,
-                                    contraction, inverse))
-                continue;
-            ++agreed;
-            ASSERT_TRUE(r.converged);
-            for (int d = 0; d < 3; ++d) EXPECT_EQ(ref[d], r.ref[d]) << "p " << p;
-            for (int d = 0; d < 9; ++d) EXPECT_EQ(inverse[d], r.inverseJacobian[d]);
-            EXPECT_EQ(iterations, r.iterations);
-            EXPECT_EQ(contraction, r.contraction);
         }
+        EXPECT_GT(agreed, tried * 9 / 10) << int(shape);
     }
-    EXPECT_GT(agreed, tried * 9 / 10);
 }
 
 }  // namespace
