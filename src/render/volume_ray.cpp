@@ -771,16 +771,22 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
             const Interval& range = (*s.ranges[f])[seg.cell];
             const bool drivesColor = f == 0, drivesExtinction = f == 1 || s.sameField;
             const double allowed = kDegreeShare * s.tolerance * (length / pathLength_);
+            auto costOver = [&](double lo, double hi) {
+                return (drivesColor ? s.colorTf.SteepestOver(lo, hi) : 0.0) +
+                       (drivesExtinction
+                            ? (2 * s.colorMax + 1) * s.extinctionTf.SteepestOver(lo, hi) *
+                                  length
+                            : 0.0);
+            };
+            // Over the range itself the cost is no larger than over any widening: a
+            // degree that fails with it fails (most segments at tight tolerances, one
+            // lookup).
+            const double least = costOver(range.lo, range.hi);
             for (int m : kSampledDegrees) {
                 if (m >= n - 1) break;
                 const double miss = kLebesgueBound * tail[m];
-                const double lo = range.lo - miss, hi = range.hi + miss;
-                const double cost =
-                    (drivesColor ? s.colorTf.SteepestOver(lo, hi) : 0.0) +
-                    (drivesExtinction ? (2 * s.colorMax + 1) *
-                                            s.extinctionTf.SteepestOver(lo, hi) * length
-                                      : 0.0);
-                if (miss * cost <= allowed) {
+                if (miss * least > allowed) continue;
+                if (miss * costOver(range.lo - miss, range.hi + miss) <= allowed) {
                     n = m;
                     unresolved_[f] = kLebesgueBound * tail[m];
                     break;
