@@ -1332,6 +1332,35 @@ struct QueryContext {
     std::vector<Crossing>* hits;
 };
 
+// Bounds of user primitive i: boxes[6 i .. 6 i + 5] (lower, upper) of the float array
+// that is the geometry's user data.
+void BoxBounds(const RTCBoundsFunctionArguments* args) {
+    const float* b =
+        static_cast<const float*>(args->geometryUserPtr) + 6 * std::size_t(args->primID);
+    args->bounds_o->lower_x = b[0];
+    args->bounds_o->lower_y = b[1];
+    args->bounds_o->lower_z = b[2];
+    args->bounds_o->upper_x = b[3];
+    args->bounds_o->upper_y = b[4];
+    args->bounds_o->upper_z = b[5];
+}
+
+// Attaches the user geometry to the scene, commits both and reports Embree's error.
+void CommitUserScene(RTCDevice device, RTCScene scene, RTCGeometry geom,
+                     const char* what) {
+    rtcSetGeometryOccludedFunction(geom, [](const RTCOccludedFunctionNArguments*) {});
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene);
+    const RTCError err = rtcGetDeviceError(device);
+    if (err != RTC_ERROR_NONE) {
+        std::ostringstream os;
+        os << "Embree " << what << " build failed (error " << int(err) << ")";
+        throw InternalError(os.str());
+    }
+}
+
 }  // namespace
 
 void BrickTraverser::Impl::BuildScene() {
@@ -1349,37 +1378,15 @@ void BrickTraverser::Impl::BuildScene() {
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
     rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(boundaryFaces.size()));
-    rtcSetGeometryUserData(geom, this);
-    rtcSetGeometryBoundsFunction(
-        geom,
-        [](const RTCBoundsFunctionArguments* args) {
-            const auto* self = static_cast<const Impl*>(args->geometryUserPtr);
-            const float* b = &self->boundaryBoxes[6 * std::size_t(args->primID)];
-            args->bounds_o->lower_x = b[0];
-            args->bounds_o->lower_y = b[1];
-            args->bounds_o->lower_z = b[2];
-            args->bounds_o->upper_x = b[3];
-            args->bounds_o->upper_y = b[4];
-            args->bounds_o->upper_z = b[5];
-        },
-        nullptr);
+    rtcSetGeometryUserData(geom, boundaryBoxes.data());
+    rtcSetGeometryBoundsFunction(geom, BoxBounds, nullptr);
     rtcSetGeometryIntersectFunction(geom, [](const RTCIntersectFunctionNArguments* args) {
         if (!args->valid[0]) return;
         const auto* ctx = reinterpret_cast<const QueryContext*>(args->context);
         const auto* self = static_cast<const Impl*>(ctx->impl);
         self->AppendCrossings(self->boundaryFaces[args->primID], *ctx->frame, *ctx->hits);
     });
-    rtcSetGeometryOccludedFunction(geom, [](const RTCOccludedFunctionNArguments*) {});
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(scene);
-    const RTCError err = rtcGetDeviceError(device);
-    if (err != RTC_ERROR_NONE) {
-        std::ostringstream os;
-        os << "Embree scene build failed (error " << int(err) << ")";
-        throw InternalError(os.str());
-    }
+    CommitUserScene(device, scene, geom, "scene");
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1596,35 +1603,13 @@ RTCScene BrickTraverser::Impl::MakeBoxScene(const float* boxes, std::size_t coun
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
     rtcSetGeometryUserPrimitiveCount(geom, static_cast<unsigned>(count));
     rtcSetGeometryUserData(geom, const_cast<float*>(boxes));
-    rtcSetGeometryBoundsFunction(
-        geom,
-        [](const RTCBoundsFunctionArguments* args) {
-            const float* b = static_cast<const float*>(args->geometryUserPtr) +
-                             6 * std::size_t(args->primID);
-            args->bounds_o->lower_x = b[0];
-            args->bounds_o->lower_y = b[1];
-            args->bounds_o->lower_z = b[2];
-            args->bounds_o->upper_x = b[3];
-            args->bounds_o->upper_y = b[4];
-            args->bounds_o->upper_z = b[5];
-        },
-        nullptr);
+    rtcSetGeometryBoundsFunction(geom, BoxBounds, nullptr);
     rtcSetGeometryIntersectFunction(geom, [](const RTCIntersectFunctionNArguments* args) {
         if (!args->valid[0]) return;
         const auto* ctx = reinterpret_cast<const CellQueryContext*>(args->context);
         ctx->candidates->push_back(args->primID);
     });
-    rtcSetGeometryOccludedFunction(geom, [](const RTCOccludedFunctionNArguments*) {});
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(s, geom);
-    rtcReleaseGeometry(geom);
-    rtcCommitScene(s);
-    const RTCError err = rtcGetDeviceError(device);
-    if (err != RTC_ERROR_NONE) {
-        std::ostringstream os;
-        os << "Embree cell scene build failed (error " << int(err) << ")";
-        throw InternalError(os.str());
-    }
+    CommitUserScene(device, s, geom, "cell scene");
     return s;
 }
 
