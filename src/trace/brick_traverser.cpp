@@ -310,6 +310,7 @@ struct BrickTraverser::Impl {
     mutable std::atomic<std::int64_t> walkRepairs{0};
     mutable std::atomic<std::int64_t> walkFailures{0};
     mutable std::atomic<std::int64_t> locatedStarts{0};
+    mutable std::atomic<std::int64_t> unpairedRays{0};
 
     ~Impl() {
         if (cellScene) rtcReleaseScene(cellScene);
@@ -384,8 +385,9 @@ struct BrickTraverser::Impl {
     template <typename Visit>
     bool ForEachPair(std::int64_t c, const RayFrame& frame, Visit&& visit) const;
     // Appends to `out` the segments of cell c in [tLo, tHi]: its faces' crossings paired
-    // as FindExit pairs them.
-    void CellSegments(std::int64_t c, const RayFrame& frame, double tLo, double tHi,
+    // as FindExit pairs them. False when some crossing found no partner (a cell that does
+    // not close up: non-conforming neighbours), where the walk would repair its way.
+    bool CellSegments(std::int64_t c, const RayFrame& frame, double tLo, double tHi,
                       std::vector<Segment>& out) const;
 };
 
@@ -1676,15 +1678,18 @@ bool BrickTraverser::Impl::ForEachPair(std::int64_t c, const RayFrame& frame,
     return false;
 }
 
-void BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
+bool BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
                                         double tHi, std::vector<Segment>& out) const {
+    std::size_t pairs = 0;
     ForEachPair(c, frame, [&](const Crossing& in, const Crossing& exit) {
+        ++pairs;
         // As the walk: the exit no earlier than the entry.
         const double tIn = in.t, tOut = std::max(exit.t, tIn);
         const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
         if (a < b) out.push_back({c, a, b});
         return false;
     });
+    return 2 * pairs == tScratch.cell.size();
 }
 
 bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame& frame,
@@ -1882,6 +1887,7 @@ TraceCounters BrickTraverser::Counters() const {
     c.walkRepairs = impl_->walkRepairs.load();
     c.walkFailures = impl_->walkFailures.load();
     c.locatedStarts = impl_->locatedStarts.load();
+    c.unpairedRays = impl_->unpairedRays.load();
     return c;
 }
 
@@ -2048,6 +2054,7 @@ class CellFilter {
         if (scene) rtcReleaseScene(scene);
     }
     const void* owner = nullptr;      // the traverser's Impl
+    std::vector<std::uint8_t> keep;   // per cell of the brick
     std::vector<std::int64_t> cells;  // primitive index -> cell
     std::vector<float> boxes;         // 6 per primitive
     RTCScene scene = nullptr;
@@ -2060,6 +2067,7 @@ std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
     filter->owner = &im;
     const std::int64_t cells = static_cast<std::int64_t>(im.cellFaceOffset.size()) - 1;
     HPRAY_CHECK(static_cast<std::int64_t>(keep.size()) == cells);
+    filter->keep = keep;
     for (std::int64_t c = 0; c < cells; ++c)
         if (keep[c]) filter->cells.push_back(c);
     filter->boxes.resize(6 * filter->cells.size());
@@ -2086,7 +2094,20 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     ++tScratch.ray;  // a new ray for the curved-face cache
     std::vector<std::int64_t>& cand = tScratch.candidates;
     im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
-    for (std::int64_t i : cand) im.CellSegments(filter.cells[i], frame, tLo, tHi, out);
+    bool closed = true;
+    for (std::int64_t i : cand)
+        closed = im.CellSegments(filter.cells[i], frame, tLo, tHi, out) && closed;
+    if (!closed) {
+        // A kept cell whose crossings do not pair up: the walk (with its repairs) decides
+        // this ray, and its segments of the kept cells are the answer.
+        im.unpairedRays.fetch_add(1, std::memory_order_relaxed);
+        std::vector<Segment> all;
+        Trace(ray, tMin, tMax, all);
+        out.clear();
+        for (const Segment& g : all)
+            if (filter.keep[g.cell]) out.push_back(g);
+        return;
+    }
     std::sort(out.begin(), out.end(), [](const Segment& a, const Segment& b) {
         if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
         return a.cell < b.cell;

@@ -82,6 +82,9 @@ struct TraceCounters {
     /// Spans that started inside the mesh (tMin past the mesh boundary, a clip box) begun
     /// at the cell located there instead of walked to from the boundary.
     std::int64_t locatedStarts = 0;
+    /// Filtered queries (Trace with a CellFilter) where a kept cell's crossings did not
+    /// pair up (non-conforming neighbours), answered by the walk instead.
+    std::int64_t unpairedRays = 0;
 };
 
 /// Where a ray crosses a planar triangular face: the face's corners (point indices of the
