@@ -1706,14 +1706,20 @@ bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame&
     std::vector<std::int64_t>& cand = tScratch.candidates;
     BoxCandidates(cellScene, ray, t, t, cand);
     for (std::int64_t c : cand) {
-        const bool found =
-            ForEachPair(c, frame, [&](const Crossing& in, const Crossing& out) {
-                if (!(in.t <= t && t < out.t)) return false;
+        // Only a cell whose crossings all pair up (one that closes; else the walk, with
+        // its repairs, decides).
+        bool found = false;
+        std::size_t pairs = 0;
+        ForEachPair(c, frame, [&](const Crossing& in, const Crossing& out) {
+            ++pairs;
+            if (!found && in.t <= t && t < out.t) {
+                found = true;
                 cell = c;
                 entry = in;
-                return true;
-            });
-        if (found) return true;
+            }
+            return false;
+        });
+        if (found) return 2 * pairs == tScratch.cell.size();
     }
     return false;
 }
