@@ -1648,8 +1648,19 @@ bool BrickTraverser::Impl::ForEachPair(std::int64_t c, const RayFrame& frame,
                                        Visit&& visit) const {
     std::vector<Crossing>& xs = tScratch.cell;
     xs.clear();
-    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
-        AppendCrossings(cellFaces[k], frame, xs);
+    const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
+    const int nf = static_cast<int>(cellFaceOffset[c + 1] - cellFaceOffset[c]);
+    // The walk is bound by memory latency: fetch the cell's face records, then their
+    // curved data, in parallel rather than one chain after the other.
+    for (int k = 0; k < nf; ++k) __builtin_prefetch(&faces[cf[k]]);
+    for (int k = 0; k < nf; ++k) {
+        const FaceRec& rec = faces[cf[k]];
+        if (rec.kind != FaceKind::Curved) continue;
+        const CurvedRec& cr = curved[rec.curved];
+        __builtin_prefetch(&cr);
+        __builtin_prefetch(&cr.box.hi[2]);
+    }
+    for (int k = 0; k < nf; ++k) AppendCrossings(cf[k], frame, xs);
     std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
         if (a.t != b.t) return a.t < b.t;
         if (a.face != b.face) return a.face < b.face;
@@ -1771,53 +1782,13 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
         // before every open entering one waits for the next entering one). The pairing is
         // a bijection computed identically on every visit, so a walk can neither get
         // stuck nor loop: each crossing has one predecessor and one successor.
-        std::vector<Crossing>& xs = tScratch.cell;
-        xs.clear();
-        // The walk is bound by memory latency: fetch the cell's face records, then their
-        // curved data, in parallel rather than one chain after the other.
-        for (int k = 0; k < nf; ++k) __builtin_prefetch(&faces[cf[k]]);
-        for (int k = 0; k < nf; ++k) {
-            const FaceRec& rec = faces[cf[k]];
-            if (rec.kind != FaceKind::Curved) continue;
-            const CurvedRec& cr = curved[rec.curved];
-            __builtin_prefetch(&cr);
-            __builtin_prefetch(&cr.box.hi[2]);
-        }
-        for (int k = 0; k < nf; ++k) AppendCrossings(cf[k], frame, xs);
-        std::sort(xs.begin(), xs.end(), [](const Crossing& a, const Crossing& b) {
-            if (a.t != b.t) return a.t < b.t;
-            if (a.face != b.face) return a.face < b.face;
-            return a.side < b.side;
-        });
-        // Match in order; openIn / openOut are FIFO queues of unmatched indices.
-        int openIn[64], openOut[64];
-        int nIn = 0, headIn = 0, nOut = 0, headOut = 0;
-        int mine = -1;
-        for (int i = 0; i < int(xs.size()) && i < 64; ++i) {
-            const Crossing& x = xs[i];
-            if (Leaves(x, c)) {
-                if (headIn < nIn) {
-                    if (openIn[headIn++] == mine) {
-                        exit = x;
-                        return true;
-                    }
-                } else {
-                    openOut[nOut++] = i;
-                }
-            } else {
-                const bool isMine = x.face == entryFace && x.t == entryT;
-                if (isMine) mine = i;
-                if (headOut < nOut) {
-                    const int j = openOut[headOut++];
-                    if (isMine) {
-                        exit = xs[j];
-                        return true;
-                    }
-                } else {
-                    openIn[nIn++] = i;
-                }
-            }
-        }
+        const bool found =
+            ForEachPair(c, frame, [&](const Crossing& in, const Crossing& out) {
+                if (in.face != entryFace || in.t != entryT) return false;
+                exit = out;
+                return true;
+            });
+        if (found) return true;
     }
     if (TolerantExit(c, tIn, frame, exit)) {
         walkRepairs.fetch_add(1, std::memory_order_relaxed);
