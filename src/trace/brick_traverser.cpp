@@ -372,6 +372,13 @@ struct BrickTraverser::Impl {
     // float queries, as 6 floats (an empty box for a cell without faces).
     void CellBox(std::int64_t c, std::vector<std::array<std::int32_t, 3>>& tris,
                  float* box) const;
+    // Grows [lo, hi] by face f (curved faces: their control net's box, which holds them;
+    // straight ones: their corners).
+    void ExtendByFace(std::int32_t f, std::vector<std::array<std::int32_t, 3>>& tris,
+                      double lo[3], double hi[3]) const;
+    // [lo, hi] padded by queryPad and rounded outwards to floats (an empty box for an
+    // empty range).
+    void FloatBox(const double lo[3], const double hi[3], float* box) const;
     // An Embree scene of `count` user primitives boxed by boxes[6 i .. 6 i + 5] whose
     // intersector appends the primitive's index to the query's candidates.
     RTCScene MakeBoxScene(const float* boxes, std::size_t count) const;
@@ -1256,26 +1263,8 @@ void BrickTraverser::Impl::CollectBoundary(TopologyBuild& t) {
     std::vector<std::array<std::int32_t, 3>> tris;
     for (std::size_t b = 0; b < boundaryFaces.size(); ++b) {
         double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
-        const FaceRec& rec = faces[boundaryFaces[b]];
-        if (rec.kind == FaceKind::Curved) {
-            const CurvedRec& cr = curved[rec.curved];
-            for (int d = 0; d < 3; ++d) {
-                lo[d] = cr.box.lo[d];
-                hi[d] = cr.box.hi[d];
-            }
-        }
-        Tessellation(boundaryFaces[b], tris);
-        for (const auto& tri : tris)
-            for (std::int32_t id : tri)
-                for (int d = 0; d < 3; ++d) {
-                    lo[d] = std::min(lo[d], P(id)[d]);
-                    hi[d] = std::max(hi[d], P(id)[d]);
-                }
-        for (int d = 0; d < 3; ++d) {
-            boundaryBoxes[6 * b + d] = std::nextafter(float(lo[d] - queryPad), -INFINITY);
-            boundaryBoxes[6 * b + 3 + d] =
-                std::nextafter(float(hi[d] + queryPad), INFINITY);
-        }
+        ExtendByFace(boundaryFaces[b], tris, lo, hi);
+        FloatBox(lo, hi, &boundaryBoxes[6 * b]);
     }
 }
 
@@ -1574,23 +1563,33 @@ void BrickTraverser::Impl::CellBox(std::int64_t c,
                                    std::vector<std::array<std::int32_t, 3>>& tris,
                                    float* b) const {
     double lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf};
-    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k) {
-        const FaceRec& rec = faces[cellFaces[k]];
-        if (rec.kind == FaceKind::Curved) {
-            const CurvedRec& cr = curved[rec.curved];
-            for (int d = 0; d < 3; ++d) {
-                lo[d] = std::min(lo[d], cr.box.lo[d]);
-                hi[d] = std::max(hi[d], cr.box.hi[d]);
-            }
+    for (std::int64_t k = cellFaceOffset[c]; k < cellFaceOffset[c + 1]; ++k)
+        ExtendByFace(cellFaces[k], tris, lo, hi);
+    FloatBox(lo, hi, b);
+}
+
+void BrickTraverser::Impl::ExtendByFace(std::int32_t f,
+                                        std::vector<std::array<std::int32_t, 3>>& tris,
+                                        double lo[3], double hi[3]) const {
+    const FaceRec& rec = faces[f];
+    if (rec.kind == FaceKind::Curved) {
+        const CurvedRec& cr = curved[rec.curved];
+        for (int d = 0; d < 3; ++d) {
+            lo[d] = std::min(lo[d], cr.box.lo[d]);
+            hi[d] = std::max(hi[d], cr.box.hi[d]);
         }
-        Tessellation(cellFaces[k], tris);
-        for (const auto& tri : tris)
-            for (std::int32_t id : tri)
-                for (int d = 0; d < 3; ++d) {
-                    lo[d] = std::min(lo[d], P(id)[d]);
-                    hi[d] = std::max(hi[d], P(id)[d]);
-                }
     }
+    Tessellation(f, tris);
+    for (const auto& tri : tris)
+        for (std::int32_t id : tri)
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = std::min(lo[d], P(id)[d]);
+                hi[d] = std::max(hi[d], P(id)[d]);
+            }
+}
+
+void BrickTraverser::Impl::FloatBox(const double lo[3], const double hi[3],
+                                    float* b) const {
     for (int d = 0; d < 3; ++d) {
         const bool empty = !(lo[d] <= hi[d]);
         b[d] = empty ? INFINITY : std::nextafter(float(lo[d] - queryPad), -INFINITY);
