@@ -1336,6 +1336,28 @@ void BoxBounds(const RTCBoundsFunctionArguments* args) {
     args->bounds_o->upper_z = b[5];
 }
 
+// The float query ray over [t0 - pad, t1 + pad] of the ray (a little longer, for the
+// float rounding of its length).
+RTCRayHit QueryRay(const Ray& ray, double t0, double t1, double pad) {
+    RTCRayHit rh;
+    const double s0 = t0 - pad;
+    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
+    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
+    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
+    rh.ray.dir_x = float(ray.dir[0]);
+    rh.ray.dir_y = float(ray.dir[1]);
+    rh.ray.dir_z = float(ray.dir[2]);
+    rh.ray.tnear = 0.0f;
+    rh.ray.tfar = float((t1 - t0) + 2 * pad) * (1 + 1e-6f);
+    rh.ray.time = 0.0f;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    return rh;
+}
+
 // Attaches the user geometry to the scene, commits both and reports Embree's error.
 void CommitUserScene(RTCDevice device, RTCScene scene, RTCGeometry geom,
                      const char* what) {
@@ -1621,22 +1643,7 @@ void BrickTraverser::Impl::BoxCandidates(RTCScene boxScene, const Ray& ray, doub
     CellQueryContext ctx;
     rtcInitIntersectContext(&ctx.base);
     ctx.candidates = &out;
-    RTCRayHit rh;
-    const double s0 = t0 - queryPad;
-    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
-    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
-    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
-    rh.ray.dir_x = float(ray.dir[0]);
-    rh.ray.dir_y = float(ray.dir[1]);
-    rh.ray.dir_z = float(ray.dir[2]);
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = float((t1 - t0) + 2 * queryPad) * (1 + 1e-6f);
-    rh.ray.time = 0.0f;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    RTCRayHit rh = QueryRay(ray, t0, t1, queryPad);
     rtcIntersect1(boxScene, &ctx.base, &rh);
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
@@ -1898,22 +1905,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     ctx.impl = &im;
     ctx.frame = &frame;
     ctx.hits = &hits;
-    RTCRayHit rh;
-    const double s0 = q0 - im.queryPad;
-    rh.ray.org_x = float(ray.origin[0] + s0 * ray.dir[0]);
-    rh.ray.org_y = float(ray.origin[1] + s0 * ray.dir[1]);
-    rh.ray.org_z = float(ray.origin[2] + s0 * ray.dir[2]);
-    rh.ray.dir_x = float(ray.dir[0]);
-    rh.ray.dir_y = float(ray.dir[1]);
-    rh.ray.dir_z = float(ray.dir[2]);
-    rh.ray.tnear = 0.0f;
-    rh.ray.tfar = float((q1 - q0) + 2 * im.queryPad) * (1 + 1e-6f);
-    rh.ray.time = 0.0f;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    RTCRayHit rh = QueryRay(ray, q0, q1, im.queryPad);
     rtcIntersect1(im.scene, &ctx.base, &rh);
     if (hits.empty()) return;
     std::sort(hits.begin(), hits.end(), [](const Crossing& a, const Crossing& b) {
