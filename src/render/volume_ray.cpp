@@ -13,6 +13,7 @@
 
 #include "render/hex_line_sampler.h"
 #include "util/check.h"
+#include "util/dense_inverse.h"
 #include "util/error.h"
 
 namespace hpray {
@@ -69,52 +70,23 @@ constexpr int kSampledDegrees[] = {3, 7, 11, 15, 19, 23, 27};
 std::vector<long double> LegendreFromEquispaced(int p) {
     using LD = long double;
     const int n = p + 1;
-    std::vector<LD> a(std::size_t(n) * n), inv(std::size_t(n) * n, 0.0L);
+    std::vector<LD> v(std::size_t(n) * n);
     for (int i = 0; i < n; ++i) {
+        // P_j(y_i) by the three-term recurrence.
         const LD y = LD(2 * i) / p - 1;
         LD prev = 1, cur = y;
         for (int j = 0; j < n; ++j) {
-            LD value;
-            if (j == 0) {
-                value = 1;
-            } else if (j == 1) {
-                value = y;
-            } else {
+            LD value = j == 0 ? LD(1) : y;
+            if (j >= 2) {
                 const LD next = (LD(2 * j - 1) * y * cur - LD(j - 1) * prev) / j;
                 prev = cur;
                 cur = next;
                 value = next;
             }
-            a[std::size_t(i) * n + j] = value;
-        }
-        inv[std::size_t(i) * n + i] = 1;
-    }
-    for (int c = 0; c < n; ++c) {
-        int piv = c;
-        for (int r = c + 1; r < n; ++r)
-            if (std::abs(a[std::size_t(r) * n + c]) >
-                std::abs(a[std::size_t(piv) * n + c]))
-                piv = r;
-        for (int k = 0; k < n; ++k) {
-            std::swap(a[std::size_t(c) * n + k], a[std::size_t(piv) * n + k]);
-            std::swap(inv[std::size_t(c) * n + k], inv[std::size_t(piv) * n + k]);
-        }
-        const LD d = a[std::size_t(c) * n + c];
-        for (int k = 0; k < n; ++k) {
-            a[std::size_t(c) * n + k] /= d;
-            inv[std::size_t(c) * n + k] /= d;
-        }
-        for (int r = 0; r < n; ++r) {
-            if (r == c) continue;
-            const LD f = a[std::size_t(r) * n + c];
-            if (f == 0) continue;
-            for (int k = 0; k < n; ++k) {
-                a[std::size_t(r) * n + k] -= f * a[std::size_t(c) * n + k];
-                inv[std::size_t(r) * n + k] -= f * inv[std::size_t(c) * n + k];
-            }
+            v[std::size_t(i) * n + j] = value;
         }
     }
-    return inv;
+    return InvertDense(n, std::move(v));
 }
 
 /// degreeTail of one Lagrange hexahedron of order p (see VolumeSetup::degreeTail) from

@@ -13,6 +13,7 @@
 #endif
 
 #include "util/check.h"
+#include "util/dense_inverse.h"
 
 namespace hpray::trace {
 namespace {
@@ -28,37 +29,9 @@ constexpr int kMaxPatchDepth = 40;
 inline int TriIndex(int p, int i, int j) { return j * (p + 1) - j * (j - 1) / 2 + i; }
 inline int QuadIndex(int p, int i, int j) { return j * (p + 1) + i; }
 
-// Inverse of a dense n x n matrix (row-major) by Gauss-Jordan with partial pivoting in
-// long double; the matrices are the well-conditioned Bernstein collocation matrices.
+// Inverse of a Bernstein collocation matrix (well conditioned), rounded to double.
 std::vector<double> Invert(int n, const std::vector<long double>& m) {
-    std::vector<long double> a(m), inv(std::size_t(n) * n, 0.0L);
-    for (int i = 0; i < n; ++i) inv[std::size_t(i) * n + i] = 1;
-    for (int c = 0; c < n; ++c) {
-        int piv = c;
-        for (int r = c + 1; r < n; ++r)
-            if (std::fabs(a[std::size_t(r) * n + c]) >
-                std::fabs(a[std::size_t(piv) * n + c]))
-                piv = r;
-        HPRAY_CHECK(a[std::size_t(piv) * n + c] != 0);
-        for (int k = 0; k < n; ++k) {
-            std::swap(a[std::size_t(c) * n + k], a[std::size_t(piv) * n + k]);
-            std::swap(inv[std::size_t(c) * n + k], inv[std::size_t(piv) * n + k]);
-        }
-        const long double d = a[std::size_t(c) * n + c];
-        for (int k = 0; k < n; ++k) {
-            a[std::size_t(c) * n + k] /= d;
-            inv[std::size_t(c) * n + k] /= d;
-        }
-        for (int r = 0; r < n; ++r) {
-            if (r == c) continue;
-            const long double f = a[std::size_t(r) * n + c];
-            if (f == 0) continue;
-            for (int k = 0; k < n; ++k) {
-                a[std::size_t(r) * n + k] -= f * a[std::size_t(c) * n + k];
-                inv[std::size_t(r) * n + k] -= f * inv[std::size_t(c) * n + k];
-            }
-        }
-    }
+    const std::vector<long double> inv = InvertDense(n, m);
     return std::vector<double>(inv.begin(), inv.end());
 }
 
