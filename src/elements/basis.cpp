@@ -8,6 +8,7 @@
 #include <mutex>
 #include <tuple>
 
+#include "elements/silvester.h"
 #include "util/check.h"
 
 namespace hpray {
@@ -15,21 +16,6 @@ namespace {
 
 constexpr int kMaxPyramidNodes =
     (kMaxOrder + 1) * (kMaxOrder + 2) * (2 * kMaxOrder + 3) / 6;
-
-// Silvester factors of order p: s[m] = prod_{q<m} (p x - q) / (q + 1), m = 0..p, and their
-// derivatives in x. s[m] is 1 at x = m/p and 0 at x = 0, 1/p, ..., (m-1)/p.
-template <typename Real>
-inline void Silvester(int p, Real x, Real* s, Real* ds) {
-    const Real px = p * x;
-    s[0] = 1;
-    ds[0] = 0;
-    for (int m = 0; m < p; ++m) {
-        const Real inv = Real(1) / Real(m + 1);
-        const Real f = (px - m) * inv;
-        ds[m + 1] = ds[m] * f + s[m] * (p * inv);
-        s[m + 1] = s[m] * f;
-    }
-}
 
 // 1-D equispaced Lagrange polynomials of degree p on [0, 1]: l_i(x) = S_i(x) S_{p-i}(1-x).
 template <typename Real>

@@ -4,25 +4,12 @@
 // where they are made.
 #include "elements/tet_kernels.h"
 
+#include "elements/silvester.h"
 #include "mesh/cell.h"
 #include "util/check.h"
 
 namespace hpray {
 namespace {
-
-// Silvester factors of order P and their derivatives, as basis.cpp's Silvester<double>.
-template <int P>
-inline void Silvester(double x, double* s, double* ds) {
-    const double px = P * x;
-    s[0] = 1;
-    ds[0] = 0;
-    for (int m = 0; m < P; ++m) {
-        const double inv = double(1) / double(m + 1);
-        const double f = (px - m) * inv;
-        ds[m + 1] = ds[m] * f + s[m] * (P * inv);
-        s[m + 1] = s[m] * f;
-    }
-}
 
 // Visits the nodes in the internal order with their basis value and, if Derivative, their
 // reference gradient, computed as EvalTet computes them.
@@ -30,10 +17,10 @@ template <int P, bool Derivative, typename Visit>
 inline void ForEachNode(const double ref[3], Visit&& visit) {
     double a[P + 1], da[P + 1], b[P + 1], db[P + 1];
     double c[P + 1], dc[P + 1], e[P + 1], de[P + 1];
-    Silvester<P>(ref[0], a, da);
-    Silvester<P>(ref[1], b, db);
-    Silvester<P>(ref[2], c, dc);
-    Silvester<P>(1.0 - ref[0] - ref[1] - ref[2], e, de);
+    Silvester<double>(P, ref[0], a, da);
+    Silvester<double>(P, ref[1], b, db);
+    Silvester<double>(P, ref[2], c, dc);
+    Silvester<double>(P, 1.0 - ref[0] - ref[1] - ref[2], e, de);
     int m = 0;
     for (int k = 0; k <= P; ++k)
         for (int j = 0; j + k <= P; ++j)
