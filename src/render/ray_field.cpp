@@ -83,19 +83,16 @@ void ReduceHexOrders(const Mesh& mesh, const ScalarSelector& field, FieldCellDat
 
 namespace {
 // Whether SegmentField::BeginLinearTet has no closed form for linear tetrahedron c: its
-// determinant, by the same operations in the same order (so bitwise the same number).
+// determinant from the same edges by the same EdgeCofactors (so bitwise the same number).
 bool LinearTetDegenerate(const Mesh& mesh, std::int64_t c) {
     const std::int64_t* nodes = mesh.CellNodes(c);
     const double* p0 = &mesh.points[3 * nodes[0]];
-    double e[3][3];
+    double e[3][3], cof[3][3];
     for (int i = 0; i < 3; ++i) {
         const double* p = &mesh.points[3 * nodes[i + 1]];
         for (int d = 0; d < 3; ++d) e[i][d] = p[d] - p0[d];
     }
-    const double c0[3] = {e[1][1] * e[2][2] - e[1][2] * e[2][1],
-                          e[1][2] * e[2][0] - e[1][0] * e[2][2],
-                          e[1][0] * e[2][1] - e[1][1] * e[2][0]};
-    const double det = e[0][0] * c0[0] + e[0][1] * c0[1] + e[0][2] * c0[2];
+    const double det = EdgeCofactors(e, cof);
     return det == 0 || !std::isfinite(det);
 }
 
@@ -380,10 +377,11 @@ void SegmentField::RefAt(double t, double ref[3]) {
     double world[3];
     for (int i = 0; i < 3; ++i) world[i] = ray_.origin[i] + t * ray_.dir[i];
     InversionOptions options = inversion_;
-    // Start Newton from the cubic Hermite interpolant through the two inverted points
-    // that bracket t (or the two nearest on one side) with their slopes d ref / dt = J^-1
-    // d: the reference path is smooth, and between samples the prediction is far closer
-    // than extrapolated from the last ones.
+    // Start Newton from the Hermite interpolant (values and slopes d ref / dt = J^-1 d)
+    // through the inverted points nearest t, those that bracket it first: the reference
+    // path is smooth, and between samples the prediction is far closer than extrapolated
+    // from the last ones. Quintic through three points, cubic through two, the tangent
+    // line at one.
     double start[3];
     const int n = histCount_;
     // First index with histT_ > t (points mostly come in increasing t: search from the
@@ -391,8 +389,8 @@ void SegmentField::RefAt(double t, double ref[3]) {
     int hi = n;
     while (hi > 0 && histT_[hi - 1] > t) --hi;
     if (n >= 3) {
-        // The quintic Hermite interpolant through the three nearest: the bracketing pair
-        // and the nearer of their outer neighbours (confluent divided differences).
+        // The three nearest: the bracketing pair and the nearer of their outer
+        // neighbours.
         int i0 = hi == 0 ? 0 : hi == n ? n - 2 : hi - 1;
         if (i0 + 2 >= n || (i0 > 0 && t - histT_[i0 - 1] < histT_[i0 + 2] - t)) --i0;
         i0 = std::max(0, std::min(i0, n - 3));

@@ -139,9 +139,7 @@ private:
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
     // Converged inversions (t, ref, d ref / dt) in this segment, sorted by t: Newton's
-    // predictor, the cubic Hermite interpolant between the two that bracket a new t (or
-    // through the two nearest on one side). At most kHistory are kept; later ones are
-    // not.
+    // predictor (see RefAt). At most kHistory are kept; later ones are not.
     static constexpr int kHistory = 48;
     double histT_[kHistory];
     double histRef_[kHistory][3];

@@ -339,10 +339,12 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
     // The top coefficient of each Lagrange hexahedron (see VolumeSetup::topCoefficient):
     // the tensor divided difference of the nodal values at the equispaced y nodes.
     s.topCoefficient.resize(count);
-    bool anyLagrangeHex = false;  // else left empty (the integrator checks)
-    for (std::int64_t c = 0; c < cells && !anyLagrangeHex; ++c)
-        anyLagrangeHex = mesh.cellShape[c] == CellShape::Hex &&
-                         mesh.cellFamily[c] == CellFamily::Lagrange;
+    int maxHexOrder = 0;  // of the Lagrange hexahedra; none: both tables left empty
+    for (std::int64_t c = 0; c < cells; ++c)
+        if (mesh.cellShape[c] == CellShape::Hex &&
+            mesh.cellFamily[c] == CellFamily::Lagrange)
+            maxHexOrder = std::max<int>(maxHexOrder, mesh.cellOrder[c]);
+    const bool anyLagrangeHex = maxHexOrder > 0;
     for (int f = 0; f < count; ++f) {
         if (!s.data[f] || !anyLagrangeHex) continue;
         const FieldCellData& data = *s.data[f];
@@ -379,14 +381,9 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
     }
     // Degree tails of the Lagrange hexahedra (see VolumeSetup::degreeTail).
     s.degreeTail.resize(count);
-    int maxHexOrder = 0;
-    for (std::int64_t c = 0; c < cells && anyLagrangeHex; ++c)
-        if (mesh.cellShape[c] == CellShape::Hex &&
-            mesh.cellFamily[c] == CellFamily::Lagrange)
-            maxHexOrder = std::max<int>(maxHexOrder, mesh.cellOrder[c]);
     s.tailStride = 3 * maxHexOrder + 1;
     for (int f = 0; f < count; ++f) {
-        if (!s.data[f] || !anyLagrangeHex || maxHexOrder > kMaxOrder) continue;
+        if (!s.data[f] || !anyLagrangeHex) continue;
         const FieldCellData& data = *s.data[f];
         s.degreeTail[f].assign(std::size_t(cells) * s.tailStride, 0.0);
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 256),
@@ -1177,11 +1174,8 @@ void VolumeRayMarcher::KronrodPiece(double p0, double p1, RayComposite& composit
     {
         const double mid = 0.5 * (p0 + p1);
         const double vc = FieldAt(0, mid), ve = s.sameField ? vc : FieldAt(1, mid);
-        double offset[3], slope[3];
-        s.colorTf.AffineOn(s.colorTf.IntervalOf(vc), offset, slope);
-        colorSlope = std::max({std::abs(slope[0]), std::abs(slope[1]), std::abs(slope[2])});
-        s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(ve), offset, slope);
-        tauSlope = std::abs(slope[0]);
+        colorSlope = s.colorTf.SteepestOn(s.colorTf.IntervalOf(vc));
+        tauSlope = s.extinctionTf.SteepestOn(s.extinctionTf.IntervalOf(ve));
     }
     const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
     stack_.clear();

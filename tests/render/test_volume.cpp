@@ -854,7 +854,9 @@ TEST(VolumeDegreeTail, ProductsOfLegendrePolynomialsGiveTheirCoefficientsBack) {
         const double want = m < 6 ? 1.0 : m < 12 ? 0.3 : 0.0;
         EXPECT_NEAR(tail[m], want, 1e-14) << "m = " << m;
         // Every |coefficient| is rounded up (the node values carry rounding of 1e-16).
-        if (m < 3 * p) EXPECT_GE(tail[m], want - 1e-15) << "m = " << m;
+        if (m < 3 * p) {
+            EXPECT_GE(tail[m], want - 1e-15) << "m = " << m;
+        }
     }
     EXPECT_EQ(tail[3 * p], 0.0);
 }
