@@ -94,7 +94,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
     if (scene.clip.box) s.clipBox = *scene.clip.box;
-    if (scene.volume) s.volume = MakeVolumeSetup(mesh, scene, *cache);
+    if (scene.volume) s.volume = MakeVolumeSetup(mesh, geometry, scene, *cache);
     for (std::size_t k = 0; k < scene.slices.size(); ++k) {
         const SceneSlice& in = scene.slices[k];
         const auto sel = SelectScalar(mesh, in.field);
@@ -374,6 +374,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         marcher_.BeginRay(*setup.volume, ray, segments_.front().tEnter,
                           segments_.back().tExit);
     bool volumeSeen = false;
+    // A volume alone on linear tetrahedra: their segments in one call each.
+    const bool linearTets = facePoints && setup.isos.empty() && setup.slices.empty() &&
+                            !costSamples && !setup.isoCells;
     for (std::size_t si = 0; si < segments_.size(); ++si) {
         const Segment& seg = segments_[si];
         // A clip plane through a face meets the ray a few ulps off the face: the sliver it
@@ -384,6 +387,21 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             counters.segmentsCulled += 1;
             recorder.Done(si);
             continue;
+        }
+        if (linearTets) {
+            using R = VolumeRayMarcher::LinearTetResult;
+            const R r = marcher_.LinearTet(*setup.geometry, seg, ends_[si], composite);
+            if (r == R::kEmpty) {
+                counters.segmentsCulled += 1;
+                continue;
+            }
+            if (r != R::kOther) {
+                volumeSeen = true;
+                if (r == R::kStop) break;
+                continue;
+            }
+            // What LinearTet queued comes first.
+            if (marcher_.FlushLinearTets(composite)) break;
         }
         // The sources of this segment: isosurfaces whose field's guaranteed range holds
         // their value, slice planes it owns, and the volume unless its transfer functions
@@ -414,6 +432,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         recorder.Done(si);
         if (done) break;
     }
+    if (linearTets) marcher_.FlushLinearTets(composite);
     if (volumeSeen) {
         marcher_.FinishRay(composite);
         out.volError =

@@ -3,6 +3,10 @@
 
 #include <cerf.h>
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <array>
 #include <boost/math/quadrature/gauss.hpp>
@@ -155,13 +159,16 @@ void SlopeSeriesMoments(double alpha, double beta, double m[3]) {
     }
 }
 
-}  // namespace
-
-LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {
+/// The start of IntegrateLinearPiece: the clamped inputs, alpha, beta and the
+/// exponential. True when the Taylor regime applies.
+struct PieceStart {
+    double alpha, beta;
+};
+bool BeginLinearPiece(double tau0, double tau1, double length, LinearPieceIntegrals& q,
+                      PieceStart& start) {
     tau0 = std::max(0.0, tau0);
     tau1 = std::max(0.0, tau1);
     length = std::max(0.0, length);
-    LinearPieceIntegrals q;
     // D(x) = alpha x + beta x^2; alpha + 2 beta = length tau1 >= 0.
     const double alpha = length * tau0;
     const double beta = 0.5 * length * (tau1 - tau0);
@@ -175,8 +182,106 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
         q.transmittance = std::exp(-depth);
         q.opacity = 1 - q.transmittance;
     }
+    start = {alpha, beta};
+    return alpha + std::abs(beta) <= 1;
+}
+
+/// The end of IntegrateLinearPiece from the moments m.
+void FinishLinearPiece(const PieceStart& start, const double m[3],
+                       LinearPieceIntegrals& q) {
+    q.mean = std::clamp(m[0], 0.0, 1.0);
+    q.firstMoment = std::clamp(m[1], 0.0, q.mean);
+    // P = integral x (alpha + 2 beta x) T dx; by parts P = I0 - T(1), which cancels only
+    // for small depth, where the moment form is used.
+    const double far = std::isnan(m[2]) ? q.mean - q.transmittance
+                                        : start.alpha * m[1] + 2 * start.beta * m[2];
+    q.farWeight = std::clamp(far, 0.0, q.opacity);
+}
+
+#if defined(__AVX2__) && defined(__FMA__)
+/// TaylorMoments of four pieces at once, bitwise TaylorMoments per lane: every lane runs
+/// the same operations, and a lane whose series has ended takes no more terms.
+void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
+    const __m256d negAlpha = _mm256_sub_pd(_mm256_setzero_pd(), _mm256_loadu_pd(alpha));
+    const __m256d negTwoBeta = _mm256_mul_pd(_mm256_set1_pd(-2), _mm256_loadu_pd(beta));
+    const __m256d absMask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffff));
+    const __m256d small = _mm256_set1_pd(1e-17);
+    __m256d cPrev = _mm256_setzero_pd(), c = _mm256_set1_pd(1);
+    __m256d m0 = _mm256_setzero_pd(), m1 = m0, m2 = m0;
+    __m256d live = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    for (int n = 0; n < kMaxTaylorTerms; ++n) {
+        const __m256d r1 = _mm256_set1_pd(kReciprocal[n + 1]);
+        const __m256d r2 = _mm256_set1_pd(kReciprocal[n + 2]);
+        const __m256d r3 = _mm256_set1_pd(kReciprocal[n + 3]);
+        m0 = _mm256_blendv_pd(m0, _mm256_add_pd(m0, _mm256_mul_pd(c, r1)), live);
+        m1 = _mm256_blendv_pd(m1, _mm256_add_pd(m1, _mm256_mul_pd(c, r2)), live);
+        m2 = _mm256_blendv_pd(m2, _mm256_add_pd(m2, _mm256_mul_pd(c, r3)), live);
+        const __m256d a = _mm256_mul_pd(negAlpha, r1);
+        const __m256d b = _mm256_mul_pd(negTwoBeta, r1);
+        const __m256d next = _mm256_fmadd_pd(a, c, _mm256_mul_pd(b, cPrev));
+        cPrev = c;
+        c = next;
+        const __m256d rest =
+            _mm256_add_pd(_mm256_and_pd(c, absMask), _mm256_and_pd(cPrev, absMask));
+        live = _mm256_andnot_pd(_mm256_cmp_pd(rest, small, _CMP_LE_OQ), live);
+        if (_mm256_movemask_pd(live) == 0) break;
+    }
+    double out[3][4];
+    _mm256_storeu_pd(out[0], m0);
+    _mm256_storeu_pd(out[1], m1);
+    _mm256_storeu_pd(out[2], m2);
+    for (int l = 0; l < 4; ++l)
+        for (int k = 0; k < 3; ++k) m[l][k] = out[k][l];
+}
+#else
+void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
+    for (int l = 0; l < 4; ++l) TaylorMoments(alpha[l], beta[l], m[l]);
+}
+#endif
+
+}  // namespace
+
+void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
+                           const double* length, LinearPieceIntegrals* out) {
+    int lane[4], lanes = 0;
+    double alpha[4], beta[4], m[4][3];
+    PieceStart start[4];
+    auto runLanes = [&] {
+        for (int l = lanes; l < 4; ++l) alpha[l] = beta[l] = 0;
+        TaylorMoments4(alpha, beta, m);
+        for (int l = 0; l < lanes; ++l) FinishLinearPiece(start[l], m[l], out[lane[l]]);
+        lanes = 0;
+    };
+    for (int i = 0; i < n; ++i) {
+        LinearPieceIntegrals& q = out[i];
+        q = LinearPieceIntegrals{};
+        PieceStart ps;
+        if (BeginLinearPiece(tau0[i], tau1[i], length[i], q, ps)) {
+            lane[lanes] = i;
+            start[lanes] = ps;
+            alpha[lanes] = ps.alpha;
+            beta[lanes] = ps.beta;
+            if (++lanes == 4) runLanes();
+        } else {
+            q = IntegrateLinearPiece(tau0[i], tau1[i], length[i]);
+        }
+    }
+    if (lanes == 1) {
+        double mm[3];
+        TaylorMoments(start[0].alpha, start[0].beta, mm);
+        FinishLinearPiece(start[0], mm, out[lane[0]]);
+    } else if (lanes > 1) {
+        runLanes();
+    }
+}
+
+LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {
+    LinearPieceIntegrals q;
+    PieceStart start;
+    const bool taylor = BeginLinearPiece(tau0, tau1, length, q, start);
+    const double alpha = start.alpha, beta = start.beta;
     double m[3];
-    if (alpha + std::abs(beta) <= 1) {
+    if (taylor) {
         TaylorMoments(alpha, beta, m);
     } else if (std::abs(beta) <= 1 ||
                (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
@@ -201,13 +306,7 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
         m[1] = (q.opacity - alpha * i0) / (2 * beta);
         m[2] = std::numeric_limits<double>::quiet_NaN();
     }
-    q.mean = std::clamp(m[0], 0.0, 1.0);
-    q.firstMoment = std::clamp(m[1], 0.0, q.mean);
-    // P = integral x (alpha + 2 beta x) T dx; by parts P = I0 - T(1), which cancels only
-    // for small depth, where the moment form is used.
-    const double far =
-        std::isnan(m[2]) ? q.mean - q.transmittance : alpha * m[1] + 2 * beta * m[2];
-    q.farWeight = std::clamp(far, 0.0, q.opacity);
+    FinishLinearPiece(start, m, q);
     return q;
 }
 

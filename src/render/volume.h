@@ -34,6 +34,10 @@ class PiecewiseLinearTf {
     /// Channels() values.
     void EvalOn(int k, double s, double* out) const;
     void Eval(double s, double* out) const { EvalOn(IntervalOf(s), s, out); }
+    /// EvalOn of a function of 3 channels (colours) into registers: bitwise EvalOn.
+    void EvalOn3(int k, double s, double& r, double& g, double& b) const;
+    /// EvalOn of a function of 1 channel: bitwise EvalOn.
+    double EvalOn1(int k, double s) const;
     /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
     /// pieces): `offset`, `slope` get Channels() values.
     void AffineOn(int k, double* offset, double* slope) const;
@@ -64,6 +68,14 @@ class PiecewiseLinearTf {
 
 // Called per ray piece: inline.
 inline int PiecewiseLinearTf::IntervalOf(double s) const {
+    // Short functions: the number of control points <= s, without branches (a search's
+    // branches go either way from piece to piece along a ray). The same result: -1 below
+    // the first point and for NaN, Size() - 1 from the last on.
+    if (scalars_.size() <= 16) {
+        int k = -1;
+        for (const double x : scalars_) k += x <= s;
+        return k;
+    }
     if (!(s >= scalars_.front())) return -1;
     if (s >= scalars_.back()) return Size() - 1;
     // First control point > s, minus one.
@@ -83,6 +95,30 @@ inline void PiecewiseLinearTf::EvalOn(int k, double s, double* out) const {
     const double* v0 = values_.data() + std::size_t(k) * channels_;
     const double* v1 = v0 + channels_;
     for (int c = 0; c < channels_; ++c) out[c] = (1 - w) * v0[c] + w * v1[c];
+}
+
+inline void PiecewiseLinearTf::EvalOn3(int k, double s, double& r, double& g,
+                                       double& b) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) {
+        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * 3);
+        r = v[0];
+        g = v[1];
+        b = v[2];
+        return;
+    }
+    const double w = (s - scalars_[k]) / (scalars_[k + 1] - scalars_[k]);
+    const double* v0 = values_.data() + std::size_t(k) * 3;
+    r = (1 - w) * v0[0] + w * v0[3];
+    g = (1 - w) * v0[1] + w * v0[4];
+    b = (1 - w) * v0[2] + w * v0[5];
+}
+
+inline double PiecewiseLinearTf::EvalOn1(int k, double s) const {
+    const int n = Size();
+    if (k < 0 || k >= n - 1) return values_[k < 0 ? 0 : std::size_t(n - 1)];
+    const double w = (s - scalars_[k]) / (scalars_[k + 1] - scalars_[k]);
+    return (1 - w) * values_[std::size_t(k)] + w * values_[std::size_t(k) + 1];
 }
 
 inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
@@ -126,6 +162,12 @@ struct LinearPieceIntegrals {
 /// for large depth, and erfcx (increasing extinction) or Dawson's integral (decreasing)
 /// otherwise; no overflow or underflow for any finite input. tau0, tau1 >= 0.
 LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length);
+
+/// IntegrateLinearPiece of n pieces, bitwise the same per piece: the Taylor series of
+/// the small-depth regime, a recurrence whose latency bounds a piece alone, runs for
+/// four pieces at once.
+void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
+                           const double* length, LinearPieceIntegrals* out);
 
 /// Williams-Max emission of a linear piece: integral kappa tau T for chromaticity going
 /// linearly from kappa0 to kappa1 (per channel).

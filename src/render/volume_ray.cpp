@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "render/hex_line_sampler.h"
+#include "trace/ray_frame.h"
 #include "util/check.h"
 #include "util/dense_inverse.h"
 #include "util/error.h"
@@ -304,7 +305,38 @@ void LagrangeHexDegreeTail(int p, const double* u, double* tail) {
     HexDegreeTail(p, u, LegendreFromEquispacedCached(p), tail);
 }
 
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache) {
+float LinearTetGradientBound(const double* points, const double* u,
+                             const std::int64_t* ids) {
+    const double* p0 = points + 3 * ids[0];
+    double e[3][3], du[3];
+    double scale = 1;
+    for (int k = 0; k < 3; ++k) {
+        const double* pk = points + 3 * ids[k + 1];
+        for (int d = 0; d < 3; ++d) e[k][d] = pk[d] - p0[d];
+        du[k] = u[ids[k + 1]] - u[ids[0]];
+        scale *= std::abs(e[k][0]) + std::abs(e[k][1]) + std::abs(e[k][2]);
+    }
+    double cof[3][3];
+    const double det = EdgeCofactors(e, cof);
+    if (!(std::abs(det) > 1e-6 * scale)) return std::numeric_limits<float>::quiet_NaN();
+    // grad = E^-1 du (Cramer). With |det| above 1e-6 of the rows' product, the rounding
+    // of the edges, the cofactors and the quotient stays far below 1e-6 relative.
+    double g2 = 0;
+    for (int d = 0; d < 3; ++d) {
+        const double g =
+            (cof[0][d] * du[0] + cof[1][d] * du[1] + cof[2][d] * du[2]) / det;
+        g2 += g * g;
+    }
+    const double bound = std::sqrt(g2) * (1 + 1e-6);
+    if (!std::isfinite(bound)) return std::numeric_limits<float>::quiet_NaN();
+    float f = static_cast<float>(bound);
+    if (static_cast<double>(f) < bound)
+        f = std::nextafter(f, std::numeric_limits<float>::infinity());
+    return f;
+}
+
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                            const Scene& scene, FieldCache& cache) {
     HPRAY_CHECK(scene.volume.has_value());
     const SceneVolume& vol = *scene.volume;
     const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
@@ -399,6 +431,23 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
                               }
                           });
     }
+    // Gradient bounds of the linear tetrahedra (see VolumeSetup::gradientBound).
+    for (int f = 0; f < count; ++f) {
+        if (!s.pointValues[f] || geometry.derivedCells == 0) continue;
+        const double* u = s.pointValues[f];
+        std::vector<float>& bound = s.gradientBound[f];
+        bound.assign(cells, std::numeric_limits<float>::quiet_NaN());
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                                  if (!geometry.IsDerived(c)) continue;
+                                  const std::int64_t* ids =
+                                      mesh.connectivity.data() + mesh.cellOffsets[c];
+                                  bound[c] =
+                                      LinearTetGradientBound(mesh.points.data(), u, ids);
+                              }
+                          });
+    }
     s.cellKind.assign(cells, VolumeSetup::kVarying);
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, cells, 4096),
@@ -449,6 +498,21 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
         sums.t = std::numeric_limits<double>::quiet_NaN();
     startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
+    lastColor_ = lastExtinction_ = TfValue{};
+    queue_.clear();
+    linearTetField_ = setup.sameField && setup.pointValues[0] &&
+                      setup.fields[0].field->association != Association::Cell &&
+                      !setup.gradientBound[0].empty();
+    if (!setup.gradientBound[0].empty() || !setup.gradientBound[1].empty()) {
+        // In the frame (x, y, z) = (a_kx - sx a_kz, a_ky - sy a_kz, sz a_kz) of world
+        // offsets a: d/dx = d/da_kx, d/dy = d/da_ky, d/dz = (sx d/da_kx + sy d/da_ky +
+        // d/da_kz) / sz; each world component is at most the gradient's norm. Rounded up
+        // by a relative 1e-15.
+        const trace::RayFrame frame(ray);
+        frameGradient_[0] = frameGradient_[1] = 1;
+        frameGradient_[2] = (1 + std::abs(frame.sx) + std::abs(frame.sy)) /
+                            std::abs(frame.sz) * (1 + 1e-15);
+    }
 }
 
 void VolumeRayMarcher::RecordEnds(double p0, double p1, double tau0, const double e0[3],
@@ -500,38 +564,15 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
     const double* u = s.pointValues[f];
     const FacePoint& in = ends.enter;
     const FacePoint& out = ends.exit;
-    // The tetrahedron's corners in the ray frame: the entry face's three and the exit
-    // face's corner that is not on it.
-    int extra = -1;
-    for (int k = 0; k < 3 && extra < 0; ++k)
-        if (out.v[k] != in.v[0] && out.v[k] != in.v[1] && out.v[k] != in.v[2]) extra = k;
-    if (extra < 0) return false;
-    // The field's gradient in the ray frame by Cramer's rule on the edges from the entry
-    // face's first corner. It only bounds how far the face points may lie off the ray.
-    const double e[3][3] = {
-        {in.x[1] - in.x[0], in.y[1] - in.y[0], in.z[1] - in.z[0]},
-        {in.x[2] - in.x[0], in.y[2] - in.y[0], in.z[2] - in.z[0]},
-        {out.x[extra] - in.x[0], out.y[extra] - in.y[0], out.z[extra] - in.z[0]}};
-    const double u0 = u[in.v[0]];
-    const double du[3] = {u[in.v[1]] - u0, u[in.v[2]] - u0, u[out.v[extra]] - u0};
-    double cof[3][3];
-    const double det = EdgeCofactors(e, cof);
-    const double* c0 = cof[0];
-    const double* c1 = cof[1];
-    const double* c2 = cof[2];
-    double scale = 1;
-    for (const auto& row : e)
-        scale *= std::abs(row[0]) + std::abs(row[1]) + std::abs(row[2]);
-    // A sliver whose gradient the rounded frame cannot resolve to 1e-6: the cell's own
-    // path.
-    if (!(std::abs(det) > 1e-6 * scale)) return false;
-    const double inv = 1 / det;
-    double grad[3];
-    for (int d = 0; d < 3; ++d)
-        grad[d] = std::abs((c0[d] * du[0] + c1[d] * du[1] + c2[d] * du[2]) * inv);
-    // Each face point: the face's linear interpolant at (sum w x, sum w y, sum w z),
-    // whose distance from the ray point at t is the first two sums (the third is t up
-    // to its rounding) plus the corners' errors.
+    // The field's gradient in the ray frame, bounded from the cell's: it only bounds how
+    // far the face points may lie off the ray. NaN: a sliver, the cell's own path.
+    if (s.gradientBound[f].empty()) return false;
+    const double g = s.gradientBound[f][seg_.cell];
+    if (!(g >= 0)) return false;
+    const double grad[3] = {g * frameGradient_[0], g * frameGradient_[1],
+                            g * frameGradient_[2]};
+    // Each face point: the face's linear interpolant at sum w P, whose distance from the
+    // ray point at t the face point bounds (FacePoint::off).
     double value[2], error = 0;
     const FacePoint* p[2] = {&in, &out};
     for (int k = 0; k < 2; ++k) {
@@ -541,28 +582,16 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
         if (!(k == 0 && sums.t == q.t && sums.v[0] == q.v[0] && sums.v[1] == q.v[1] &&
               sums.v[2] == q.v[2])) {
             const double uk[3] = {u[q.v[0]], u[q.v[1]], u[q.v[2]]};
-            double dx = 0, dy = 0, ax = 0, ay = 0, az = 0, au = 0;
-            for (int m = 0; m < 3; ++m) {
-                dx += q.w[m] * q.x[m];
-                dy += q.w[m] * q.y[m];
-                ax += q.w[m] * std::abs(q.x[m]);
-                ay += q.w[m] * std::abs(q.y[m]);
-                az += q.w[m] * std::abs(q.z[m]);
-                au = std::max(au, std::abs(uk[m]));
-            }
+            const double au =
+                std::max({std::abs(uk[0]), std::abs(uk[1]), std::abs(uk[2])});
             sums.value = q.w[0] * uk[0] + q.w[1] * uk[1] + q.w[2] * uk[2];
-            sums.offX = std::abs(dx) + 4 * kEps * ax + q.cornerError;
-            sums.offY = std::abs(dy) + 4 * kEps * ay + q.cornerError;
-            sums.offZ = 4 * kEps * az;
             sums.rounding = 4 * kEps * au;
             sums.t = q.t;
             for (int m = 0; m < 3; ++m) sums.v[m] = q.v[m];
         }
         value[k] = sums.value;
-        const double off =
-            grad[0] * sums.offX + grad[1] * sums.offY + grad[2] * sums.offZ;
-        // Twice: the gradient itself carries rounding (at most 1e-6 relative here, and
-        // the reciprocal of det one more).
+        const double off = grad[0] * q.off[0] + grad[1] * q.off[1] + grad[2] * q.off[2];
+        // Twice: a margin over the rounding of these sums.
         error = std::max(error, 2 * off + sums.rounding);
     }
     const double t0 = in.t, t1 = out.t;
@@ -817,6 +846,29 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     truncated_[f] = dropped;
 }
 
+void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
+    const VolumeSetup& s = *setup_;
+    const FieldState& st = state_[f];
+    const double dv = st.valueExit - st.valueEnter;
+    if (dv == 0) return;
+    const double length = seg.tExit - seg.tEnter;
+    // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)).
+    const double lo = std::min(st.valueEnter, st.valueExit);
+    const double hi = std::max(st.valueEnter, st.valueExit);
+    auto visit = [&](const std::vector<double>& scalars) {
+        for (const double b : scalars) {
+            if (!(b > lo && b < hi)) continue;
+            const double x = (b - st.valueEnter) / dv;
+            if (x > 0 && x < 1) {
+                const double t = seg.tEnter + x * length;
+                if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
+            }
+        }
+    };
+    if (f == 0) visit(s.colorTf.Scalars());
+    if (f == 1 || s.sameField) visit(s.extinctionTf.Scalars());
+}
+
 void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
                                      RenderCounters& counters) {
     const VolumeSetup& s = *setup_;
@@ -833,19 +885,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
                 if (b > lo && b < hi) visit(b);
     };
     if (st.linear) {
-        const double dv = st.valueExit - st.valueEnter;
-        if (dv == 0) return;
-        const double length = seg.tExit - seg.tEnter;
-        // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)).
-        forEachBreakpoint(std::min(st.valueEnter, st.valueExit),
-                          std::max(st.valueEnter, st.valueExit), [&](double b) {
-                              const double x = (b - st.valueEnter) / dv;
-                              if (x > 0 && x < 1) {
-                                  const double t = seg.tEnter + x * length;
-                                  if (t > seg.tEnter && t < seg.tExit)
-                                      crossings_.push_back(t);
-                              }
-                          });
+        LinearCrossings(f, seg);
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];
@@ -966,6 +1006,132 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
     composite.transmittance = T * q.transmittance;
     composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
     RecordEnds(p0, p1, tau0, e0, tau1, e1, composite.transmittance);
+}
+
+void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
+    const VolumeSetup& s = *setup_;
+    QueuedPiece& piece = queue_.emplace_back();
+    piece.p0 = p0;
+    piece.p1 = p1;
+    piece.length = p1 - p0;
+    piece.varying = varying;
+    double r0, g0, b0, r1, g1, b1, tau0, tau1;
+    if (!varying) {
+        // LinearPiece of a constant cell.
+        tau0 = tau1 = constTau_;
+        r0 = r1 = constColor_[0];
+        g0 = g1 = constColor_[1];
+        b0 = b1 = constColor_[2];
+        piece.colorError = piece.tauError = 0;
+    } else {
+        // As LinearPiece with one linear field (FieldAt, the transfer functions), the
+        // colour and extinction at the piece's start kept from the last piece's end
+        // where they are the same.
+        const FieldState& st = state_[0];
+        const double tE = seg_.tEnter, tX = seg_.tExit;
+        const double vE = st.valueEnter, vX = st.valueExit;
+        auto at = [&](double t) {
+            if (t == tE) return vE;
+            if (t == tX) return vX;
+            const double x = (t - tE) / (tX - tE);
+            return (1 - x) * vE + x * vX;
+        };
+        const double v0 = at(p0), v1 = at(p1), vm = at(0.5 * (p0 + p1));
+        const int kc = s.colorTf.IntervalOf(vm);
+        const int ke = s.extinctionTf.IntervalOf(vm);
+        if (kc == lastColor_.piece && v0 == lastColor_.value) {
+            r0 = lastColor_.out[0];
+            g0 = lastColor_.out[1];
+            b0 = lastColor_.out[2];
+        } else {
+            s.colorTf.EvalOn3(kc, v0, r0, g0, b0);
+        }
+        if (ke == lastExtinction_.piece && v0 == lastExtinction_.value) {
+            tau0 = lastExtinction_.out[0];
+        } else {
+            tau0 = s.extinctionTf.EvalOn1(ke, v0);
+        }
+        s.colorTf.EvalOn3(kc, v1, r1, g1, b1);
+        tau1 = s.extinctionTf.EvalOn1(ke, v1);
+        lastColor_ = {kc, v1, {r1, g1, b1}};
+        lastExtinction_ = {ke, v1, {tau1, 0, 0}};
+        // The slopes of the pieces in use turn field errors into value errors.
+        piece.colorError = s.colorTf.SteepestOn(kc) * st.error;
+        piece.tauError = s.extinctionTf.SteepestOn(ke) * st.error;
+    }
+    piece.tau0 = std::max(0.0, tau0);
+    piece.tau1 = std::max(0.0, tau1);
+    piece.c0[0] = std::max(0.0, r0);
+    piece.c0[1] = std::max(0.0, g0);
+    piece.c0[2] = std::max(0.0, b0);
+    piece.c1[0] = std::max(0.0, r1);
+    piece.c1[1] = std::max(0.0, g1);
+    piece.c1[2] = std::max(0.0, b1);
+}
+
+bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
+    const std::size_t n = queue_.size();
+    if (n == 0) return false;
+    const VolumeSetup& s = *setup_;
+    // The closed forms of all queued pieces at once, then LinearPiece's compositing and
+    // error terms piece by piece, and Terminate after each as Integrate does.
+    pieceTau_[0].resize(n);
+    pieceTau_[1].resize(n);
+    pieceLength_.resize(n);
+    pieceIntegrals_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        pieceTau_[0][i] = queue_[i].tau0;
+        pieceTau_[1][i] = queue_[i].tau1;
+        pieceLength_[i] = queue_[i].length;
+    }
+    IntegrateLinearPieces(static_cast<int>(n), pieceTau_[0].data(), pieceTau_[1].data(),
+                          pieceLength_.data(), pieceIntegrals_.data());
+    const bool wm = s.glow == GlowModel::WilliamsMax;
+    bool stop = false;
+    for (std::size_t i = 0; i < n && !stop; ++i) {
+        const QueuedPiece& piece = queue_[i];
+        const LinearPieceIntegrals& q = pieceIntegrals_[i];
+        const double length = piece.length, tau0 = piece.tau0, tau1 = piece.tau1;
+        const double T = composite.transmittance;
+        double rgb[3];
+        for (int c = 0; c < 3; ++c) {
+            const double e = wm ? WilliamsMaxEmission(q, piece.c0[c], piece.c1[c])
+                                : GlowEmission(q, piece.c0[c], piece.c1[c], length);
+            rgb[c] = T * e;
+            // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of
+            // the compositing.
+            composite.error[c] += 16 * kEps * rgb[c];
+        }
+        // The piece's own colour first: the depth errors below affect only what lies
+        // behind.
+        composite.AddColor(rgb);
+        if (piece.varying) {
+            // AddFieldError.
+            const double depth = 0.5 * length * (tau0 + tau1);
+            const double tauMin = std::min(tau0, tau1);
+            const double lambda = tauMin * length > 1 ? 1 / tauMin : length;
+            const double own =
+                wm ? piece.colorError * std::min(1.0, depth) +
+                         2 * s.colorMax * piece.tauError * lambda
+                   : (piece.colorError + s.colorMax * piece.tauError * lambda) * lambda;
+            for (double& e : composite.error) e += T * own;
+            composite.depthError += length * piece.tauError;
+        }
+        composite.rgba[3] += T * q.opacity;
+        composite.transmittance = T * q.transmittance;
+        composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
+        if (piece.p0 == tStart_ || piece.p1 == tEnd_) {
+            double e0[3], e1[3];
+            for (int c = 0; c < 3; ++c) {
+                e0[c] = wm ? piece.c0[c] * tau0 : piece.c0[c];
+                e1[c] = wm ? piece.c1[c] * tau1 : piece.c1[c];
+            }
+            RecordEnds(piece.p0, piece.p1, tau0, e0, tau1, e1, composite.transmittance);
+        }
+        stop = Terminate(piece.p1, composite);
+    }
+    queue_.clear();
+    return stop;
 }
 
 void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
@@ -1273,6 +1439,50 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
     if (bound > sofar) return false;
     for (double& e : composite.error) e += bound;
     return true;
+}
+
+VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
+    const MeshGeometry& geometry, const Segment& seg, const SegmentEnds& ends,
+    RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    const std::uint8_t kind = s.cellKind[seg.cell];
+    if (kind == VolumeSetup::kEmpty) return LinearTetResult::kEmpty;
+    crossings_.clear();
+    if (kind == VolumeSetup::kConstant) {
+        seg_ = seg;
+        kind_ = kind;
+        const Interval& rc = (*s.ranges[0])[seg.cell];
+        const Interval& re = (*s.ranges.back())[seg.cell];
+        s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
+        constTau_ = std::max(0.0, constTau_);
+        s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
+    } else {
+        if (!linearTetField_ || !ends.enter.Valid() || !ends.exit.Valid() ||
+            !geometry.IsDerived(seg.cell))
+            return LinearTetResult::kOther;
+        seg_ = seg;
+        state_[0] = FieldState{};
+        // Sets nothing when it fails; BeginSegment then takes the cell's own path.
+        if (!LinearFromFacePoints(0, ends)) return LinearTetResult::kOther;
+        kind_ = kind;
+        fieldCount_ = 1;
+        LinearCrossings(0, seg);
+        if (crossings_.size() > 1) std::sort(crossings_.begin(), crossings_.end());
+        crossings_.erase(std::unique(crossings_.begin(), crossings_.end()),
+                         crossings_.end());
+    }
+    mode_ = Mode::kClosed;
+    // Integrate(seg.tEnter, seg.tExit) (the crossings lie strictly inside), its pieces
+    // queued and composited in order by FlushLinearTets.
+    const bool varying = kind == VolumeSetup::kVarying;
+    double p0 = seg.tEnter;
+    for (const double t : crossings_) {
+        QueueLinearTetPiece(p0, t, varying);
+        p0 = t;
+    }
+    QueueLinearTetPiece(p0, seg.tExit, varying);
+    if (queue_.size() < kQueuedPieces) return LinearTetResult::kGoOn;
+    return FlushLinearTets(composite) ? LinearTetResult::kStop : LinearTetResult::kGoOn;
 }
 
 bool VolumeRayMarcher::Integrate(double a, double b, RayComposite& composite,

@@ -60,6 +60,12 @@ struct VolumeSetup {
     /// for linear tetrahedra integrated from the traversal's face points; null for a cell
     /// field.
     const double* pointValues[2] = {nullptr, nullptr};
+    /// Per point field with pointValues and cell, for linear tetrahedra (derived
+    /// geometry; else NaN, and empty without such cells): a bound of the Euclidean norm
+    /// of the field's gradient (world units), rounded up, or NaN for a tetrahedron too
+    /// flat to bound it (|det| <= 1e-6 of the product of its edge rows). It turns how far
+    /// a face point lies off the ray into an error of the field value there.
+    std::vector<float> gradientBound[2];
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
     /// Wilhelms-Van Gelder, glow zero), both transfer functions constant over the range
@@ -104,7 +110,13 @@ PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
 /// if a field is missing), takes their per-cell ranges from `cache` (computed there the
 /// first time a field is used) and classifies the cells for the transfer functions
 /// (parallel).
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache);
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
+                            const Scene& scene, FieldCache& cache);
+
+/// VolumeSetup::gradientBound of the linear tetrahedron whose corners are points[3 id]
+/// for the four `ids`, with field values u[id].
+float LinearTetGradientBound(const double* points, const double* u,
+                             const std::int64_t* ids);
 
 /// Front-to-back compositing state of one ray: premultiplied colour and opacity (rgba),
 /// transmittance, and the error bookkeeping of the volume integration.
@@ -152,6 +164,26 @@ class VolumeRayMarcher {
     /// pixel by less than a tenth of the tolerance (that bound is added to the error).
     bool Integrate(double a, double b, RayComposite& composite, RenderCounters& counters);
 
+    /// What LinearTet did with a segment.
+    enum class LinearTetResult : std::uint8_t {
+        kOther,  ///< not such a segment: nothing changed (BeginSegment, Integrate)
+        kEmpty,  ///< the cell holds nothing to integrate
+        kGoOn,   ///< integrated; the ray goes on
+        kStop    ///< integrated; the ray may stop (as Integrate's true)
+    };
+    /// BeginSegment and Integrate(seg.tEnter, seg.tExit) in one, for the common segment
+    /// of a large linear mesh: a linear tetrahedron with Valid face points `ends`, in a
+    /// volume whose colour and extinction come from one point field, or a cell whose
+    /// transfer functions are constant or empty over its range. The same arithmetic as
+    /// those two calls (bitwise the same pixel), without their general cases.
+    LinearTetResult LinearTet(const MeshGeometry& geometry, const Segment& seg,
+                              const SegmentEnds& ends, RayComposite& composite);
+    /// LinearTet queues the pieces of its segments and composites them in batches; this
+    /// composites what is queued. Call it before any other segment is integrated and
+    /// before FinishRay. True when the ray may stop (as Integrate's true); the rest of
+    /// the queue is then dropped.
+    bool FlushLinearTets(RayComposite& composite);
+
     /// Ends the ray: adds to the error the signed quadrature estimates and the
     /// first-order effect of rounding in the ray's entry and exit parameters (a few ulps
     /// of t).
@@ -186,6 +218,21 @@ class VolumeRayMarcher {
     double FieldAt(int f, double t);
     void Sample(double t, double& tau, double emission[3]);
     void LinearPiece(double p0, double p1, RayComposite& composite);
+    /// Queues LinearPiece(p0, p1) of LinearTet's current segment: a varying cell (one
+    /// linear field drives both transfer functions) or a constant one.
+    void QueueLinearTetPiece(double p0, double p1, bool varying);
+    /// A piece of LinearTet waiting for its closed form and compositing: what LinearPiece
+    /// computes before the closed form (the colours clamped at 0).
+    struct QueuedPiece {
+        double p0, p1, length, tau0, tau1, c0[3], c1[3];
+        double colorError, tauError;  ///< field errors through the transfer functions
+        bool varying;
+    };
+    /// Queued pieces beyond which LinearTet composites.
+    static constexpr std::size_t kQueuedPieces = 8;
+    std::vector<QueuedPiece> queue_;
+    std::vector<double> pieceTau_[2], pieceLength_;
+    std::vector<LinearPieceIntegrals> pieceIntegrals_;
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
     bool Terminate(double t, RayComposite& composite);
@@ -194,6 +241,8 @@ class VolumeRayMarcher {
     /// nothing set) for a tetrahedron too flat to bound that error in the ray frame.
     bool LinearFromFacePoints(int f, const SegmentEnds& ends);
     void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
+    /// FindCrossings of a linear field f (state_[f].linear).
+    void LinearCrossings(int f, const Segment& seg);
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
     /// into pieces_[f].
     void ProjectExact(int f, const MeshGeometry& geometry, const Segment& seg);
@@ -222,15 +271,29 @@ class VolumeRayMarcher {
     CellScratch cellScratch_;
     std::vector<double> nodeT_, nodeU_[2], nodeDepth_, nodeAtt_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
+    /// The last transfer-function value LinearTetPiece computed at a piece's end: piece
+    /// `piece` of the function at field value `value` (piece -2: none).
+    struct TfValue {
+        int piece = -2;
+        double value = 0;
+        double out[3] = {0, 0, 0};
+    };
+    TfValue lastColor_, lastExtinction_;
     /// Per field, what LinearFromFacePoints computed at the last face point (the exit
     /// of the last segment), keyed by its t and corners: the next segment's entry.
     struct FacePointSums {
         double t = 0;
         std::int32_t v[3] = {-1, -1, -1};
-        double value = 0, offX = 0, offY = 0, offZ = 0, rounding = 0;
+        double value = 0, rounding = 0;
     };
     FacePointSums faceSums_[2];
     int fieldCount_ = 1;
+    /// LinearTet applies: one point field, with per-point values, drives both.
+    bool linearTetField_ = false;
+    /// Bounds of |d field / d x|, |d / d y|, |d / d z| in the ray frame per unit of a
+    /// tetrahedron's VolumeSetup::gradientBound (trace/ray_frame.h: x and y are world
+    /// axes sheared along z, z a scaled world axis).
+    double frameGradient_[3] = {1, 1, 1};
     FieldState state_[2];
     SegmentField field_[2];
     std::vector<ProjectedPiece> pieces_[2];

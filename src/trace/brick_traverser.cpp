@@ -110,14 +110,12 @@ void MakeFacePoint(const std::int32_t* ids, const ShearedPoint& a, const Sheared
                    const ShearedPoint& c, const TriangleCrossing& x, double dirKz,
                    FacePoint& fp) {
     constexpr double kU = 0.5 * std::numeric_limits<double>::epsilon();
+    constexpr double kEps = std::numeric_limits<double>::epsilon();
     const ShearedPoint* p[3] = {&a, &b, &c};
     double err = 0;
     for (int k = 0; k < 3; ++k) {
         fp.v[k] = ids[k];
         fp.w[k] = x.bary[k];
-        fp.x[k] = p[k]->x;
-        fp.y[k] = p[k]->y;
-        fp.z[k] = p[k]->z;
         // The offset's rounding (|a_d| each, |a_kx| <= |x| + |a_kz| as |sx| <= 1), the
         // shear's fused multiply-add and its result's rounding.
         err = std::max(
@@ -125,6 +123,19 @@ void MakeFacePoint(const std::int32_t* ids, const ShearedPoint& a, const Sheared
     }
     fp.cornerError = 4 * kU * err;
     fp.t = x.t;
+    // The point's distance from the ray: the first two sums (the third is t up to its
+    // rounding) plus their rounding and the corners' errors.
+    double dx = 0, dy = 0, ax = 0, ay = 0, az = 0;
+    for (int m = 0; m < 3; ++m) {
+        dx += fp.w[m] * p[m]->x;
+        dy += fp.w[m] * p[m]->y;
+        ax += fp.w[m] * std::abs(p[m]->x);
+        ay += fp.w[m] * std::abs(p[m]->y);
+        az += fp.w[m] * std::abs(p[m]->z);
+    }
+    fp.off[0] = std::abs(dx) + 4 * kEps * ax + fp.cornerError;
+    fp.off[1] = std::abs(dy) + 4 * kEps * ay + fp.cornerError;
+    fp.off[2] = 4 * kEps * az;
 }
 
 inline double Dist2(const double* a, const double* b) {
@@ -1933,15 +1944,21 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     std::int64_t before = 0;  // cells walked before tLo
     // One walk from cell c, entered by the crossing of entryFace at entryT, at tIn (>=
     // entryT). True when the span is done.
-    auto walk = [&](std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
-                    const Crossing& entry) {
+    // With ends: the face points go straight into a pending last element of *ends (its
+    // exit written by FindExit, its entry the last exit), which becomes the segment's
+    // when the segment is kept; `trim` drops it when the walk ends.
+    auto walkOnce = [&](std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
+                        const Crossing& entry) {
         int zeroSteps = 0;
-        SegmentEnds se;
-        if (ends) im.EntryPoint(entry, frame, se.enter);
+        if (ends) {
+            ends->emplace_back();
+            im.EntryPoint(entry, frame, ends->back().enter);
+        }
         while (true) {
             Crossing ex;
+            SegmentEnds* pending = ends ? &ends->back() : nullptr;
             if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex,
-                             ends ? &se.exit : nullptr)) {
+                             pending ? &pending->exit : nullptr)) {
                 im.walkFailures.fetch_add(1, std::memory_order_relaxed);
                 return false;
             }
@@ -1949,13 +1966,20 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
             before += tOut <= tLo;
             if (a < b) {
-                out.push_back({c, a, b});
-                if (ends) {
-                    ends->push_back(se);
-                    if (!se.exit.Valid()) ends->back().enter.v[0] = -1;
+                Segment& g = out.emplace_back();
+                g.cell = c;
+                g.tEnter = a;
+                g.tExit = b;
+                if (pending) {
+                    const FacePoint& exitPoint = pending->exit;
+                    const bool valid = exitPoint.Valid();
+                    SegmentEnds& next = ends->emplace_back();
+                    next.enter = (ends->end() - 2)->exit;
+                    if (!valid) (ends->end() - 2)->enter.v[0] = -1;
                 }
+            } else if (pending) {
+                pending->enter = pending->exit;
             }
-            if (ends) se.enter = se.exit;
             tCur = tOut;
             if (tOut >= tHi) return true;
             const std::int64_t next = im.faces[ex.face].cell[ex.side > 0 ? 1 : 0];
@@ -1973,6 +1997,12 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             entryT = ex.t;
             tIn = tOut;
         }
+    };
+    auto walk = [&](std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
+                    const Crossing& entry) {
+        const bool done = walkOnce(c, entryFace, entryT, tIn, entry);
+        if (ends) ends->pop_back();
+        return done;
     };
     // A span cut by the caller (a clip box) that starts inside the mesh: start at the
     // cell holding its start instead of walking the cells before it from the boundary.

@@ -90,15 +90,17 @@ struct TraceCounters {
 /// Where a ray crosses a planar triangular face: the face's corners (point indices of the
 /// brick's mesh), the barycentric weights of the crossing on them (each >= 0, sum 1) and
 /// its ray parameter t = sum w_k z_k. Computed from the face's one canonical
-/// representation, so both cells of a face get bitwise the same point. The corners are
-/// also given in the ray frame (trace/ray_frame.h: x, y across the ray, z its parameter),
-/// so that a user can bound how far the point (sum w_k x_k, sum w_k y_k, t) lies from the
-/// ray: a few rounding errors of the corners' coordinates, cornerError bounding those.
+/// representation, so both cells of a face get bitwise the same point. With it, bounds of
+/// how far the point sum w_k P_k lies from the ray point at t, in the ray frame
+/// (trace/ray_frame.h: x, y across the ray, z its parameter): off[0] and off[1] across
+/// the ray (|sum w_k x_k| and |sum w_k y_k|, the rounding of those sums, and
+/// cornerError), off[2] along it (the rounding of t's sum; with a factor 4 eps on the
+/// sums of w_k |coordinate|).
 struct FacePoint {
     std::int32_t v[3] = {-1, -1, -1};  ///< v[0] < 0: not available
     double w[3] = {0, 0, 0};
     double t = 0;
-    double x[3] = {0, 0, 0}, y[3] = {0, 0, 0}, z[3] = {0, 0, 0};
+    double off[3] = {0, 0, 0};
     /// Bound of the error of each corner's x and y (ray frame) against the exact
     /// transformation of its world position.
     double cornerError = 0;

@@ -197,6 +197,40 @@ TEST(VolumeClosedForm, HugeDepthTinySegmentsAndZeroExtinction) {
     EXPECT_DOUBLE_EQ(GlowEmission(clear, 0.4, 0.8, 2.5), 2.5 * 0.6);
 }
 
+// The batched closed form gives every piece bitwise what the single one gives, in every
+// regime and for any number of pieces (full and partial groups of four).
+TEST(VolumeClosedForm, BatchedPiecesEqualSinglePiecesBitwise) {
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> uni(0, 1);
+    for (int n : {1, 2, 3, 4, 5, 8, 13, 64}) {
+        std::vector<double> tau0(n), tau1(n), length(n);
+        for (int i = 0; i < n; ++i) {
+            // Scales from 1e-6 to 1e3 for the extinction and the length, so that the
+            // Taylor regime and the others mix within a batch; some zero extinction.
+            tau0[i] = i % 7 == 3 ? 0.0 : std::pow(10.0, -3 + 6 * uni(rng));
+            tau1[i] = i % 5 == 2 ? 0.0 : std::pow(10.0, -3 + 6 * uni(rng));
+            length[i] = std::pow(10.0, -3 + 3 * uni(rng));
+        }
+        std::vector<LinearPieceIntegrals> batch(n);
+        IntegrateLinearPieces(n, tau0.data(), tau1.data(), length.data(), batch.data());
+        int taylor = 0;
+        for (int i = 0; i < n; ++i) {
+            const LinearPieceIntegrals q =
+                IntegrateLinearPiece(tau0[i], tau1[i], length[i]);
+            taylor += length[i] * (tau0[i] + std::abs(tau1[i] - tau0[i]) / 2) <= 1;
+            EXPECT_EQ(batch[i].transmittance, q.transmittance) << n << " " << i;
+            EXPECT_EQ(batch[i].opacity, q.opacity) << n << " " << i;
+            EXPECT_EQ(batch[i].mean, q.mean) << n << " " << i;
+            EXPECT_EQ(batch[i].firstMoment, q.firstMoment) << n << " " << i;
+            EXPECT_EQ(batch[i].farWeight, q.farWeight) << n << " " << i;
+        }
+        if (n == 64) {
+            EXPECT_GT(taylor, 8);
+            EXPECT_LT(taylor, 56);
+        }
+    }
+}
+
 TEST(VolumeClosedForm, KronrodRuleIntegratesPolynomials) {
     const KronrodRule& rule = GetKronrodRule();
     // Kronrod: exact to degree 22; Gauss: degree 13; cumulative: degree 14 at every node.
@@ -367,6 +401,100 @@ TEST(VolumeLinear, FacePointFieldsOnAJitteredMeshAreWithinTheirErrorBound) {
             .pixels,
         250);
     EXPECT_LT(stats.counters.volumeErrorMax, 1e-12);
+}
+
+// The lean path of linear tetrahedra (VolumeRayMarcher::LinearTet, taken when one point
+// field drives a volume alone; its pieces queued and composited in batches) gives bitwise
+// the pixel of the general one (BeginSegment and Integrate per segment), stops where it
+// stops, and takes nearly every segment that holds something.
+TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
+    Mesh mesh =
+        testing::GridMesh(6, 0.25, [](int, int, int) { return testing::CubeCut::Tets5; });
+    Field u{"u", Association::Point, 1, {}};
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        const double* x = &mesh.points[3 * i];
+        u.values.push_back(x[0] + 2 * x[1] + 3 * x[2] + 0.3 * std::sin(7 * x[0]));
+    }
+    mesh.pointFields.push_back(std::move(u));
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    ASSERT_TRUE(traverser.FacePoints());
+    Scene scene = MakeScene(kLinearScene);
+    scene.volume->extinctionField = "u";
+    // Breakpoints inside segments, a constant stretch, and zero extinction (empty cells).
+    scene.volume->extinctionTf = {{0.5, 0.0}, {1.0, 0.0}, {1.5, 2.0},
+                                  {2.2, 2.0}, {3.0, 9.0}, {4.0, 0.5}};
+    using R = VolumeRayMarcher::LinearTetResult;
+    // The third pass: extinction 1e4 times higher, so that rays stop early.
+    for (int pass = 0; pass < 3; ++pass) {
+        scene.volume->glow =
+            pass == 1 ? GlowModel::WilhelmsVanGelder : GlowModel::WilliamsMax;
+        if (pass == 2)
+            for (auto& p : scene.volume->extinctionTf) p.extinction *= 1e4;
+        const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+        ASSERT_TRUE(setup.volume.has_value());
+        const Camera camera(scene.camera);
+        VolumeRayMarcher lean, general;
+        RenderCounters counters;
+        std::vector<Segment> segments;
+        std::vector<SegmentEnds> ends;
+        int taken = 0, other = 0, rays = 0, stopped = 0;
+        for (int j = 0; j < 24; ++j)
+            for (int i = 0; i < 28; ++i) {
+                const CameraRay cr = camera.PixelRay(i, j);
+                Ray ray;
+                for (int d = 0; d < 3; ++d) {
+                    ray.origin[d] = cr.origin[d];
+                    ray.dir[d] = cr.direction[d];
+                }
+                traverser.Trace(ray, 0, 1e30, segments, &ends);
+                if (segments.empty()) continue;
+                ++rays;
+                double rgbaLean[4] = {0, 0, 0, 0}, rgbaGeneral[4] = {0, 0, 0, 0};
+                RayComposite a, b;
+                a.rgba = rgbaLean;
+                b.rgba = rgbaGeneral;
+                lean.BeginRay(*setup.volume, ray, segments.front().tEnter,
+                              segments.back().tExit);
+                general.BeginRay(*setup.volume, ray, segments.front().tEnter,
+                                 segments.back().tExit);
+                bool stopA = false, stopB = false;
+                for (std::size_t k = 0; k < segments.size() && !stopB; ++k) {
+                    const Segment& seg = segments[k];
+                    if (general.BeginSegment(mesh, geometry, seg, counters, &ends[k]))
+                        stopB = general.Integrate(seg.tEnter, seg.tExit, b, counters);
+                }
+                // The lean path queues pieces: it stops at the same piece, later.
+                for (std::size_t k = 0; k < segments.size() && !stopA; ++k) {
+                    const Segment& seg = segments[k];
+                    const R r = lean.LinearTet(geometry, seg, ends[k], a);
+                    if (r == R::kOther) {
+                        ++other;
+                        stopA = lean.FlushLinearTets(a);
+                        if (!stopA &&
+                            lean.BeginSegment(mesh, geometry, seg, counters, &ends[k]))
+                            stopA = lean.Integrate(seg.tEnter, seg.tExit, a, counters);
+                    } else {
+                        taken += r != R::kEmpty;
+                        stopA = r == R::kStop;
+                    }
+                }
+                if (!stopA) stopA = lean.FlushLinearTets(a);
+                ASSERT_EQ(stopA, stopB) << i << "," << j;
+                stopped += stopB;
+                lean.FinishRay(a);
+                general.FinishRay(b);
+                for (int c = 0; c < 4; ++c) EXPECT_EQ(rgbaLean[c], rgbaGeneral[c]);
+                for (int c = 0; c < 3; ++c) EXPECT_EQ(a.error[c], b.error[c]);
+                EXPECT_EQ(a.transmittance, b.transmittance);
+            }
+        EXPECT_GT(rays, 250);
+        EXPECT_GT(taken, (pass == 2 ? 1 : 5) * rays);
+        EXPECT_LT(other, taken / 100 + 1);
+        if (pass == 2) {
+            EXPECT_GT(stopped, rays / 2);
+        }
+    }
 }
 
 TEST(VolumeLinear, WilhelmsVanGelderOnTwoFieldsMatchesReference) {
