@@ -2,14 +2,16 @@
 // centroids, distribute cells (with ghost copies) to bricks, write pieces, index and
 // manifest atomically.
 //
-// Memory: with B = the memory limit, the point cache of the scan holds B/4, stream
+// Memory: with B = the memory limit, the point cache of the scan holds B/4 (and the
+// distribution's, which recomputes order-1 cells' boxes, another B/4 after it), stream
 // buffers and spill buffers a few MiB (the distribution's brick spill buffers B/8, twice:
-// spill writers fill one buffer while a background thread writes the other), the tree builder collects at most B/4 of
-// centroids per level (a coordinate, the cost and the other two coordinates of each,
-// the latter for a tie-break without another pass), and one brick is assembled at a time; a brick that would need
-// more than B is an input error (ask for more bricks). A gmsh input's tag -> index maps
-// take at most B/8 each (gmsh_stream.h), in the scan only. Everything else lives in
-// DIR/.spill-PID-N/ (removed at the end, and by the next run if this one dies).
+// spill writers fill one buffer while a background thread writes the other), the tree
+// builder collects at most B/4 of centroids per level (a coordinate, the cost and the
+// other two coordinates of each, the latter for a tie-break without another pass), and
+// one brick is assembled at a time; a brick that would need more than B is an input
+// error (ask for more bricks). A gmsh input's tag -> index maps take at most B/8 each
+// (gmsh_stream.h), in the scan only. Everything else lives in DIR/.spill-PID-N/ (removed
+// at the end, and by the next run if this one dies).
 #include "partition.h"
 
 #include <fcntl.h>
@@ -61,21 +63,29 @@ constexpr const char* kTestWideIdsEnv = "HPRAY_PARTITION_TEST_WIDE_IDS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a cell in the scan's cell spill; followed by nodeCount global point
+/// Fixed part of a cell in the scan's cell spill; followed by the cell's guaranteed
+/// geometry box (6 doubles: lo, then hi) when `boxStored`, then nodeCount global point
 /// indices (int32 when every one fits, int64 when `wide`) and the cell field values
-/// (doubles). The centroid and cost parts of the
+/// (doubles). Only curved cells (order > 1 or not Lagrange) store their box, whose
+/// Bernstein hull is costly; the box of an order-1 Lagrange cell is the bounds of its
+/// nodes, which the distribution recomputes from the point spill (CellNodeBox) rather
+/// than reading 48 bytes per cell back from disk. The centroid and cost parts of the
 /// cell are in the centroid spill, at the same position. `vtkType` is the VTK type the
 /// input cell was read as (0 = unknown), for the brick writer to keep. The node count
 /// fits 16 bits (at most (kMaxOrder + 1)^3 nodes).
 struct CellRecord {
-    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0;
-    std::uint16_t nodeCount = 0, wide = 0;
-    double lo[3], hi[3];
+    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, boxStored = 0, wide = 0;
+    std::uint16_t nodeCount = 0;
     std::size_t NodeBytes() const { return (wide ? 8u : 4u) * std::size_t(nodeCount); }
 };
-static_assert(sizeof(CellRecord) == 56, "spill record layout");
+static_assert(sizeof(CellRecord) == 8, "spill record layout");
 static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
               "CellRecord::nodeCount holds the node count of any cell");
+
+/// Whether the spilled box of a cell must be stored (see CellRecord).
+bool StoresBox(int order, CellFamily family) {
+    return order > 1 || family != CellFamily::Lagrange;
+}
 
 /// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
 /// and field values that follow it as in CellRecord.
@@ -241,34 +251,39 @@ class ScanSink : public MeshSink {
         // type, so the pieces agree with the arrays bricks.pvtu declares.
         higherOrderDegrees |=
             VtkTypeNeedsDegrees(VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
-        double sum[3] = {0, 0, 0}, centroid[3];
+        double sum[3] = {0, 0, 0}, centroid[3], lo[3], hi[3];
         for (int d = 0; d < 3; ++d) {
-            r.lo[d] = std::numeric_limits<double>::infinity();
-            r.hi[d] = -r.lo[d];
+            lo[d] = std::numeric_limits<double>::infinity();
+            hi[d] = -lo[d];
         }
         for (int k = 0; k < nodeCount; ++k)
             for (int d = 0; d < 3; ++d) {
                 const double v = xyz_[3 * k + d];
                 sum[d] += v;
-                r.lo[d] = std::min(r.lo[d], v);
-                r.hi[d] = std::max(r.hi[d], v);
+                lo[d] = std::min(lo[d], v);
+                hi[d] = std::max(hi[d], v);
             }
         for (int d = 0; d < 3; ++d)
-            centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
-        if (order > 1 || family != CellFamily::Lagrange) {
+            centroid[d] = std::clamp(sum[d] / nodeCount, lo[d], hi[d]);
+        r.boxStored = StoresBox(order, family) ? 1 : 0;
+        if (r.boxStored) {
             // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
             const Box g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
             for (int d = 0; d < 3; ++d) {
-                r.lo[d] = std::min(r.lo[d], g.lo[d]);
-                r.hi[d] = std::max(r.hi[d], g.hi[d]);
+                lo[d] = std::min(lo[d], g.lo[d]);
+                hi[d] = std::max(hi[d], g.hi[d]);
             }
         }
         const CellCostInput cost = CellCostFromNodes(shape, order, family, xyz_.data());
         for (int d = 0; d < 3; ++d) {
-            root.lo[d] = std::min(root.lo[d], r.lo[d]);
-            root.hi[d] = std::max(root.hi[d], r.hi[d]);
+            root.lo[d] = std::min(root.lo[d], lo[d]);
+            root.hi[d] = std::max(root.hi[d], hi[d]);
         }
         cells_->Write(&r, sizeof r);
+        if (r.boxStored) {
+            const double box[6] = {lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]};
+            cells_->Write(box, sizeof box);
+        }
         if (r.wide) {
             cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
         } else {
@@ -311,6 +326,51 @@ class ScanSink : public MeshSink {
     std::vector<std::int32_t> nodes32_;
     bool allWide_ = false;
 };
+
+/// The bounds of a cell's nodes, from the point spill: the box the scan computed for an
+/// order-1 Lagrange cell (the same minima and maxima in the same order, so the same
+/// doubles). `stored` holds nodeCount ids, int64 when `wide`, else int32.
+Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wide) {
+    Box box;
+    for (int d = 0; d < 3; ++d) {
+        box.lo[d] = std::numeric_limits<double>::infinity();
+        box.hi[d] = -box.lo[d];
+    }
+    for (int k = 0; k < nodeCount; ++k) {
+        std::int64_t id;
+        if (wide) {
+            std::memcpy(&id, stored + sizeof(std::int64_t) * k, sizeof id);
+        } else {
+            std::int32_t id32;
+            std::memcpy(&id32, stored + sizeof id32 * k, sizeof id32);
+            id = id32;
+        }
+        const double* p = points.Get(id);
+        for (int d = 0; d < 3; ++d) {
+            box.lo[d] = std::min(box.lo[d], p[d]);
+            box.hi[d] = std::max(box.hi[d], p[d]);
+        }
+    }
+    return box;
+}
+
+/// KdTree::TouchedLeaves without an allocation per call: the leaves whose closed box
+/// meets `b`, in the same order, through a stack the caller keeps.
+void TouchedLeaves(const KdTree& tree, const Box& b, std::vector<int>& stack,
+                   std::vector<int>& leaves) {
+    stack.clear();
+    stack.push_back(tree.root);
+    while (!stack.empty()) {
+        const KdNode& n = tree.nodes[stack.back()];
+        stack.pop_back();
+        if (n.IsLeaf()) {
+            leaves.push_back(n.leaf);
+            continue;
+        }
+        if (b.hi[n.axis] >= n.split) stack.push_back(n.high);
+        if (b.lo[n.axis] <= n.split) stack.push_back(n.low);
+    }
+}
 
 /// Per-brick tallies of the distribution pass.
 struct BrickTally {
@@ -639,18 +699,28 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
         SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
         SpillReader centroids(centroidsPath, std::size_t(1) << 20);
+        // Order-1 cells' boxes from their nodes (see CellRecord).
+        RecordCache points(scan.PointsPath(), scan.pointStride, budget / 4);
         CellRecord r;
         CentroidRecord c;
-        std::vector<int> hits;
+        std::vector<int> hits, stack;
         while (reader.Read(&r, sizeof r)) {
+            Box box;
+            if (r.boxStored) {
+                double stored[6];
+                if (!reader.Read(stored, sizeof stored))
+                    throw InternalError("cell spill ends inside a record");
+                box = Box{{stored[0], stored[1], stored[2]},
+                          {stored[3], stored[4], stored[5]}};
+            }
             const std::size_t restBytes = r.NodeBytes() + recordTail;
             const char* rest = reader.Take(restBytes);
             if (!rest || !centroids.Read(&c, sizeof c))
                 throw InternalError("cell spill ends inside a record");
+            if (!r.boxStored) box = CellNodeBox(points, rest, r.nodeCount, r.wide != 0);
             const int owner = OwnerBrick(tree, c.x);
             hits.clear();
-            tree.TouchedLeaves(Box{{r.lo[0], r.lo[1], r.lo[2]}, {r.hi[0], r.hi[1], r.hi[2]}},
-                               hits);
+            TouchedLeaves(tree, box, stack, hits);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
             const double cost =
                 CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
