@@ -2,8 +2,9 @@
 // centroids, distribute cells (with ghost copies) to bricks, write pieces, index and
 // manifest atomically.
 //
-// Memory: with B = the memory limit, the point cache of the scan holds B/4 (and the
-// distribution's, which recomputes order-1 cells' boxes, another B/4 after it), stream
+// Memory: with B = the memory limit, the point cache of the scan holds B/4 and its batch
+// of cells about B/64 (nodes and their coordinates); the point cache of the distribution,
+// which recomputes order-1 cells' boxes, another B/4 after it; stream
 // buffers and spill buffers a few MiB (the distribution's brick spill buffers B/8, twice:
 // spill writers fill one buffer while a background thread writes the other), the tree
 // builder collects at most B/4 of centroids per level (a coordinate, the cost and the
@@ -210,6 +211,8 @@ class ScanSink : public MeshSink {
         centroids_ = std::make_unique<SpillWriter>(CentroidsPath(), buf);
         cache_ =
             std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
+        batchNodeLimit_ = std::clamp<std::size_t>(
+            memoryLimit_ / 64 / (4 * sizeof(double)), 4096, std::size_t(1) << 17);
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::numeric_limits<double>::infinity();
             root.hi[d] = -std::numeric_limits<double>::infinity();
@@ -229,77 +232,48 @@ class ScanSink : public MeshSink {
         points += count;
     }
 
+    /// Gathers the cell's node coordinates (the point cache is sequential) and queues it;
+    /// a full batch is processed by FlushBatch.
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
               int nodeCount, const double* values, std::uint8_t vtkType) override {
-        xyz_.resize(3 * static_cast<std::size_t>(nodeCount));
+        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
+        Pending c;
+        c.r.shape = static_cast<std::uint8_t>(shape);
+        c.r.order = static_cast<std::uint8_t>(order);
+        c.r.family = static_cast<std::uint8_t>(family);
+        c.r.vtkType = vtkType;
+        c.r.nodeCount = static_cast<std::uint16_t>(nodeCount);
+        c.r.wide = allWide_ ? 1 : 0;
+        c.r.boxStored = StoresBox(order, family) ? 1 : 0;
+        c.first = batchNodes_.size();
+        c.firstValue = batchValues_.size();
         for (int k = 0; k < nodeCount; ++k) {
             HPRAY_CHECK_LT(nodes[k], points);
+            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) c.r.wide = 1;
             const double* p = cache_->Get(nodes[k]);
-            std::copy(p, p + 3, xyz_.begin() + 3 * k);
+            batchXyz_.insert(batchXyz_.end(), p, p + 3);
         }
-        CellRecord r;
-        r.shape = static_cast<std::uint8_t>(shape);
-        r.order = static_cast<std::uint8_t>(order);
-        r.family = static_cast<std::uint8_t>(family);
-        r.vtkType = vtkType;
-        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
-        r.nodeCount = static_cast<std::uint16_t>(nodeCount);
-        r.wide = allWide_ ? 1 : 0;
-        for (int k = 0; k < nodeCount; ++k)
-            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) r.wide = 1;
+        batchNodes_.insert(batchNodes_.end(), nodes, nodes + nodeCount);
+        batchValues_.insert(batchValues_.end(), values, values + cellValues);
         // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
         // type, so the pieces agree with the arrays bricks.pvtu declares.
-        higherOrderDegrees |=
-            VtkTypeNeedsDegrees(VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
-        double sum[3] = {0, 0, 0}, centroid[3], lo[3], hi[3];
-        for (int d = 0; d < 3; ++d) {
-            lo[d] = std::numeric_limits<double>::infinity();
-            hi[d] = -lo[d];
+        if (shape != lastShape_ || order != lastOrder_ || family != lastFamily_ ||
+            vtkType != lastVtkType_) {
+            higherOrderDegrees |= VtkTypeNeedsDegrees(
+                VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
+            lastShape_ = shape;
+            lastOrder_ = order;
+            lastFamily_ = family;
+            lastVtkType_ = vtkType;
         }
-        for (int k = 0; k < nodeCount; ++k)
-            for (int d = 0; d < 3; ++d) {
-                const double v = xyz_[3 * k + d];
-                sum[d] += v;
-                lo[d] = std::min(lo[d], v);
-                hi[d] = std::max(hi[d], v);
-            }
-        for (int d = 0; d < 3; ++d)
-            centroid[d] = std::clamp(sum[d] / nodeCount, lo[d], hi[d]);
-        r.boxStored = StoresBox(order, family) ? 1 : 0;
-        if (r.boxStored) {
-            // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
-            const Box g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
-            for (int d = 0; d < 3; ++d) {
-                lo[d] = std::min(lo[d], g.lo[d]);
-                hi[d] = std::max(hi[d], g.hi[d]);
-            }
-        }
-        const CellCostInput cost = CellCostFromNodes(shape, order, family, xyz_.data());
-        for (int d = 0; d < 3; ++d) {
-            root.lo[d] = std::min(root.lo[d], lo[d]);
-            root.hi[d] = std::max(root.hi[d], hi[d]);
-        }
-        cells_->Write(&r, sizeof r);
-        if (r.boxStored) {
-            const double box[6] = {lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]};
-            cells_->Write(box, sizeof box);
-        }
-        if (r.wide) {
-            cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
-        } else {
-            nodes32_.resize(static_cast<std::size_t>(nodeCount));
-            for (int k = 0; k < nodeCount; ++k)
-                nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
-            cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
-        }
-        cells_->Write(values, sizeof(double) * cellValues);
-        const CentroidRecord w{{centroid[0], centroid[1], centroid[2]},
-                               cost.parts.setup, cost.parts.perSegment * cost.area};
-        centroids_->Write(&w, sizeof w);
+        pending_.push_back(c);
         ++cells;
+        if (batchNodes_.size() >= batchNodeLimit_ || pending_.size() >= kBatchCells)
+            FlushBatch();
     }
 
     void Close() {
+        FlushBatch();
         if (points_) points_->Close();
         if (cells_) cells_->Close();
         if (centroids_) centroids_->Close();
@@ -318,13 +292,107 @@ class ScanSink : public MeshSink {
     bool higherOrderDegrees = false;  ///< some cell is written as VTK 71-74
 
   private:
+    /// A queued cell: its record, where its nodes (and their coordinates, 3 per node) and
+    /// field values are in the batch, and what FlushBatch computes from them.
+    struct Pending {
+        CellRecord r;
+        std::size_t first = 0, firstValue = 0;
+        double lo[3], hi[3], centroid[3];
+        CellCostInput cost;
+    };
+    static constexpr std::size_t kBatchCells = 16384;
+
+    /// The cells' geometry (node bounds, centroid, the Bernstein hull of curved cells)
+    /// and cost parts, in parallel (each cell on its own, so the same doubles as one at a
+    /// time); then the records, in input order.
+    void FlushBatch() {
+        if (pending_.empty()) return;
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, pending_.size(), 1024),
+            [&](const tbb::blocked_range<std::size_t>& range) {
+                for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                    Pending& c = pending_[i];
+                    const int nodeCount = c.r.nodeCount;
+                    const double* xyz = batchXyz_.data() + 3 * c.first;
+                    const auto shape = static_cast<CellShape>(c.r.shape);
+                    const auto family = static_cast<CellFamily>(c.r.family);
+                    double sum[3] = {0, 0, 0};
+                    for (int d = 0; d < 3; ++d) {
+                        c.lo[d] = std::numeric_limits<double>::infinity();
+                        c.hi[d] = -c.lo[d];
+                    }
+                    for (int k = 0; k < nodeCount; ++k)
+                        for (int d = 0; d < 3; ++d) {
+                            const double v = xyz[3 * k + d];
+                            sum[d] += v;
+                            c.lo[d] = std::min(c.lo[d], v);
+                            c.hi[d] = std::max(c.hi[d], v);
+                        }
+                    for (int d = 0; d < 3; ++d)
+                        c.centroid[d] = std::clamp(sum[d] / nodeCount, c.lo[d], c.hi[d]);
+                    if (c.r.boxStored) {
+                        // Curved cells may bulge beyond their nodes: the guaranteed
+                        // Bernstein hull.
+                        const Box g =
+                            GeometryBox(GetBasis(shape, c.r.order, family), xyz);
+                        for (int d = 0; d < 3; ++d) {
+                            c.lo[d] = std::min(c.lo[d], g.lo[d]);
+                            c.hi[d] = std::max(c.hi[d], g.hi[d]);
+                        }
+                    }
+                    c.cost = CellCostFromNodes(shape, c.r.order, family, xyz);
+                }
+            });
+        for (const Pending& c : pending_) {
+            for (int d = 0; d < 3; ++d) {
+                root.lo[d] = std::min(root.lo[d], c.lo[d]);
+                root.hi[d] = std::max(root.hi[d], c.hi[d]);
+            }
+            const int nodeCount = c.r.nodeCount;
+            const std::int64_t* nodes = batchNodes_.data() + c.first;
+            cells_->Write(&c.r, sizeof c.r);
+            if (c.r.boxStored) {
+                const double box[6] = {c.lo[0], c.lo[1], c.lo[2],
+                                       c.hi[0], c.hi[1], c.hi[2]};
+                cells_->Write(box, sizeof box);
+            }
+            if (c.r.wide) {
+                cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+            } else {
+                nodes32_.resize(static_cast<std::size_t>(nodeCount));
+                for (int k = 0; k < nodeCount; ++k)
+                    nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
+                cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
+            }
+            cells_->Write(batchValues_.data() + c.firstValue,
+                          sizeof(double) * cellValues);
+            const CentroidRecord w{{c.centroid[0], c.centroid[1], c.centroid[2]},
+                                   c.cost.parts.setup,
+                                   c.cost.parts.perSegment * c.cost.area};
+            centroids_->Write(&w, sizeof w);
+        }
+        pending_.clear();
+        batchNodes_.clear();
+        batchXyz_.clear();
+        batchValues_.clear();
+    }
+
     std::string spill_;
     std::size_t memoryLimit_;
     std::unique_ptr<SpillWriter> points_, cells_, centroids_;
     std::unique_ptr<RecordCache> cache_;
-    std::vector<double> xyz_;
+    std::vector<Pending> pending_;
+    std::vector<std::int64_t> batchNodes_;
+    std::vector<double> batchXyz_, batchValues_;
+    /// Nodes per batch: about B/64 of nodes and coordinates, at least 4096.
+    std::size_t batchNodeLimit_ = 4096;
     std::vector<std::int32_t> nodes32_;
     bool allWide_ = false;
+    /// The last cell kind whose written VTK type was checked for HigherOrderDegrees.
+    CellShape lastShape_ = CellShape::Tet;
+    int lastOrder_ = -1;
+    CellFamily lastFamily_ = CellFamily::Lagrange;
+    std::uint8_t lastVtkType_ = 0;
 };
 
 /// The bounds of a cell's nodes, from the point spill: the box the scan computed for an
@@ -810,15 +878,26 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                     spill.Path() + "/brick-" + std::to_string(b) + ".bin";
                 SpillReader reader(path, std::size_t(1) << 20);
                 BrickCellRecord r;
-                std::vector<std::int64_t> nodes;
-                std::vector<double> values(scan.cellValues);
+                // The node count of the last kind seen, checked once per run of cells of
+                // one kind (Mesh::AddCell checks it for every cell).
+                std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
                 while (reader.Read(&r, sizeof r)) {
-                    nodes.resize(r.nodeCount);
-                    const char* stored = reader.Take(r.NodeBytes());
-                    if (!stored || !reader.Read(values.data(), recordTail))
-                        throw InternalError("brick spill ends inside a record");
+                    const char* stored = reader.Take(r.NodeBytes() + recordTail);
+                    if (!stored) throw InternalError("brick spill ends inside a record");
+                    if (r.shape != lastKind[0] || r.order != lastKind[1] ||
+                        r.family != lastKind[2]) {
+                        HPRAY_CHECK_EQ(static_cast<int>(r.nodeCount),
+                                       NodeCount(static_cast<CellShape>(r.shape), r.order,
+                                                 static_cast<CellFamily>(r.family)));
+                        lastKind[0] = r.shape;
+                        lastKind[1] = r.order;
+                        lastKind[2] = r.family;
+                    }
+                    const std::size_t first = mesh.connectivity.size();
+                    mesh.connectivity.resize(first + r.nodeCount);
+                    std::int64_t* nodes = mesh.connectivity.data() + first;
                     if (r.wide) {
-                        std::memcpy(nodes.data(), stored, r.NodeBytes());
+                        std::memcpy(nodes, stored, r.NodeBytes());
                     } else {
                         for (int k = 0; k < r.nodeCount; ++k) {
                             std::int32_t id;
@@ -826,12 +905,17 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             nodes[k] = id;
                         }
                     }
-                    mesh.AddCell(static_cast<CellShape>(r.shape), r.order,
-                                 static_cast<CellFamily>(r.family), nodes.data(),
-                                 r.nodeCount);
+                    mesh.cellOffsets.push_back(
+                        static_cast<std::int64_t>(mesh.connectivity.size()));
+                    mesh.cellShape.push_back(static_cast<CellShape>(r.shape));
+                    mesh.cellOrder.push_back(r.order);
+                    mesh.cellFamily.push_back(static_cast<CellFamily>(r.family));
                     mesh.ghost.push_back(r.ghost);
                     mesh.vtkType.push_back(r.vtkType);
-                    cellValues.insert(cellValues.end(), values.begin(), values.end());
+                    const std::size_t v = cellValues.size();
+                    cellValues.resize(v + scan.cellValues);
+                    std::memcpy(cellValues.data() + v, stored + r.NodeBytes(),
+                                recordTail);
                 }
                 std::error_code ec;
                 fs::remove(path, ec);
