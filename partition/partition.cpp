@@ -851,7 +851,10 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     for (int b = 0; b < nBricks; ++b)
         if (brickBytes(tally[b], 0) > budget) throw tooLarge(b, brickBytes(tally[b], 0));
 
-    // 5. Brick files, one at a time.
+    // 5. Brick files: brick b is written (with its field ranges) by a background task
+    // while brick b + 1 is assembled, when both fit the limit together (the one in flight
+    // at its assembled size, the next at a bound with one point per node); otherwise one
+    // at a time.
     int exitAfter = -1;
     if (const char* env = std::getenv(kTestExitEnv)) exitAfter = std::atoi(env);
     nlohmann::json bricksJson = nlohmann::json::array();
@@ -861,9 +864,57 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     {
         RecordCache pointsCache(scan.PointsPath(), scan.pointStride,
                                 std::size_t(4) << 20);
-        for (int b = 0; b < nBricks; ++b) {
-            Mesh mesh;
+        struct InFlight {
+            int brick = -1;
+            std::shared_ptr<const Mesh> mesh;
+            std::size_t points = 0;
+            std::uint64_t bytes = 0;             ///< brickBytes of the assembled brick
+            std::future<nlohmann::json> ranges;  ///< after the file is written
+        } inFlight;
+        // Waits for the brick in flight, then records it and starts its checksum.
+        auto finish = [&] {
+            if (inFlight.brick < 0) return;
+            const nlohmann::json ranges = inFlight.ranges.get();
+            const int b = inFlight.brick;
             const BrickTally& t = tally[b];
+            const std::string file = BrickName(b);
+            const std::string path = (fs::path(dir) / file).string();
+            checksums.push_back(std::async(std::launch::async, FileSha256, path));
+            const std::uint64_t bytes = fs::file_size(path);
+            bytesWritten += bytes;
+            storedCells += inFlight.mesh->CellCount();
+            bricksJson.push_back({{"file", file},
+                                  {"box", BoxJson(leafBoxes[b])},
+                                  {"cells", inFlight.mesh->CellCount()},
+                                  {"ghosts", t.ghosts},
+                                  {"points", static_cast<std::int64_t>(inFlight.points)},
+                                  {"cost", t.cost},
+                                  {"cost_with_ghosts", t.cost + t.ghostCost},
+                                  {"ranges", ranges},
+                                  {"bytes", bytes}});
+            inFlight = InFlight{};
+            if (exitAfter >= 0 && b + 1 >= exitAfter) {
+                for (std::future<std::string>& c : checksums) c.wait();
+                std::fflush(nullptr);
+                ::_exit(75);  // test hook: die like a killed process, spills left behind
+            }
+        };
+        // A failed assembly must not leave the write in flight behind.
+        struct WaitInFlight {
+            InFlight& f;
+            ~WaitInFlight() {
+                if (f.ranges.valid()) f.ranges.wait();
+            }
+        } waitInFlight{inFlight};
+        for (int b = 0; b < nBricks; ++b) {
+            const BrickTally& t = tally[b];
+            if (inFlight.brick >= 0 &&
+                inFlight.bytes +
+                        brickBytes(t, std::min<std::int64_t>(t.nodes, scan.points)) >
+                    budget)
+                finish();
+            auto assembled = std::make_shared<Mesh>();
+            Mesh& mesh = *assembled;
             mesh.cellOffsets.reserve(t.cells + 1);
             mesh.connectivity.reserve(t.nodes);
             mesh.cellShape.reserve(t.cells);
@@ -964,38 +1015,28 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 }
                 std::vector<double>().swap(cellValues);
             }
+            finish();
             // The field ranges are computed while the file is written, and its checksum
             // while the next brick is assembled.
-            std::future<nlohmann::json> rangesLater =
-                std::async(std::launch::async, [&mesh] { return BrickRanges(mesh); });
-            const std::string file = BrickName(b);
-            const std::string path = (fs::path(dir) / file).string();
-            try {
-                WriteVtu(path, mesh, scan.higherOrderDegrees);
-            } catch (...) {
-                rangesLater.wait();
-                throw;
-            }
-            const nlohmann::json ranges = rangesLater.get();
-            checksums.push_back(std::async(std::launch::async, FileSha256, path));
-            const std::uint64_t bytes = fs::file_size(path);
-            bytesWritten += bytes;
-            storedCells += mesh.CellCount();
-            bricksJson.push_back({{"file", file},
-                                  {"box", BoxJson(leafBoxes[b])},
-                                  {"cells", mesh.CellCount()},
-                                  {"ghosts", t.ghosts},
-                                  {"points", static_cast<std::int64_t>(nPoints)},
-                                  {"cost", t.cost},
-                                  {"cost_with_ghosts", t.cost + t.ghostCost},
-                                  {"ranges", ranges},
-                                  {"bytes", bytes}});
-            if (exitAfter >= 0 && b + 1 >= exitAfter) {
-                for (std::future<std::string>& c : checksums) c.wait();
-                std::fflush(nullptr);
-                ::_exit(75);  // test hook: die like a killed process, spills left behind
-            }
+            const std::string path = (fs::path(dir) / BrickName(b)).string();
+            const bool degrees = scan.higherOrderDegrees;
+            inFlight.brick = b;
+            inFlight.mesh = assembled;
+            inFlight.points = nPoints;
+            inFlight.bytes = brickBytes(t, static_cast<std::int64_t>(nPoints));
+            inFlight.ranges = std::async(std::launch::async, [assembled, path, degrees] {
+                std::future<nlohmann::json> ranges = std::async(
+                    std::launch::async, [assembled] { return BrickRanges(*assembled); });
+                try {
+                    WriteVtu(path, *assembled, degrees);
+                } catch (...) {
+                    ranges.wait();
+                    throw;
+                }
+                return ranges.get();
+            });
         }
+        finish();
         log::Debug("partition: point cache of the bricks: " +
                    std::to_string(pointsCache.Misses()) + " blocks read");
     }
