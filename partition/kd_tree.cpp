@@ -18,6 +18,8 @@ namespace {
 
 constexpr int kBins = 1024;
 constexpr int kMaxRounds = 40;
+/// Lanes summing a block of routed centroids in parallel (see the pass below).
+constexpr std::size_t kSumLanes = 2;
 
 /// The search for one node's split plane.
 struct Search {
@@ -182,24 +184,38 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                             }
                         }
                     });
-                for (std::size_t i = 0; i < count; ++i) {
-                    const Route& r = route[i];
-                    if (r.search < 0) continue;
-                    const WeightedPoint& p = pts[i];
-                    Search& s = searches[r.search];
-                    if (s.first) s.total += p.cost;
-                    if (r.action >= 0) {
-                        const double x = p.x[s.axis];
-                        s.binCost[r.action] += p.cost;
-                        ++s.binCount[r.action];
-                        s.binLo[r.action] = std::min(s.binLo[r.action], x);
-                        s.binHi[r.action] = std::max(s.binHi[r.action], x);
-                    } else if (r.action == kBelow) {
-                        if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
-                    } else if (r.action == kCollect) {
-                        s.collected.push_back({p.x[s.axis], p.cost, p.x[(s.axis + 1) % 3],
-                                               p.x[(s.axis + 2) % 3]});
+                // The sums of each search in the points' order; searches are split
+                // between lanes (search index modulo the lane count), which run in
+                // parallel, each over every point but adding only to its own searches.
+                const int lanes =
+                    static_cast<int>(std::min<std::size_t>(searches.size(), kSumLanes));
+                auto sum = [&](int lane) {
+                    for (std::size_t i = 0; i < count; ++i) {
+                        const Route& r = route[i];
+                        if (r.search < 0 || r.search % lanes != lane) continue;
+                        const WeightedPoint& p = pts[i];
+                        Search& s = searches[r.search];
+                        if (s.first) s.total += p.cost;
+                        if (r.action >= 0) {
+                            const double x = p.x[s.axis];
+                            s.binCost[r.action] += p.cost;
+                            ++s.binCount[r.action];
+                            s.binLo[r.action] = std::min(s.binLo[r.action], x);
+                            s.binHi[r.action] = std::max(s.binHi[r.action], x);
+                        } else if (r.action == kBelow) {
+                            if (s.first)
+                                s.below += p.cost;  // cannot happen: a is the box's lo
+                        } else if (r.action == kCollect) {
+                            s.collected.push_back({p.x[s.axis], p.cost,
+                                                   p.x[(s.axis + 1) % 3],
+                                                   p.x[(s.axis + 2) % 3]});
+                        }
                     }
+                };
+                if (lanes < 2) {
+                    sum(0);
+                } else {
+                    tbb::parallel_for(0, lanes, [&](int lane) { sum(lane); });
                 }
             });
             for (Search& s : searches) {

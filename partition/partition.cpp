@@ -2,14 +2,17 @@
 // centroids, distribute cells (with ghost copies) to bricks, write pieces, index and
 // manifest atomically.
 //
-// Memory: with B = the memory limit, the point cache of the scan holds B/4, stream
+// Memory: with B = the memory limit, the point cache of the scan holds B/4 and its batch
+// of cells about B/64 (nodes and their coordinates); the point cache of the distribution,
+// which recomputes order-1 cells' boxes, another B/4 after it; stream
 // buffers and spill buffers a few MiB (the distribution's brick spill buffers B/8, twice:
-// spill writers fill one buffer while a background thread writes the other), the tree builder collects at most B/4 of
-// centroids per level (a coordinate, the cost and the other two coordinates of each,
-// the latter for a tie-break without another pass), and one brick is assembled at a time; a brick that would need
-// more than B is an input error (ask for more bricks). A gmsh input's tag -> index maps
-// take at most B/8 each (gmsh_stream.h), in the scan only. Everything else lives in
-// DIR/.spill-PID-N/ (removed at the end, and by the next run if this one dies).
+// spill writers fill one buffer while a background thread writes the other), the tree
+// builder collects at most B/4 of centroids per level (a coordinate, the cost and the
+// other two coordinates of each, the latter for a tie-break without another pass), and
+// one brick is assembled at a time; a brick that would need more than B is an input
+// error (ask for more bricks). A gmsh input's tag -> index maps take at most B/8 each
+// (gmsh_stream.h), in the scan only. Everything else lives in DIR/.spill-PID-N/ (removed
+// at the end, and by the next run if this one dies).
 #include "partition.h"
 
 #include <fcntl.h>
@@ -61,21 +64,29 @@ constexpr const char* kTestWideIdsEnv = "HPRAY_PARTITION_TEST_WIDE_IDS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a cell in the scan's cell spill; followed by nodeCount global point
+/// Fixed part of a cell in the scan's cell spill; followed by the cell's guaranteed
+/// geometry box (6 doubles: lo, then hi) when `boxStored`, then nodeCount global point
 /// indices (int32 when every one fits, int64 when `wide`) and the cell field values
-/// (doubles). The centroid and cost parts of the
+/// (doubles). Only curved cells (order > 1 or not Lagrange) store their box, whose
+/// Bernstein hull is costly; the box of an order-1 Lagrange cell is the bounds of its
+/// nodes, which the distribution recomputes from the point spill (CellNodeBox) rather
+/// than reading 48 bytes per cell back from disk. The centroid and cost parts of the
 /// cell are in the centroid spill, at the same position. `vtkType` is the VTK type the
 /// input cell was read as (0 = unknown), for the brick writer to keep. The node count
 /// fits 16 bits (at most (kMaxOrder + 1)^3 nodes).
 struct CellRecord {
-    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0;
-    std::uint16_t nodeCount = 0, wide = 0;
-    double lo[3], hi[3];
+    std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, boxStored = 0, wide = 0;
+    std::uint16_t nodeCount = 0;
     std::size_t NodeBytes() const { return (wide ? 8u : 4u) * std::size_t(nodeCount); }
 };
-static_assert(sizeof(CellRecord) == 56, "spill record layout");
+static_assert(sizeof(CellRecord) == 8, "spill record layout");
 static_assert((kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1) <= 0xffff,
               "CellRecord::nodeCount holds the node count of any cell");
+
+/// Whether the spilled box of a cell must be stored (see CellRecord).
+bool StoresBox(int order, CellFamily family) {
+    return order > 1 || family != CellFamily::Lagrange;
+}
 
 /// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
 /// and field values that follow it as in CellRecord.
@@ -200,6 +211,8 @@ class ScanSink : public MeshSink {
         centroids_ = std::make_unique<SpillWriter>(CentroidsPath(), buf);
         cache_ =
             std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
+        batchNodeLimit_ = std::clamp<std::size_t>(
+            memoryLimit_ / 64 / (4 * sizeof(double)), 4096, std::size_t(1) << 17);
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::numeric_limits<double>::infinity();
             root.hi[d] = -std::numeric_limits<double>::infinity();
@@ -219,72 +232,48 @@ class ScanSink : public MeshSink {
         points += count;
     }
 
+    /// Gathers the cell's node coordinates (the point cache is sequential) and queues it;
+    /// a full batch is processed by FlushBatch.
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
               int nodeCount, const double* values, std::uint8_t vtkType) override {
-        xyz_.resize(3 * static_cast<std::size_t>(nodeCount));
+        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
+        Pending c;
+        c.r.shape = static_cast<std::uint8_t>(shape);
+        c.r.order = static_cast<std::uint8_t>(order);
+        c.r.family = static_cast<std::uint8_t>(family);
+        c.r.vtkType = vtkType;
+        c.r.nodeCount = static_cast<std::uint16_t>(nodeCount);
+        c.r.wide = allWide_ ? 1 : 0;
+        c.r.boxStored = StoresBox(order, family) ? 1 : 0;
+        c.first = batchNodes_.size();
+        c.firstValue = batchValues_.size();
         for (int k = 0; k < nodeCount; ++k) {
             HPRAY_CHECK_LT(nodes[k], points);
+            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) c.r.wide = 1;
             const double* p = cache_->Get(nodes[k]);
-            std::copy(p, p + 3, xyz_.begin() + 3 * k);
+            batchXyz_.insert(batchXyz_.end(), p, p + 3);
         }
-        CellRecord r;
-        r.shape = static_cast<std::uint8_t>(shape);
-        r.order = static_cast<std::uint8_t>(order);
-        r.family = static_cast<std::uint8_t>(family);
-        r.vtkType = vtkType;
-        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
-        r.nodeCount = static_cast<std::uint16_t>(nodeCount);
-        r.wide = allWide_ ? 1 : 0;
-        for (int k = 0; k < nodeCount; ++k)
-            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) r.wide = 1;
+        batchNodes_.insert(batchNodes_.end(), nodes, nodes + nodeCount);
+        batchValues_.insert(batchValues_.end(), values, values + cellValues);
         // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
         // type, so the pieces agree with the arrays bricks.pvtu declares.
-        higherOrderDegrees |=
-            VtkTypeNeedsDegrees(VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
-        double sum[3] = {0, 0, 0}, centroid[3];
-        for (int d = 0; d < 3; ++d) {
-            r.lo[d] = std::numeric_limits<double>::infinity();
-            r.hi[d] = -r.lo[d];
+        if (shape != lastShape_ || order != lastOrder_ || family != lastFamily_ ||
+            vtkType != lastVtkType_) {
+            higherOrderDegrees |= VtkTypeNeedsDegrees(
+                VtkTypeToWrite(CellKind{shape, order, family}, vtkType));
+            lastShape_ = shape;
+            lastOrder_ = order;
+            lastFamily_ = family;
+            lastVtkType_ = vtkType;
         }
-        for (int k = 0; k < nodeCount; ++k)
-            for (int d = 0; d < 3; ++d) {
-                const double v = xyz_[3 * k + d];
-                sum[d] += v;
-                r.lo[d] = std::min(r.lo[d], v);
-                r.hi[d] = std::max(r.hi[d], v);
-            }
-        for (int d = 0; d < 3; ++d)
-            centroid[d] = std::clamp(sum[d] / nodeCount, r.lo[d], r.hi[d]);
-        if (order > 1 || family != CellFamily::Lagrange) {
-            // Curved cells may bulge beyond their nodes: the guaranteed Bernstein hull.
-            const Box g = GeometryBox(GetBasis(shape, order, family), xyz_.data());
-            for (int d = 0; d < 3; ++d) {
-                r.lo[d] = std::min(r.lo[d], g.lo[d]);
-                r.hi[d] = std::max(r.hi[d], g.hi[d]);
-            }
-        }
-        const CellCostInput cost = CellCostFromNodes(shape, order, family, xyz_.data());
-        for (int d = 0; d < 3; ++d) {
-            root.lo[d] = std::min(root.lo[d], r.lo[d]);
-            root.hi[d] = std::max(root.hi[d], r.hi[d]);
-        }
-        cells_->Write(&r, sizeof r);
-        if (r.wide) {
-            cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
-        } else {
-            nodes32_.resize(static_cast<std::size_t>(nodeCount));
-            for (int k = 0; k < nodeCount; ++k)
-                nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
-            cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
-        }
-        cells_->Write(values, sizeof(double) * cellValues);
-        const CentroidRecord w{{centroid[0], centroid[1], centroid[2]},
-                               cost.parts.setup, cost.parts.perSegment * cost.area};
-        centroids_->Write(&w, sizeof w);
+        pending_.push_back(c);
         ++cells;
+        if (batchNodes_.size() >= batchNodeLimit_ || pending_.size() >= kBatchCells)
+            FlushBatch();
     }
 
     void Close() {
+        FlushBatch();
         if (points_) points_->Close();
         if (cells_) cells_->Close();
         if (centroids_) centroids_->Close();
@@ -303,14 +292,153 @@ class ScanSink : public MeshSink {
     bool higherOrderDegrees = false;  ///< some cell is written as VTK 71-74
 
   private:
+    /// A queued cell: its record, where its nodes (and their coordinates, 3 per node) and
+    /// field values are in the batch, and what FlushBatch computes from them.
+    struct Pending {
+        CellRecord r;
+        std::size_t first = 0, firstValue = 0;
+        double lo[3], hi[3], centroid[3];
+        CellCostInput cost;
+    };
+    static constexpr std::size_t kBatchCells = 16384;
+
+    /// The cells' geometry (node bounds, centroid, the Bernstein hull of curved cells)
+    /// and cost parts, in parallel (each cell on its own, so the same doubles as one at a
+    /// time); then the records, in input order.
+    void FlushBatch() {
+        if (pending_.empty()) return;
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, pending_.size(), 1024),
+            [&](const tbb::blocked_range<std::size_t>& range) {
+                for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                    Pending& c = pending_[i];
+                    const int nodeCount = c.r.nodeCount;
+                    const double* xyz = batchXyz_.data() + 3 * c.first;
+                    const auto shape = static_cast<CellShape>(c.r.shape);
+                    const auto family = static_cast<CellFamily>(c.r.family);
+                    double sum[3] = {0, 0, 0};
+                    for (int d = 0; d < 3; ++d) {
+                        c.lo[d] = std::numeric_limits<double>::infinity();
+                        c.hi[d] = -c.lo[d];
+                    }
+                    for (int k = 0; k < nodeCount; ++k)
+                        for (int d = 0; d < 3; ++d) {
+                            const double v = xyz[3 * k + d];
+                            sum[d] += v;
+                            c.lo[d] = std::min(c.lo[d], v);
+                            c.hi[d] = std::max(c.hi[d], v);
+                        }
+                    for (int d = 0; d < 3; ++d)
+                        c.centroid[d] = std::clamp(sum[d] / nodeCount, c.lo[d], c.hi[d]);
+                    if (c.r.boxStored) {
+                        // Curved cells may bulge beyond their nodes: the guaranteed
+                        // Bernstein hull.
+                        const Box g =
+                            GeometryBox(GetBasis(shape, c.r.order, family), xyz);
+                        for (int d = 0; d < 3; ++d) {
+                            c.lo[d] = std::min(c.lo[d], g.lo[d]);
+                            c.hi[d] = std::max(c.hi[d], g.hi[d]);
+                        }
+                    }
+                    c.cost = CellCostFromNodes(shape, c.r.order, family, xyz);
+                }
+            });
+        for (const Pending& c : pending_) {
+            for (int d = 0; d < 3; ++d) {
+                root.lo[d] = std::min(root.lo[d], c.lo[d]);
+                root.hi[d] = std::max(root.hi[d], c.hi[d]);
+            }
+            const int nodeCount = c.r.nodeCount;
+            const std::int64_t* nodes = batchNodes_.data() + c.first;
+            cells_->Write(&c.r, sizeof c.r);
+            if (c.r.boxStored) {
+                const double box[6] = {c.lo[0], c.lo[1], c.lo[2],
+                                       c.hi[0], c.hi[1], c.hi[2]};
+                cells_->Write(box, sizeof box);
+            }
+            if (c.r.wide) {
+                cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+            } else {
+                nodes32_.resize(static_cast<std::size_t>(nodeCount));
+                for (int k = 0; k < nodeCount; ++k)
+                    nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
+                cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
+            }
+            cells_->Write(batchValues_.data() + c.firstValue,
+                          sizeof(double) * cellValues);
+            const CentroidRecord w{{c.centroid[0], c.centroid[1], c.centroid[2]},
+                                   c.cost.parts.setup,
+                                   c.cost.parts.perSegment * c.cost.area};
+            centroids_->Write(&w, sizeof w);
+        }
+        pending_.clear();
+        batchNodes_.clear();
+        batchXyz_.clear();
+        batchValues_.clear();
+    }
+
     std::string spill_;
     std::size_t memoryLimit_;
     std::unique_ptr<SpillWriter> points_, cells_, centroids_;
     std::unique_ptr<RecordCache> cache_;
-    std::vector<double> xyz_;
+    std::vector<Pending> pending_;
+    std::vector<std::int64_t> batchNodes_;
+    std::vector<double> batchXyz_, batchValues_;
+    /// Nodes per batch: about B/64 of nodes and coordinates, at least 4096.
+    std::size_t batchNodeLimit_ = 4096;
     std::vector<std::int32_t> nodes32_;
     bool allWide_ = false;
+    /// The last cell kind whose written VTK type was checked for HigherOrderDegrees.
+    CellShape lastShape_ = CellShape::Tet;
+    int lastOrder_ = -1;
+    CellFamily lastFamily_ = CellFamily::Lagrange;
+    std::uint8_t lastVtkType_ = 0;
 };
+
+/// The bounds of a cell's nodes, from the point spill: the box the scan computed for an
+/// order-1 Lagrange cell (the same minima and maxima in the same order, so the same
+/// doubles). `stored` holds nodeCount ids, int64 when `wide`, else int32.
+Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wide) {
+    Box box;
+    for (int d = 0; d < 3; ++d) {
+        box.lo[d] = std::numeric_limits<double>::infinity();
+        box.hi[d] = -box.lo[d];
+    }
+    for (int k = 0; k < nodeCount; ++k) {
+        std::int64_t id;
+        if (wide) {
+            std::memcpy(&id, stored + sizeof(std::int64_t) * k, sizeof id);
+        } else {
+            std::int32_t id32;
+            std::memcpy(&id32, stored + sizeof id32 * k, sizeof id32);
+            id = id32;
+        }
+        const double* p = points.Get(id);
+        for (int d = 0; d < 3; ++d) {
+            box.lo[d] = std::min(box.lo[d], p[d]);
+            box.hi[d] = std::max(box.hi[d], p[d]);
+        }
+    }
+    return box;
+}
+
+/// KdTree::TouchedLeaves without an allocation per call: the leaves whose closed box
+/// meets `b`, in the same order, through a stack the caller keeps.
+void TouchedLeaves(const KdTree& tree, const Box& b, std::vector<int>& stack,
+                   std::vector<int>& leaves) {
+    stack.clear();
+    stack.push_back(tree.root);
+    while (!stack.empty()) {
+        const KdNode& n = tree.nodes[stack.back()];
+        stack.pop_back();
+        if (n.IsLeaf()) {
+            leaves.push_back(n.leaf);
+            continue;
+        }
+        if (b.hi[n.axis] >= n.split) stack.push_back(n.high);
+        if (b.lo[n.axis] <= n.split) stack.push_back(n.low);
+    }
+}
 
 /// Per-brick tallies of the distribution pass.
 struct BrickTally {
@@ -639,18 +767,28 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
         SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
         SpillReader centroids(centroidsPath, std::size_t(1) << 20);
+        // Order-1 cells' boxes from their nodes (see CellRecord).
+        RecordCache points(scan.PointsPath(), scan.pointStride, budget / 4);
         CellRecord r;
         CentroidRecord c;
-        std::vector<int> hits;
+        std::vector<int> hits, stack;
         while (reader.Read(&r, sizeof r)) {
+            Box box;
+            if (r.boxStored) {
+                double stored[6];
+                if (!reader.Read(stored, sizeof stored))
+                    throw InternalError("cell spill ends inside a record");
+                box = Box{{stored[0], stored[1], stored[2]},
+                          {stored[3], stored[4], stored[5]}};
+            }
             const std::size_t restBytes = r.NodeBytes() + recordTail;
             const char* rest = reader.Take(restBytes);
             if (!rest || !centroids.Read(&c, sizeof c))
                 throw InternalError("cell spill ends inside a record");
+            if (!r.boxStored) box = CellNodeBox(points, rest, r.nodeCount, r.wide != 0);
             const int owner = OwnerBrick(tree, c.x);
             hits.clear();
-            tree.TouchedLeaves(Box{{r.lo[0], r.lo[1], r.lo[2]}, {r.hi[0], r.hi[1], r.hi[2]}},
-                               hits);
+            TouchedLeaves(tree, box, stack, hits);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
             const double cost =
                 CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
@@ -713,7 +851,10 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     for (int b = 0; b < nBricks; ++b)
         if (brickBytes(tally[b], 0) > budget) throw tooLarge(b, brickBytes(tally[b], 0));
 
-    // 5. Brick files, one at a time.
+    // 5. Brick files: brick b is written (with its field ranges) by a background task
+    // while brick b + 1 is assembled, when both fit the limit together (the one in flight
+    // at its assembled size, the next at a bound with one point per node); otherwise one
+    // at a time.
     int exitAfter = -1;
     if (const char* env = std::getenv(kTestExitEnv)) exitAfter = std::atoi(env);
     nlohmann::json bricksJson = nlohmann::json::array();
@@ -723,9 +864,57 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     {
         RecordCache pointsCache(scan.PointsPath(), scan.pointStride,
                                 std::size_t(4) << 20);
-        for (int b = 0; b < nBricks; ++b) {
-            Mesh mesh;
+        struct InFlight {
+            int brick = -1;
+            std::shared_ptr<const Mesh> mesh;
+            std::size_t points = 0;
+            std::uint64_t bytes = 0;             ///< brickBytes of the assembled brick
+            std::future<nlohmann::json> ranges;  ///< after the file is written
+        } inFlight;
+        // Waits for the brick in flight, then records it and starts its checksum.
+        auto finish = [&] {
+            if (inFlight.brick < 0) return;
+            const nlohmann::json ranges = inFlight.ranges.get();
+            const int b = inFlight.brick;
             const BrickTally& t = tally[b];
+            const std::string file = BrickName(b);
+            const std::string path = (fs::path(dir) / file).string();
+            checksums.push_back(std::async(std::launch::async, FileSha256, path));
+            const std::uint64_t bytes = fs::file_size(path);
+            bytesWritten += bytes;
+            storedCells += inFlight.mesh->CellCount();
+            bricksJson.push_back({{"file", file},
+                                  {"box", BoxJson(leafBoxes[b])},
+                                  {"cells", inFlight.mesh->CellCount()},
+                                  {"ghosts", t.ghosts},
+                                  {"points", static_cast<std::int64_t>(inFlight.points)},
+                                  {"cost", t.cost},
+                                  {"cost_with_ghosts", t.cost + t.ghostCost},
+                                  {"ranges", ranges},
+                                  {"bytes", bytes}});
+            inFlight = InFlight{};
+            if (exitAfter >= 0 && b + 1 >= exitAfter) {
+                for (std::future<std::string>& c : checksums) c.wait();
+                std::fflush(nullptr);
+                ::_exit(75);  // test hook: die like a killed process, spills left behind
+            }
+        };
+        // A failed assembly must not leave the write in flight behind.
+        struct WaitInFlight {
+            InFlight& f;
+            ~WaitInFlight() {
+                if (f.ranges.valid()) f.ranges.wait();
+            }
+        } waitInFlight{inFlight};
+        for (int b = 0; b < nBricks; ++b) {
+            const BrickTally& t = tally[b];
+            if (inFlight.brick >= 0 &&
+                inFlight.bytes +
+                        brickBytes(t, std::min<std::int64_t>(t.nodes, scan.points)) >
+                    budget)
+                finish();
+            auto assembled = std::make_shared<Mesh>();
+            Mesh& mesh = *assembled;
             mesh.cellOffsets.reserve(t.cells + 1);
             mesh.connectivity.reserve(t.nodes);
             mesh.cellShape.reserve(t.cells);
@@ -740,15 +929,26 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                     spill.Path() + "/brick-" + std::to_string(b) + ".bin";
                 SpillReader reader(path, std::size_t(1) << 20);
                 BrickCellRecord r;
-                std::vector<std::int64_t> nodes;
-                std::vector<double> values(scan.cellValues);
+                // The node count of the last kind seen, checked once per run of cells of
+                // one kind (Mesh::AddCell checks it for every cell).
+                std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
                 while (reader.Read(&r, sizeof r)) {
-                    nodes.resize(r.nodeCount);
-                    const char* stored = reader.Take(r.NodeBytes());
-                    if (!stored || !reader.Read(values.data(), recordTail))
-                        throw InternalError("brick spill ends inside a record");
+                    const char* stored = reader.Take(r.NodeBytes() + recordTail);
+                    if (!stored) throw InternalError("brick spill ends inside a record");
+                    if (r.shape != lastKind[0] || r.order != lastKind[1] ||
+                        r.family != lastKind[2]) {
+                        HPRAY_CHECK_EQ(static_cast<int>(r.nodeCount),
+                                       NodeCount(static_cast<CellShape>(r.shape), r.order,
+                                                 static_cast<CellFamily>(r.family)));
+                        lastKind[0] = r.shape;
+                        lastKind[1] = r.order;
+                        lastKind[2] = r.family;
+                    }
+                    const std::size_t first = mesh.connectivity.size();
+                    mesh.connectivity.resize(first + r.nodeCount);
+                    std::int64_t* nodes = mesh.connectivity.data() + first;
                     if (r.wide) {
-                        std::memcpy(nodes.data(), stored, r.NodeBytes());
+                        std::memcpy(nodes, stored, r.NodeBytes());
                     } else {
                         for (int k = 0; k < r.nodeCount; ++k) {
                             std::int32_t id;
@@ -756,12 +956,17 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             nodes[k] = id;
                         }
                     }
-                    mesh.AddCell(static_cast<CellShape>(r.shape), r.order,
-                                 static_cast<CellFamily>(r.family), nodes.data(),
-                                 r.nodeCount);
+                    mesh.cellOffsets.push_back(
+                        static_cast<std::int64_t>(mesh.connectivity.size()));
+                    mesh.cellShape.push_back(static_cast<CellShape>(r.shape));
+                    mesh.cellOrder.push_back(r.order);
+                    mesh.cellFamily.push_back(static_cast<CellFamily>(r.family));
                     mesh.ghost.push_back(r.ghost);
                     mesh.vtkType.push_back(r.vtkType);
-                    cellValues.insert(cellValues.end(), values.begin(), values.end());
+                    const std::size_t v = cellValues.size();
+                    cellValues.resize(v + scan.cellValues);
+                    std::memcpy(cellValues.data() + v, stored + r.NodeBytes(),
+                                recordTail);
                 }
                 std::error_code ec;
                 fs::remove(path, ec);
@@ -810,38 +1015,28 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 }
                 std::vector<double>().swap(cellValues);
             }
+            finish();
             // The field ranges are computed while the file is written, and its checksum
             // while the next brick is assembled.
-            std::future<nlohmann::json> rangesLater =
-                std::async(std::launch::async, [&mesh] { return BrickRanges(mesh); });
-            const std::string file = BrickName(b);
-            const std::string path = (fs::path(dir) / file).string();
-            try {
-                WriteVtu(path, mesh, scan.higherOrderDegrees);
-            } catch (...) {
-                rangesLater.wait();
-                throw;
-            }
-            const nlohmann::json ranges = rangesLater.get();
-            checksums.push_back(std::async(std::launch::async, FileSha256, path));
-            const std::uint64_t bytes = fs::file_size(path);
-            bytesWritten += bytes;
-            storedCells += mesh.CellCount();
-            bricksJson.push_back({{"file", file},
-                                  {"box", BoxJson(leafBoxes[b])},
-                                  {"cells", mesh.CellCount()},
-                                  {"ghosts", t.ghosts},
-                                  {"points", static_cast<std::int64_t>(nPoints)},
-                                  {"cost", t.cost},
-                                  {"cost_with_ghosts", t.cost + t.ghostCost},
-                                  {"ranges", ranges},
-                                  {"bytes", bytes}});
-            if (exitAfter >= 0 && b + 1 >= exitAfter) {
-                for (std::future<std::string>& c : checksums) c.wait();
-                std::fflush(nullptr);
-                ::_exit(75);  // test hook: die like a killed process, spills left behind
-            }
+            const std::string path = (fs::path(dir) / BrickName(b)).string();
+            const bool degrees = scan.higherOrderDegrees;
+            inFlight.brick = b;
+            inFlight.mesh = assembled;
+            inFlight.points = nPoints;
+            inFlight.bytes = brickBytes(t, static_cast<std::int64_t>(nPoints));
+            inFlight.ranges = std::async(std::launch::async, [assembled, path, degrees] {
+                std::future<nlohmann::json> ranges = std::async(
+                    std::launch::async, [assembled] { return BrickRanges(*assembled); });
+                try {
+                    WriteVtu(path, *assembled, degrees);
+                } catch (...) {
+                    ranges.wait();
+                    throw;
+                }
+                return ranges.get();
+            });
         }
+        finish();
         log::Debug("partition: point cache of the bricks: " +
                    std::to_string(pointsCache.Misses()) + " blocks read");
     }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Benchmark of `hpray partition`: cells per second, peak RSS and bytes written, for the
 # largest mesh in ../shared/data and for a generated mesh of 11M tets (builtin:cube-tets-130,
-# written to an appended .vtu first, since only files can be streamed).
+# written to an appended .vtu first, since only files can be streamed), the last run at a
+# memory limit of a quarter of that file's size.
 # Usage: scripts/bench_partition.sh [BUILD_DIR] [SCRATCH_DIR]
 set -euo pipefail
 
@@ -49,3 +50,5 @@ fi
 ls -l "$BIG/brick-0000.vtu"
 run cube130_16 "$BIG/brick-0000.vtu" 16 1G
 run cube130_64 "$BIG/brick-0000.vtu" 64 256M
+# A limit of a quarter of the input file (509 MiB) or less: out of core for real.
+run cube130_32 "$BIG/brick-0000.vtu" 32 128M

@@ -85,19 +85,35 @@ void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees
     std::vector<std::uint8_t> types(nCells);
     std::vector<double> degrees(3 * nCells);
     bool anyLagrange = alwaysWriteDegrees;
+    // The written type and node permutation of the last (kind, source type) seen: meshes
+    // hold long runs of one kind, so the lookups run once per run, not per cell.
+    struct Last {
+        int shape = -1, order = -1, family = -1, source = -1;
+        int type = 0;
+        const std::vector<int>* perm = nullptr;
+    } last;
     for (std::int64_t c = 0; c < nCells; ++c) {
         const CellKind kind{mesh.cellShape[c], mesh.cellOrder[c], mesh.cellFamily[c]};
         const std::int64_t* nodes = mesh.CellNodes(c);
         std::int64_t* out = connectivity.data() + mesh.cellOffsets[c];
         const int count = mesh.CellNodeCount(c);
-        const int type = VtkTypeToWrite(kind, mesh.vtkType.empty() ? 0 : mesh.vtkType[c]);
-        const std::vector<int>& perm = InternalToVtk(type, kind);
+        const int source = mesh.vtkType.empty() ? 0 : mesh.vtkType[c];
+        if (static_cast<int>(kind.shape) != last.shape || kind.order != last.order ||
+            static_cast<int>(kind.family) != last.family || source != last.source) {
+            last.shape = static_cast<int>(kind.shape);
+            last.order = kind.order;
+            last.family = static_cast<int>(kind.family);
+            last.source = source;
+            last.type = VtkTypeToWrite(kind, source);
+            last.perm = &InternalToVtk(last.type, kind);
+            anyLagrange |= VtkTypeNeedsDegrees(last.type);
+        }
+        const std::vector<int>& perm = *last.perm;
         HPRAY_CHECK_EQ(static_cast<int>(perm.size()), count);
         for (int k = 0; k < count; ++k) out[k] = nodes[perm[k]];
-        types[c] = static_cast<std::uint8_t>(type);
+        types[c] = static_cast<std::uint8_t>(last.type);
         offsets[c] = mesh.cellOffsets[c + 1];
         for (int k = 0; k < 3; ++k) degrees[3 * c + k] = kind.order;
-        anyLagrange |= VtkTypeNeedsDegrees(type);
     }
 
     std::vector<Block> pointData, cellData;

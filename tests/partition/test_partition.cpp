@@ -373,6 +373,35 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
     }
 }
 
+TEST(Partition, SmallestMemoryLimitGivesValidPartitionsAndTheSameBricks) {
+    // At 4M the point caches of the scan and of the distribution (which recomputes the
+    // boxes of order-1 cells from their nodes) evict blocks, the scan's batches are
+    // small, and bricks are written one at a time or while the next is assembled
+    // depending on their sizes: the partition must still satisfy every invariant against
+    // the independent cell model, and equal, file for file, the one made with a limit
+    // large enough to hold everything.
+    ScratchDir dir("partition_small_limit");
+    struct Case {
+        std::string file;
+        int bricks;
+    };
+    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
+                          Case{"gmsh_boolean_tet_p4.vtu", 5}}) {
+        std::vector<std::string> sums[2];
+        for (int small = 0; small < 2; ++small) {
+            partition::PartitionOptions o;
+            o.bricks = c.bricks;
+            o.outDir = dir / (c.file + std::to_string(small));
+            o.memoryLimitBytes = small ? std::size_t(4) << 20 : std::size_t(2) << 30;
+            partition::PartitionMesh(kData + "/" + c.file, o);
+            if (small) ExpectValidPartition(kData + "/" + c.file, o.outDir);
+            for (const auto& b : partition::ReadPartition(o.outDir).bricks)
+                sums[small].push_back(b.sha256);
+        }
+        EXPECT_EQ(sums[0], sums[1]) << c.file;
+    }
+}
+
 /// The VTK cell types of a partition's bricks as their files store them (the raw
 /// `types` and `vtkGhostType` arrays, decoded without hpray's reader).
 struct BrickTypes {
