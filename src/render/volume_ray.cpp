@@ -467,6 +467,12 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
                 }
             }
         });
+    s.breakpoints = s.colorTf.Scalars();
+    s.breakpoints.insert(s.breakpoints.end(), s.extinctionTf.Scalars().begin(),
+                         s.extinctionTf.Scalars().end());
+    std::sort(s.breakpoints.begin(), s.breakpoints.end());
+    s.breakpoints.erase(std::unique(s.breakpoints.begin(), s.breakpoints.end()),
+                        s.breakpoints.end());
     s.colorMax = std::max(0.0, s.colorTf.MaxValue());
     s.extinctionSlope = s.extinctionTf.MaxSlope();
     s.colorSlope = s.colorTf.MaxSlope();
@@ -499,7 +505,7 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     startTau_ = 0;
     for (int c = 0; c < 3; ++c) startEmission_[c] = endEmission_[c] = 0;
     lastColor_ = lastExtinction_ = TfValue{};
-    queue_.clear();
+    queued_ = 0;
     linearTetField_ = setup.sameField && setup.pointValues[0] &&
                       setup.fields[0].field->association != Association::Cell &&
                       !setup.gradientBound[0].empty();
@@ -1010,7 +1016,9 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
 
 void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
     const VolumeSetup& s = *setup_;
-    QueuedPiece& piece = queue_.emplace_back();
+    // Grown in steps, never cleared: no piece is zeroed before it is written.
+    if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
+    QueuedPiece& piece = queue_[queued_++];
     piece.p0 = p0;
     piece.p1 = p1;
     piece.length = p1 - p0;
@@ -1070,7 +1078,7 @@ void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
 }
 
 bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
-    const std::size_t n = queue_.size();
+    const std::size_t n = queued_;
     if (n == 0) return false;
     const VolumeSetup& s = *setup_;
     // The closed forms of all queued pieces at once, then LinearPiece's compositing and
@@ -1130,7 +1138,7 @@ bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
         }
         stop = Terminate(piece.p1, composite);
     }
-    queue_.clear();
+    queued_ = 0;
     return stop;
 }
 
@@ -1466,10 +1474,29 @@ VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
         if (!LinearFromFacePoints(0, ends)) return LinearTetResult::kOther;
         kind_ = kind;
         fieldCount_ = 1;
-        LinearCrossings(0, seg);
-        if (crossings_.size() > 1) std::sort(crossings_.begin(), crossings_.end());
-        crossings_.erase(std::unique(crossings_.begin(), crossings_.end()),
-                         crossings_.end());
+        // LinearCrossings(0, seg), sorted and without repeats, from the breakpoints of
+        // both transfer functions in ascending order: t is monotone in the breakpoint
+        // (the same rounded operations), so the crossings come out sorted, descending
+        // where the field falls.
+        const FieldState& st = state_[0];
+        const double dv = st.valueExit - st.valueEnter;
+        if (dv != 0) {
+            const double length = seg.tExit - seg.tEnter;
+            const double lo = std::min(st.valueEnter, st.valueExit);
+            const double hi = std::max(st.valueEnter, st.valueExit);
+            for (const double b : s.breakpoints) {
+                if (b >= hi) break;
+                if (!(b > lo)) continue;
+                const double x = (b - st.valueEnter) / dv;
+                if (x > 0 && x < 1) {
+                    const double t = seg.tEnter + x * length;
+                    if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
+                }
+            }
+            if (dv < 0) std::reverse(crossings_.begin(), crossings_.end());
+            crossings_.erase(std::unique(crossings_.begin(), crossings_.end()),
+                             crossings_.end());
+        }
     }
     mode_ = Mode::kClosed;
     // Integrate(seg.tEnter, seg.tExit) (the crossings lie strictly inside), its pieces
@@ -1481,7 +1508,7 @@ VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
         p0 = t;
     }
     QueueLinearTetPiece(p0, seg.tExit, varying);
-    if (queue_.size() < kQueuedPieces) return LinearTetResult::kGoOn;
+    if (queued_ < kQueuedPieces) return LinearTetResult::kGoOn;
     return FlushLinearTets(composite) ? LinearTetResult::kStop : LinearTetResult::kGoOn;
 }
 

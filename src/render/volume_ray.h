@@ -29,6 +29,8 @@ struct VolumeSetup {
     GlowModel glow = GlowModel::WilliamsMax;
     PiecewiseLinearTf colorTf;       ///< 3 channels: chromaticity or glow per world unit
     PiecewiseLinearTf extinctionTf;  ///< 1 channel: extinction per world unit
+    /// The control points of both transfer functions, ascending, without repeats.
+    std::vector<double> breakpoints;
     /// fields[0] drives colour, fields[1] extinction; sameField: both are fields[0].
     ScalarSelector fields[2];
     bool sameField = true;
@@ -230,7 +232,8 @@ class VolumeRayMarcher {
     };
     /// Queued pieces beyond which LinearTet composites.
     static constexpr std::size_t kQueuedPieces = 8;
-    std::vector<QueuedPiece> queue_;
+    std::vector<QueuedPiece> queue_;  ///< the first queued_ are queued
+    std::size_t queued_ = 0;
     std::vector<double> pieceTau_[2], pieceLength_;
     std::vector<LinearPieceIntegrals> pieceIntegrals_;
     void KronrodPiece(double p0, double p1, RayComposite& composite);
