@@ -402,6 +402,79 @@ TEST(Partition, SmallestMemoryLimitGivesValidPartitionsAndTheSameBricks) {
     }
 }
 
+TEST(Partition, TreeAndOwnedCostsEqualTheCostModelCellByCell) {
+    // Each cell's cost is rebuilt from spilled parts (the per-segment part per cell, the
+    // setup part from runs of equal values): on a mesh of four cell types and a curved
+    // one (curved and affine cells of one type cost differently), at a limit that holds
+    // everything and at the smallest one, the tree must be the one built from the cost
+    // model's own estimates in input order, and each brick's owned cost their sum.
+    ScratchDir dir("partition_costs");
+    struct Case {
+        std::string file;
+        int bricks;
+    };
+    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
+                          Case{"gmsh_boolean_tet_p4.vtu", 5}}) {
+        const std::string path = kData + "/" + c.file;
+        const Mesh mesh = ReadMesh(path);
+        for (const std::size_t limit : {std::size_t(4) << 20, std::size_t(256) << 20}) {
+            SCOPED_TRACE(c.file + " " + std::to_string(limit >> 20) + "M");
+            partition::PartitionOptions o;
+            o.bricks = c.bricks;
+            o.outDir = dir / "p";
+            o.memoryLimitBytes = limit;
+            partition::PartitionMesh(path, o);
+            const Partition p = partition::ReadPartition(o.outDir);
+            // The centroids as the scan computes them: the mean of the nodes, clamped to
+            // their bounds.
+            std::vector<partition::WeightedPoint> pts(mesh.CellCount());
+            for (std::int64_t k = 0; k < mesh.CellCount(); ++k) {
+                const auto x = test::Centroid(mesh, k);
+                for (int d = 0; d < 3; ++d) {
+                    double lo = 1e300, hi = -1e300;
+                    for (int j = 0; j < mesh.CellNodeCount(k); ++j) {
+                        const double v = mesh.points[3 * mesh.CellNodes(k)[j] + d];
+                        lo = std::min(lo, v);
+                        hi = std::max(hi, v);
+                    }
+                    pts[k].x[d] = std::clamp(x[d], lo, hi);
+                }
+                pts[k].cost = ModelCost(mesh, k, p.tree.box);
+            }
+            const partition::CentroidPass pass = [&](const auto& visit) {
+                for (std::size_t i = 0; i < pts.size(); i += 65536)
+                    visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
+            };
+            const std::size_t collectLimit = std::clamp<std::size_t>(
+                limit / 8 / 16 / static_cast<std::size_t>(c.bricks), 256,
+                std::size_t(1) << 20);
+            const KdTree tree =
+                partition::BuildKdTree(p.tree.box, c.bricks, pass, collectLimit);
+            // The same tree, node for node from the roots (the manifest numbers its nodes
+            // in its own order).
+            ASSERT_EQ(tree.nodes.size(), p.tree.nodes.size());
+            std::vector<std::pair<int, int>> stack{{tree.root, p.tree.root}};
+            while (!stack.empty()) {
+                const auto [i, j] = stack.back();
+                stack.pop_back();
+                const KdNode &a = tree.nodes[i], &b = p.tree.nodes[j];
+                ASSERT_EQ(a.axis, b.axis) << "node " << i;
+                EXPECT_EQ(a.leaf, b.leaf) << "node " << i;
+                if (a.axis < 0) continue;
+                EXPECT_EQ(a.split, b.split) << "node " << i;
+                EXPECT_EQ(a.tieBreak, b.tieBreak) << "node " << i;
+                if (a.tieBreak && b.tieBreak) EXPECT_EQ(a.tie, b.tie) << "node " << i;
+                stack.push_back({a.low, b.low});
+                stack.push_back({a.high, b.high});
+            }
+            std::vector<double> owned(p.bricks.size(), 0.0);
+            for (const auto& w : pts) owned[partition::OwnerBrick(p.tree, w.x)] += w.cost;
+            for (std::size_t b = 0; b < p.bricks.size(); ++b)
+                EXPECT_EQ(p.bricks[b].cost, owned[b]) << "brick " << b;
+        }
+    }
+}
+
 /// The VTK cell types of a partition's bricks as their files store them (the raw
 /// `types` and `vtkGhostType` arrays, decoded without hpray's reader).
 struct BrickTypes {
