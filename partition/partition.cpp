@@ -64,7 +64,8 @@ constexpr const char* kTestWideIdsEnv = "HPRAY_PARTITION_TEST_WIDE_IDS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a cell in the scan's cell spill; followed by the cell's guaranteed
+/// Fixed part of a cell in the scan's cell spill (stored as its KindCodes byte);
+/// followed by the cell's guaranteed
 /// geometry box (6 doubles: lo, then hi) when `boxStored`, then nodeCount global point
 /// indices (int32 when every one fits, int64 when `wide`) and the cell field values
 /// (doubles). Only curved cells (order > 1 or not Lagrange) store their box, whose
@@ -88,14 +89,82 @@ bool StoresBox(int order, CellFamily family) {
     return order > 1 || family != CellFamily::Lagrange;
 }
 
-/// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
-/// and field values that follow it as in CellRecord.
+/// Fixed part of a cell in a brick spill (stored as its KindCodes byte): what the brick
+/// writer needs besides the nodes and field values that follow it as in CellRecord.
 struct BrickCellRecord {
     std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, ghost = 0, wide = 0;
     std::uint16_t nodeCount = 0;
     std::size_t NodeBytes() const { return (wide ? 8u : 4u) * std::size_t(nodeCount); }
 };
 static_assert(sizeof(BrickCellRecord) == 8, "spill record layout");
+
+/// Test-only: the most distinct kinds a KindCodes table holds (else 255), so that
+/// escaped records are written and read.
+constexpr const char* kTestKindCodesEnv = "HPRAY_PARTITION_TEST_KIND_CODES";
+
+/// The 8-byte fixed parts of cells (CellRecord, BrickCellRecord) spilled as one byte per
+/// cell: the code of the record in a table of the distinct records met so far (a mesh has
+/// a few cell kinds), or kEscape followed by the record itself once the table is full.
+/// One table serves every spill of the record type; it is filled while writing and only
+/// read afterwards.
+template <class Record>
+class KindCodes {
+  public:
+    static_assert(sizeof(Record) == 8, "spill record layout");
+    static constexpr std::uint8_t kEscape = 255;
+
+    KindCodes() {
+        if (const char* env = std::getenv(kTestKindCodesEnv))
+            capacity_ =
+                std::clamp<std::size_t>(std::strtoul(env, nullptr, 10), 0, kEscape);
+    }
+
+    void Write(SpillWriter& w, const Record& r) {
+        std::uint8_t item[1 + sizeof(Record)];
+        item[0] = Code(r);
+        std::size_t bytes = 1;
+        if (item[0] == kEscape) {
+            std::memcpy(item + 1, &r, sizeof r);
+            bytes += sizeof r;
+        }
+        w.Write(item, bytes);
+    }
+    /// The next record; false at a clean end of the spill.
+    bool Read(SpillReader& in, Record& r) const {
+        const char* p = in.Take(1);
+        if (!p) return false;
+        const auto code = static_cast<std::uint8_t>(*p);
+        if (code == kEscape) {
+            if (!in.Read(&r, sizeof r)) throw InternalError("spill ends inside a record");
+            return true;
+        }
+        if (code >= kinds_.size())
+            throw InternalError("spill holds an unknown cell kind");
+        r = kinds_[code];
+        return true;
+    }
+
+  private:
+    static bool Same(const Record& a, const Record& b) {
+        return std::memcmp(&a, &b, sizeof a) == 0;
+    }
+    std::uint8_t Code(const Record& r) {
+        if (last_ < kinds_.size() && Same(kinds_[last_], r))
+            return static_cast<std::uint8_t>(last_);
+        for (std::size_t i = 0; i < kinds_.size(); ++i)
+            if (Same(kinds_[i], r)) {
+                last_ = i;
+                return static_cast<std::uint8_t>(i);
+            }
+        if (kinds_.size() >= capacity_) return kEscape;
+        kinds_.push_back(r);
+        last_ = kinds_.size() - 1;
+        return static_cast<std::uint8_t>(last_);
+    }
+    std::vector<Record> kinds_;
+    std::size_t last_ = 0;
+    std::size_t capacity_ = kEscape;
+};
 
 /// A centroid and the per-segment part of its cost (perSegment * area), as spilled
 /// before the root box is known. The setup part takes one of a few values (one per cell
@@ -345,6 +414,8 @@ class ScanSink : public MeshSink {
     std::int64_t points = 0, cells = 0;
     Box root;
     bool higherOrderDegrees = false;  ///< some cell is written as VTK 71-74
+    /// The codes of the cell records in the cell spill.
+    KindCodes<CellRecord> cellKinds;
     /// The distinct setup costs of the cells (SetupRun::value indexes them); at most one
     /// per cell class of the cost model.
     std::vector<double> setupValues;
@@ -408,7 +479,7 @@ class ScanSink : public MeshSink {
             }
             const int nodeCount = c.r.nodeCount;
             const std::int64_t* nodes = batchNodes_.data() + c.first;
-            cells_->Write(&c.r, sizeof c.r);
+            cellKinds.Write(*cells_, c.r);
             if (c.r.boxStored) {
                 const double box[6] = {c.lo[0], c.lo[1], c.lo[2],
                                        c.hi[0], c.hi[1], c.hi[2]};
@@ -837,6 +908,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     // 3. Distribute cells to brick spills (owner + ghost copies).
     const int nBricks = options.bricks;
     std::vector<BrickTally> tally(nBricks);
+    KindCodes<BrickCellRecord> brickKinds;  // the records in the brick spills
     const std::size_t recordTail = sizeof(double) * scan.cellValues;
     for (int first = 0; first < nBricks; first += kBricksPerPass) {
         const int last = std::min(nBricks, first + kBricksPerPass);
@@ -854,7 +926,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         CellRecord r;
         CentroidRecord c;
         std::vector<int> hits, stack;
-        while (reader.Read(&r, sizeof r)) {
+        while (scan.cellKinds.Read(reader, r)) {
             Box box;
             if (r.boxStored) {
                 double stored[6];
@@ -885,7 +957,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 if (b < first || b >= last) continue;
                 h.ghost = b == owner ? 0 : 1;
                 SpillWriter& w = *writers[b - first];
-                w.Write(&h, sizeof h);
+                brickKinds.Write(w, h);
                 w.Write(rest, restBytes);
                 BrickTally& t = tally[b];
                 ++t.cells;
@@ -1015,7 +1087,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 // The node count of the last kind seen, checked once per run of cells of
                 // one kind (Mesh::AddCell checks it for every cell).
                 std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
-                while (reader.Read(&r, sizeof r)) {
+                while (brickKinds.Read(reader, r)) {
                     const char* stored = reader.Take(r.NodeBytes() + recordTail);
                     if (!stored) throw InternalError("brick spill ends inside a record");
                     if (r.shape != lastKind[0] || r.order != lastKind[1] ||
