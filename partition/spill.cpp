@@ -236,10 +236,11 @@ RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheB
     : path_(path), stride_(stride) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) IoFail(path, "cannot open the spill file");
-    // Blocks of about 64 KiB; at least 16 of them.
+    // Blocks of at most 64 KiB (a power of two of records, so that finding a record's
+    // block is a shift); at least 16 of them.
     const std::size_t recordBytes = sizeof(double) * static_cast<std::size_t>(stride);
-    recordsPerBlock_ =
-        std::max<std::int64_t>(1, 65536 / static_cast<std::int64_t>(recordBytes));
+    while ((std::size_t(2) << blockShift_) * recordBytes <= 65536) ++blockShift_;
+    recordsPerBlock_ = std::int64_t(1) << blockShift_;
     maxBlocks_ =
         std::max<std::size_t>(16, cacheBytes / (recordsPerBlock_ * recordBytes + 96));
 }
@@ -252,12 +253,12 @@ void RecordCache::Invalidate() {
     slots_.clear();
     slotOf_.clear();
     last_ = nullptr;
-    lastBlock_ = -1;
+    lastBlock_ = std::numeric_limits<std::int64_t>::min();
 }
 
-const double* RecordCache::Get(std::int64_t index) {
-    const std::int64_t b = index / recordsPerBlock_;
-    const std::int64_t within = index - b * recordsPerBlock_;
+const double* RecordCache::Load(std::int64_t index) {
+    const std::int64_t b = index >> blockShift_;
+    const std::int64_t within = index & (recordsPerBlock_ - 1);
     if (b == lastBlock_ && last_) return last_ + within * stride_;
     if (static_cast<std::size_t>(b) >= slotOf_.size())
         slotOf_.resize(static_cast<std::size_t>(b) + 1, -1);

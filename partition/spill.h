@@ -2,9 +2,10 @@
 // and a bounded LRU cache for random access to fixed-size point records.
 #pragma once
 
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
-#include <condition_variable>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -105,12 +106,18 @@ class RecordCache {
     RecordCache& operator=(const RecordCache&) = delete;
 
     /// Record `index`; the pointer stays valid until the next Get or Invalidate.
-    const double* Get(std::int64_t index);
+    const double* Get(std::int64_t index) {
+        if ((index >> blockShift_) == lastBlock_)
+            return last_ + (index & (recordsPerBlock_ - 1)) * stride_;
+        return Load(index);
+    }
     /// Forgets every cached block (after the file grew).
     void Invalidate();
     std::int64_t Misses() const { return misses_; }
 
   private:
+    /// Get of a record outside the last block used.
+    const double* Load(std::int64_t index);
     struct Slot {
         std::int64_t block = -1;  ///< block held, -1: free
         std::uint64_t lastUse = 0;
@@ -119,12 +126,14 @@ class RecordCache {
     std::string path_;
     int fd_ = -1;
     int stride_ = 0;
-    std::int64_t recordsPerBlock_ = 0;
+    std::int64_t recordsPerBlock_ = 0;  ///< a power of two: 1 << blockShift_
+    int blockShift_ = 0;
     std::size_t maxBlocks_ = 0;
     std::vector<Slot> slots_;
     std::vector<std::int32_t> slotOf_;  ///< per block: its slot, -1 when not cached
     std::uint64_t clock_ = 0;
-    std::int64_t lastBlock_ = -1;
+    /// The block of last_; no index maps to the initial value.
+    std::int64_t lastBlock_ = std::numeric_limits<std::int64_t>::min();
     const double* last_ = nullptr;
     std::int64_t misses_ = 0;
 };

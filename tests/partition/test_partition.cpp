@@ -2,6 +2,7 @@
 // ownership and ghost coverage against an independent cell model, manifest validation,
 // checksums, and the front-to-back order of bricks.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +10,6 @@
 #include <map>
 #include <random>
 #include <set>
-#include <tbb/global_control.h>
 
 #include "cost_model.h"
 #include "io/mesh_io.h"
@@ -20,6 +20,7 @@
 #include "partition.h"
 #include "partition_test_util.h"
 #include "renumber.h"
+#include "spill.h"
 #include "util/error.h"
 #include "vtu_stream.h"
 
@@ -638,6 +639,59 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
     }
 }
 
+TEST(Partition, TreeBuilderSplitEqualsTheExactWeightedMedian) {
+    // Two leaves over distinct random coordinates with random costs: the histogram
+    // rounds (1024 bins, narrowed until a bin holds at most `limit` centroids) and the
+    // exact selection must divide the centroids where a sort of all of them does: after
+    // the first coordinate whose cumulative cost is closest to half the total (the plane
+    // lies between that coordinate and the next, or the histogram bin's edge).
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<double> u(0.0, 40.0), w(0.1, 3.0);
+    for (int trial = 0; trial < 4; ++trial) {
+        std::vector<partition::WeightedPoint> pts;
+        const int n = trial == 0 ? 1000 : 150000;
+        // Clustered coordinates in some trials: bins of very unequal counts.
+        for (int i = 0; i < n; ++i) {
+            const double x = trial == 3 ? 20.0 + std::pow(u(rng) / 40.0, 9.0) : u(rng);
+            pts.push_back({{x, u(rng), u(rng) * 0.5}, w(rng)});
+        }
+        std::vector<std::pair<double, double>> sorted;
+        double total = 0;
+        for (const auto& p : pts) {
+            sorted.push_back({p.x[0], p.cost});
+            total += p.cost;
+        }
+        std::sort(sorted.begin(), sorted.end());
+        const double target = total / 2;
+        double best = std::abs(0 - target), cum = 0;
+        std::size_t lowCount = 0;
+        for (std::size_t i = 0; i < sorted.size(); ++i) {
+            cum += sorted[i].second;
+            if (std::abs(cum - target) < best) {
+                best = std::abs(cum - target);
+                lowCount = i + 1;
+            }
+        }
+        const partition::CentroidPass pass = [&](const auto& visit) {
+            for (std::size_t i = 0; i < pts.size(); i += 65536)
+                visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
+        };
+        Box root;
+        root.lo = {0, 0, 0};
+        root.hi = {40, 40, 40};
+        for (const std::size_t limit :
+             {std::size_t(64), std::size_t(4096), std::size_t(1) << 20}) {
+            const KdTree tree = partition::BuildKdTree(root, 2, pass, limit);
+            const KdNode& r = tree.nodes[tree.root];
+            EXPECT_EQ(r.axis, 0) << trial << " " << limit;
+            const auto low = std::count_if(
+                pts.begin(), pts.end(), [&](const auto& p) { return p.x[0] < r.split; });
+            EXPECT_EQ(static_cast<std::size_t>(low), lowCount) << trial << " " << limit;
+            EXPECT_FALSE(r.tieBreak) << trial << " " << limit;
+        }
+    }
+}
+
 TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
     // Centroids on a coarse lattice (equal coordinates, tie-breaks, bins of one
     // coordinate) and scattered ones, in blocks large enough to be routed by several
@@ -676,6 +730,49 @@ TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
                 EXPECT_EQ(a.tieBreak, b.tieBreak) << n << " " << limit << " node " << k;
                 EXPECT_EQ(a.tie, b.tie) << n << " " << limit << " node " << k;
                 EXPECT_EQ(a.leaf, b.leaf) << n << " " << limit << " node " << k;
+            }
+        }
+    }
+}
+
+TEST(Partition, RecordCacheReturnsTheStoredRecords) {
+    // Records of 3, 5, 8 and 4097 doubles (blocks of 2048, 1024, 1024 and 1 records),
+    // read in random order through caches that evict (the smallest holds 16 blocks) and
+    // after the file grew (Invalidate): each is the record written.
+    ScratchDir dir("partition_record_cache");
+    std::mt19937_64 rng(3);
+    for (const int stride : {3, 5, 8, 4097}) {
+        const std::string path = dir / ("r" + std::to_string(stride) + ".bin");
+        const std::int64_t count = stride > 100 ? 40 : 60000;
+        auto value = [&](std::int64_t i, int k) { return i * 10007.0 + k; };
+        auto write = [&](std::int64_t from, std::int64_t to) {
+            partition::SpillWriter w(path, 1 << 16);
+            std::vector<double> r(stride);
+            for (std::int64_t i = from; i < to; ++i) {
+                for (int k = 0; k < stride; ++k) r[k] = value(i, k);
+                w.Write(r.data(), sizeof(double) * stride);
+            }
+        };
+        { std::ofstream truncate(path, std::ios::binary | std::ios::trunc); }
+        write(0, count / 2);
+        for (const std::size_t cacheBytes : {std::size_t(0), std::size_t(64) << 20}) {
+            partition::RecordCache cache(path, stride, cacheBytes);
+            for (int round = 0; round < 2; ++round) {
+                const std::int64_t n = round == 0 ? count / 2 : count;
+                for (int q = 0; q < 20000; ++q) {
+                    const std::int64_t i =
+                        q % 3 == 0 ? q % n : static_cast<std::int64_t>(rng() % n);
+                    const double* r = cache.Get(i);
+                    ASSERT_EQ(r[0], value(i, 0)) << stride << " " << i;
+                    ASSERT_EQ(r[stride - 1], value(i, stride - 1)) << stride << " " << i;
+                }
+                if (round == 0 && cacheBytes == 0) {
+                    // Append the second half (SpillWriter truncates: rewrite all).
+                    write(0, count);
+                    cache.Invalidate();
+                } else if (round == 0) {
+                    cache.Invalidate();
+                }
             }
         }
     }
