@@ -123,6 +123,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
 
     std::vector<int> level{0};
     std::vector<Route> route;
+    std::vector<int> laneOf;
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -199,10 +200,15 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 // parallel, each over every point but adding only to its own searches.
                 const int lanes =
                     static_cast<int>(std::min<std::size_t>(searches.size(), kSumLanes));
+                // The lane of each search (search index modulo the lanes), looked up
+                // rather than divided per point.
+                laneOf.resize(searches.size());
+                for (std::size_t k = 0; k < searches.size(); ++k)
+                    laneOf[k] = static_cast<int>(k % static_cast<std::size_t>(lanes));
                 auto sum = [&](int lane) {
                     for (std::size_t i = 0; i < count; ++i) {
                         const Route& r = route[i];
-                        if (r.search < 0 || r.search % lanes != lane) continue;
+                        if (r.search < 0 || laneOf[r.search] != lane) continue;
                         const WeightedPoint& p = pts[i];
                         Search& s = searches[r.search];
                         if (s.first) s.total += p.cost;

@@ -5,6 +5,7 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <mutex>
 #include <string>
@@ -25,13 +26,22 @@ class SpillWriter {
     SpillWriter(const SpillWriter&) = delete;
     SpillWriter& operator=(const SpillWriter&) = delete;
 
-    void Write(const void* data, std::size_t bytes);
+    void Write(const void* data, std::size_t bytes) {
+        if (bytes <= capacity_ - used_) {  // fits the buffer: no call
+            std::memcpy(buffer_.data() + used_, data, bytes);
+            used_ += bytes;
+            return;
+        }
+        WriteAcross(data, bytes);
+    }
     void Flush();
     void Close();
-    std::uint64_t Bytes() const { return written_ + buffer_.size(); }
+    std::uint64_t Bytes() const { return written_ + used_; }
     const std::string& Path() const { return path_; }
 
   private:
+    /// Write of more bytes than the buffer has room for: ships full buffers.
+    void WriteAcross(const void* data, std::size_t bytes);
     /// Hands the filled buffer to the background thread (after the previous one is
     /// written) and continues in the other buffer.
     void Ship();
@@ -41,8 +51,10 @@ class SpillWriter {
 
     std::string path_;
     int fd_ = -1;
-    std::vector<char> buffer_, inFlight_;
+    std::vector<char> buffer_, inFlight_;  ///< capacity_ bytes each (while open)
     std::size_t capacity_ = 0;
+    std::size_t used_ = 0;           ///< bytes of buffer_ filled
+    std::size_t inFlightBytes_ = 0;  ///< bytes of inFlight_ to write
     std::uint64_t written_ = 0;
     std::mutex mutex_;
     std::condition_variable done_;
