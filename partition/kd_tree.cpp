@@ -44,6 +44,8 @@ struct Search {
     std::vector<double> binCost;
     std::vector<std::int64_t> binCount;
     std::vector<double> binLo, binHi;  ///< least and greatest coordinate in each bin
+    std::vector<double> edges;         ///< Edge(0..kBins) of the histogram's interval
+    double scale = 0;                  ///< kBins / (b - a), for Bin's first guess
     /// (x, cost, y, z) of the centroids in [a, b), y and z for a tie-break
     std::vector<std::array<double, 4>> collected;
 
@@ -51,15 +53,23 @@ struct Search {
         if (k == kBins) return b;
         return a + (b - a) * (static_cast<double>(k) / kBins);
     }
-    /// The histogram bin of coordinate x in [a, b): Edge(k) <= x < Edge(k + 1).
+    /// The histogram bin of coordinate x in [a, b): Edge(k) <= x < Edge(k + 1), the
+    /// greatest k with Edge(k) <= x whatever the first guess (edges do not decrease), so
+    /// the guess may round differently from the edges. Needs the edges of ResetHistogram.
     int Bin(double x) const {
-        int k = static_cast<int>((x - a) / (b - a) * kBins);
-        k = std::clamp(k, 0, kBins - 1);
-        while (k > 0 && x < Edge(k)) --k;
-        while (k < kBins - 1 && x >= Edge(k + 1)) ++k;
+        double g = (x - a) * scale;
+        if (!(g >= 0)) g = 0;
+        if (g > kBins - 1) g = kBins - 1;
+        int k = static_cast<int>(g);
+        while (k > 0 && x < edges[k]) --k;
+        while (k < kBins - 1 && x >= edges[k + 1]) ++k;
         return k;
     }
+    /// Empties the histogram of the interval [a, b) and tabulates its edges.
     void ResetHistogram() {
+        edges.resize(kBins + 1);
+        for (int k = 0; k <= kBins; ++k) edges[k] = Edge(k);
+        scale = kBins / (b - a);
         binCost.assign(kBins, 0.0);
         binCount.assign(kBins, 0);
         binLo.assign(kBins, std::numeric_limits<double>::infinity());
@@ -113,6 +123,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
 
     std::vector<int> level{0};
     std::vector<Route> route;
+    std::vector<int> laneOf;
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -189,10 +200,15 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 // parallel, each over every point but adding only to its own searches.
                 const int lanes =
                     static_cast<int>(std::min<std::size_t>(searches.size(), kSumLanes));
+                // The lane of each search (search index modulo the lanes), looked up
+                // rather than divided per point.
+                laneOf.resize(searches.size());
+                for (std::size_t k = 0; k < searches.size(); ++k)
+                    laneOf[k] = static_cast<int>(k % static_cast<std::size_t>(lanes));
                 auto sum = [&](int lane) {
                     for (std::size_t i = 0; i < count; ++i) {
                         const Route& r = route[i];
-                        if (r.search < 0 || r.search % lanes != lane) continue;
+                        if (r.search < 0 || laneOf[r.search] != lane) continue;
                         const WeightedPoint& p = pts[i];
                         Search& s = searches[r.search];
                         if (s.first) s.total += p.cost;

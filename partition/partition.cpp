@@ -64,7 +64,8 @@ constexpr const char* kTestWideIdsEnv = "HPRAY_PARTITION_TEST_WIDE_IDS";
 /// Bricks distributed per pass over the cell spill (bounds open files).
 constexpr int kBricksPerPass = 256;
 
-/// Fixed part of a cell in the scan's cell spill; followed by the cell's guaranteed
+/// Fixed part of a cell in the scan's cell spill (stored as its KindCodes byte);
+/// followed by the cell's guaranteed
 /// geometry box (6 doubles: lo, then hi) when `boxStored`, then nodeCount global point
 /// indices (int32 when every one fits, int64 when `wide`) and the cell field values
 /// (doubles). Only curved cells (order > 1 or not Lagrange) store their box, whose
@@ -88,8 +89,8 @@ bool StoresBox(int order, CellFamily family) {
     return order > 1 || family != CellFamily::Lagrange;
 }
 
-/// Fixed part of a cell in a brick spill: what the brick writer needs besides the nodes
-/// and field values that follow it as in CellRecord.
+/// Fixed part of a cell in a brick spill (stored as its KindCodes byte): what the brick
+/// writer needs besides the nodes and field values that follow it as in CellRecord.
 struct BrickCellRecord {
     std::uint8_t shape = 0, order = 1, family = 0, vtkType = 0, ghost = 0, wide = 0;
     std::uint16_t nodeCount = 0;
@@ -97,10 +98,126 @@ struct BrickCellRecord {
 };
 static_assert(sizeof(BrickCellRecord) == 8, "spill record layout");
 
-/// A centroid and its cost parts, as spilled before the root box is known.
+/// Test-only: the most distinct kinds a KindCodes table holds (else 255), so that
+/// escaped records are written and read.
+constexpr const char* kTestKindCodesEnv = "HPRAY_PARTITION_TEST_KIND_CODES";
+
+/// The 8-byte fixed parts of cells (CellRecord, BrickCellRecord) spilled as one byte per
+/// cell: the code of the record in a table of the distinct records met so far (a mesh has
+/// a few cell kinds), or kEscape followed by the record itself once the table is full.
+/// One table serves every spill of the record type; it is filled while writing and only
+/// read afterwards.
+template <class Record>
+class KindCodes {
+  public:
+    static_assert(sizeof(Record) == 8, "spill record layout");
+    static constexpr std::uint8_t kEscape = 255;
+
+    KindCodes() {
+        if (const char* env = std::getenv(kTestKindCodesEnv))
+            capacity_ =
+                std::clamp<std::size_t>(std::strtoul(env, nullptr, 10), 0, kEscape);
+    }
+
+    void Write(SpillWriter& w, const Record& r) {
+        std::uint8_t item[1 + sizeof(Record)];
+        item[0] = Code(r);
+        std::size_t bytes = 1;
+        if (item[0] == kEscape) {
+            std::memcpy(item + 1, &r, sizeof r);
+            bytes += sizeof r;
+        }
+        w.Write(item, bytes);
+    }
+    /// The next record; false at a clean end of the spill.
+    bool Read(SpillReader& in, Record& r) const {
+        const char* p = in.Take(1);
+        if (!p) return false;
+        const auto code = static_cast<std::uint8_t>(*p);
+        if (code == kEscape) {
+            if (!in.Read(&r, sizeof r)) throw InternalError("spill ends inside a record");
+            return true;
+        }
+        if (code >= kinds_.size())
+            throw InternalError("spill holds an unknown cell kind");
+        r = kinds_[code];
+        return true;
+    }
+
+  private:
+    static bool Same(const Record& a, const Record& b) {
+        return std::memcmp(&a, &b, sizeof a) == 0;
+    }
+    std::uint8_t Code(const Record& r) {
+        if (last_ < kinds_.size() && Same(kinds_[last_], r))
+            return static_cast<std::uint8_t>(last_);
+        for (std::size_t i = 0; i < kinds_.size(); ++i)
+            if (Same(kinds_[i], r)) {
+                last_ = i;
+                return static_cast<std::uint8_t>(i);
+            }
+        if (kinds_.size() >= capacity_) return kEscape;
+        kinds_.push_back(r);
+        last_ = kinds_.size() - 1;
+        return static_cast<std::uint8_t>(last_);
+    }
+    std::vector<Record> kinds_;
+    std::size_t last_ = 0;
+    std::size_t capacity_ = kEscape;
+};
+
+/// A centroid and the per-segment part of its cost (perSegment * area), as spilled
+/// before the root box is known. The setup part takes one of a few values (one per cell
+/// class of the cost model), so it is not stored per cell: the scan writes runs of equal
+/// setup costs (SetupRun) to a stream of its own, and keeps the distinct values in
+/// memory.
 struct CentroidRecord {
     double x[3];
-    double setupCost, segmentArea;
+    double segmentArea;
+};
+static_assert(sizeof(CentroidRecord) == 32, "spill record layout");
+
+/// `count` consecutive cells whose setup cost is the distinct value number `value`.
+struct SetupRun {
+    std::uint32_t count = 0;
+    std::uint32_t value = 0;
+};
+static_assert(sizeof(SetupRun) == 8, "spill record layout");
+
+/// The setup costs of the cells in order, from the run stream of the scan.
+class SetupCosts {
+  public:
+    SetupCosts(const std::string& path, const std::vector<double>& values)
+        : runs_(path, std::size_t(64) << 10), values_(values) {}
+    /// The setup costs of the next `n` cells into out[0..n).
+    void Next(double* out, std::size_t n) {
+        while (n > 0) {
+            if (left_ == 0) {
+                SetupRun run;
+                if (!runs_.Read(&run, sizeof run) || run.count == 0 ||
+                    run.value >= values_.size())
+                    throw InternalError("setup cost spill ends early or is corrupt");
+                left_ = run.count;
+                value_ = values_[run.value];
+            }
+            const std::size_t k = std::min<std::size_t>(n, left_);
+            std::fill(out, out + k, value_);
+            out += k;
+            n -= k;
+            left_ -= static_cast<std::uint32_t>(k);
+        }
+    }
+    double Next() {
+        double v;
+        Next(&v, 1);
+        return v;
+    }
+
+  private:
+    SpillReader runs_;
+    const std::vector<double>& values_;
+    std::uint32_t left_ = 0;
+    double value_ = 0;
 };
 
 double Diagonal(const Box& b) {
@@ -209,6 +326,7 @@ class ScanSink : public MeshSink {
         points_ = std::make_unique<SpillWriter>(PointsPath(), buf);
         cells_ = std::make_unique<SpillWriter>(CellsPath(), buf);
         centroids_ = std::make_unique<SpillWriter>(CentroidsPath(), buf);
+        setupRuns_ = std::make_unique<SpillWriter>(SetupsPath(), std::size_t(64) << 10);
         cache_ =
             std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
         batchNodeLimit_ = std::clamp<std::size_t>(
@@ -277,12 +395,18 @@ class ScanSink : public MeshSink {
         if (points_) points_->Close();
         if (cells_) cells_->Close();
         if (centroids_) centroids_->Close();
+        if (setupRuns_) {
+            if (run_.count > 0) setupRuns_->Write(&run_, sizeof run_);
+            run_ = SetupRun{};
+            setupRuns_->Close();
+        }
         cache_.reset();
     }
 
     std::string PointsPath() const { return spill_ + "/points.bin"; }
     std::string CellsPath() const { return spill_ + "/cells.bin"; }
     std::string CentroidsPath() const { return spill_ + "/centroids.bin"; }
+    std::string SetupsPath() const { return spill_ + "/setups.bin"; }
 
     std::vector<StreamField> pointFields, cellFields;
     int pointStride = 3;
@@ -290,6 +414,11 @@ class ScanSink : public MeshSink {
     std::int64_t points = 0, cells = 0;
     Box root;
     bool higherOrderDegrees = false;  ///< some cell is written as VTK 71-74
+    /// The codes of the cell records in the cell spill.
+    KindCodes<CellRecord> cellKinds;
+    /// The distinct setup costs of the cells (SetupRun::value indexes them); at most one
+    /// per cell class of the cost model.
+    std::vector<double> setupValues;
 
   private:
     /// A queued cell: its record, where its nodes (and their coordinates, 3 per node) and
@@ -350,7 +479,7 @@ class ScanSink : public MeshSink {
             }
             const int nodeCount = c.r.nodeCount;
             const std::int64_t* nodes = batchNodes_.data() + c.first;
-            cells_->Write(&c.r, sizeof c.r);
+            cellKinds.Write(*cells_, c.r);
             if (c.r.boxStored) {
                 const double box[6] = {c.lo[0], c.lo[1], c.lo[2],
                                        c.hi[0], c.hi[1], c.hi[2]};
@@ -366,10 +495,12 @@ class ScanSink : public MeshSink {
             }
             cells_->Write(batchValues_.data() + c.firstValue,
                           sizeof(double) * cellValues);
+            // perSegment * area: CellRenderSeconds with an area of 1 multiplies by 1.0,
+            // so the tree sees the same doubles as from the parts and the area.
             const CentroidRecord w{{c.centroid[0], c.centroid[1], c.centroid[2]},
-                                   c.cost.parts.setup,
                                    c.cost.parts.perSegment * c.cost.area};
             centroids_->Write(&w, sizeof w);
+            AddSetup(c.cost.parts.setup);
         }
         pending_.clear();
         batchNodes_.clear();
@@ -377,9 +508,27 @@ class ScanSink : public MeshSink {
         batchValues_.clear();
     }
 
+    /// Appends a cell's setup cost to the runs (values compared bit for bit).
+    void AddSetup(double setup) {
+        if (run_.count > 0 && run_.count < std::numeric_limits<std::uint32_t>::max() &&
+            std::memcmp(&setupValues[run_.value], &setup, sizeof setup) == 0) {
+            ++run_.count;
+            return;
+        }
+        if (run_.count > 0) setupRuns_->Write(&run_, sizeof run_);
+        std::size_t v = 0;
+        while (v < setupValues.size() &&
+               std::memcmp(&setupValues[v], &setup, sizeof setup) != 0)
+            ++v;
+        if (v == setupValues.size()) setupValues.push_back(setup);
+        run_.value = static_cast<std::uint32_t>(v);
+        run_.count = 1;
+    }
+
     std::string spill_;
     std::size_t memoryLimit_;
-    std::unique_ptr<SpillWriter> points_, cells_, centroids_;
+    std::unique_ptr<SpillWriter> points_, cells_, centroids_, setupRuns_;
+    SetupRun run_;
     std::unique_ptr<RecordCache> cache_;
     std::vector<Pending> pending_;
     std::vector<std::int64_t> batchNodes_;
@@ -722,8 +871,10 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     const CentroidPass pass =
         [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
             SpillMap file(centroidsPath);
+            SetupCosts setups(scan.SetupsPath(), scan.setupValues);
             constexpr std::size_t kBlock = 65536;
             std::vector<WeightedPoint> block(kBlock);
+            std::vector<double> setup(kBlock);
             for (std::int64_t done = 0; done < scan.cells;) {
                 const std::size_t n =
                     static_cast<std::size_t>(std::min<std::int64_t>(scan.cells - done, kBlock));
@@ -731,6 +882,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                     file.Map(static_cast<std::uint64_t>(done) * sizeof(CentroidRecord),
                              n * sizeof(CentroidRecord));
                 done += static_cast<std::int64_t>(n);
+                setups.Next(setup.data(), n);
                 tbb::parallel_for(
                     tbb::blocked_range<std::size_t>(0, n, 8192),
                     [&](const tbb::blocked_range<std::size_t>& range) {
@@ -739,7 +891,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             std::memcpy(&c, records + i * sizeof c, sizeof c);
                             WeightedPoint& w = block[i];
                             std::copy(c.x, c.x + 3, w.x);
-                            w.cost = CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0,
+                            w.cost = CellRenderSeconds({setup[i], c.segmentArea}, 1.0,
                                                        rootDiagonal);
                         }
                     });
@@ -756,6 +908,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     // 3. Distribute cells to brick spills (owner + ghost copies).
     const int nBricks = options.bricks;
     std::vector<BrickTally> tally(nBricks);
+    KindCodes<BrickCellRecord> brickKinds;  // the records in the brick spills
     const std::size_t recordTail = sizeof(double) * scan.cellValues;
     for (int first = 0; first < nBricks; first += kBricksPerPass) {
         const int last = std::min(nBricks, first + kBricksPerPass);
@@ -767,12 +920,13 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
         SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
         SpillReader centroids(centroidsPath, std::size_t(1) << 20);
+        SetupCosts setups(scan.SetupsPath(), scan.setupValues);
         // Order-1 cells' boxes from their nodes (see CellRecord).
         RecordCache points(scan.PointsPath(), scan.pointStride, budget / 4);
         CellRecord r;
         CentroidRecord c;
         std::vector<int> hits, stack;
-        while (reader.Read(&r, sizeof r)) {
+        while (scan.cellKinds.Read(reader, r)) {
             Box box;
             if (r.boxStored) {
                 double stored[6];
@@ -791,7 +945,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             TouchedLeaves(tree, box, stack, hits);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
             const double cost =
-                CellRenderSeconds({c.setupCost, c.segmentArea}, 1.0, rootDiagonal);
+                CellRenderSeconds({setups.Next(), c.segmentArea}, 1.0, rootDiagonal);
             BrickCellRecord h;
             h.shape = r.shape;
             h.order = r.order;
@@ -803,7 +957,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 if (b < first || b >= last) continue;
                 h.ghost = b == owner ? 0 : 1;
                 SpillWriter& w = *writers[b - first];
-                w.Write(&h, sizeof h);
+                brickKinds.Write(w, h);
                 w.Write(rest, restBytes);
                 BrickTally& t = tally[b];
                 ++t.cells;
@@ -825,6 +979,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         std::error_code ec;
         fs::remove(scan.CellsPath(), ec);
         fs::remove(centroidsPath, ec);
+        fs::remove(scan.SetupsPath(), ec);
     }
 
     phase("distribution");
@@ -932,7 +1087,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 // The node count of the last kind seen, checked once per run of cells of
                 // one kind (Mesh::AddCell checks it for every cell).
                 std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
-                while (reader.Read(&r, sizeof r)) {
+                while (brickKinds.Read(reader, r)) {
                     const char* stored = reader.Take(r.NodeBytes() + recordTail);
                     if (!stored) throw InternalError("brick spill ends inside a record");
                     if (r.shape != lastKind[0] || r.order != lastKind[1] ||

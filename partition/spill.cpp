@@ -89,7 +89,7 @@ SpillWriter::SpillWriter(const std::string& path, std::size_t bufferBytes)
     : path_(path), capacity_(std::max<std::size_t>(bufferBytes, 4096)) {
     fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (fd_ < 0) IoFail(path, "cannot create the spill file");
-    buffer_.reserve(capacity_);
+    buffer_.resize(capacity_);
 }
 
 SpillWriter::~SpillWriter() {
@@ -104,12 +104,13 @@ SpillWriter::~SpillWriter() {
     if (fd_ >= 0) ::close(fd_);
 }
 
-void SpillWriter::Write(const void* data, std::size_t bytes) {
+void SpillWriter::WriteAcross(const void* data, std::size_t bytes) {
     const char* p = static_cast<const char*>(data);
     while (bytes > 0) {
-        if (buffer_.size() == capacity_) Ship();
-        const std::size_t n = std::min(bytes, capacity_ - buffer_.size());
-        buffer_.insert(buffer_.end(), p, p + n);
+        if (used_ == capacity_) Ship();
+        const std::size_t n = std::min(bytes, capacity_ - used_);
+        std::memcpy(buffer_.data() + used_, p, n);
+        used_ += n;
         p += n;
         bytes -= n;
     }
@@ -127,17 +128,18 @@ void SpillWriter::Wait() {
 void SpillWriter::Ship() {
     HPRAY_CHECK(fd_ >= 0);
     Wait();
-    if (buffer_.empty()) return;
-    written_ += buffer_.size();
+    if (used_ == 0) return;
+    written_ += used_;
     std::swap(buffer_, inFlight_);
-    buffer_.clear();
-    buffer_.reserve(capacity_);
+    inFlightBytes_ = used_;
+    used_ = 0;
+    buffer_.resize(capacity_);
     {
         std::lock_guard<std::mutex> lock(mutex_);
         busy_ = true;
     }
     BackgroundQueue::Get().Submit([this] {
-        const int error = WriteAll(fd_, inFlight_.data(), inFlight_.size());
+        const int error = WriteAll(fd_, inFlight_.data(), inFlightBytes_);
         {
             std::lock_guard<std::mutex> lock(mutex_);
             if (error != 0) error_ = error;
@@ -159,6 +161,8 @@ void SpillWriter::Close() {
     fd_ = -1;
     std::vector<char>().swap(buffer_);
     std::vector<char>().swap(inFlight_);
+    used_ = 0;
+    capacity_ = 0;  // a Write after Close reaches Ship's check
 }
 
 SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes)
@@ -236,10 +240,11 @@ RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheB
     : path_(path), stride_(stride) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) IoFail(path, "cannot open the spill file");
-    // Blocks of about 64 KiB; at least 16 of them.
+    // Blocks of at most 64 KiB (a power of two of records, so that finding a record's
+    // block is a shift); at least 16 of them.
     const std::size_t recordBytes = sizeof(double) * static_cast<std::size_t>(stride);
-    recordsPerBlock_ =
-        std::max<std::int64_t>(1, 65536 / static_cast<std::int64_t>(recordBytes));
+    while ((std::size_t(2) << blockShift_) * recordBytes <= 65536) ++blockShift_;
+    recordsPerBlock_ = std::int64_t(1) << blockShift_;
     maxBlocks_ =
         std::max<std::size_t>(16, cacheBytes / (recordsPerBlock_ * recordBytes + 96));
 }
@@ -252,12 +257,12 @@ void RecordCache::Invalidate() {
     slots_.clear();
     slotOf_.clear();
     last_ = nullptr;
-    lastBlock_ = -1;
+    lastBlock_ = std::numeric_limits<std::int64_t>::min();
 }
 
-const double* RecordCache::Get(std::int64_t index) {
-    const std::int64_t b = index / recordsPerBlock_;
-    const std::int64_t within = index - b * recordsPerBlock_;
+const double* RecordCache::Load(std::int64_t index) {
+    const std::int64_t b = index >> blockShift_;
+    const std::int64_t within = index & (recordsPerBlock_ - 1);
     if (b == lastBlock_ && last_) return last_ + within * stride_;
     if (static_cast<std::size_t>(b) >= slotOf_.size())
         slotOf_.resize(static_cast<std::size_t>(b) + 1, -1);

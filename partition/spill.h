@@ -2,9 +2,11 @@
 // and a bounded LRU cache for random access to fixed-size point records.
 #pragma once
 
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
-#include <condition_variable>
+#include <cstring>
+#include <limits>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -24,13 +26,22 @@ class SpillWriter {
     SpillWriter(const SpillWriter&) = delete;
     SpillWriter& operator=(const SpillWriter&) = delete;
 
-    void Write(const void* data, std::size_t bytes);
+    void Write(const void* data, std::size_t bytes) {
+        if (bytes <= capacity_ - used_) {  // fits the buffer: no call
+            std::memcpy(buffer_.data() + used_, data, bytes);
+            used_ += bytes;
+            return;
+        }
+        WriteAcross(data, bytes);
+    }
     void Flush();
     void Close();
-    std::uint64_t Bytes() const { return written_ + buffer_.size(); }
+    std::uint64_t Bytes() const { return written_ + used_; }
     const std::string& Path() const { return path_; }
 
   private:
+    /// Write of more bytes than the buffer has room for: ships full buffers.
+    void WriteAcross(const void* data, std::size_t bytes);
     /// Hands the filled buffer to the background thread (after the previous one is
     /// written) and continues in the other buffer.
     void Ship();
@@ -40,8 +51,10 @@ class SpillWriter {
 
     std::string path_;
     int fd_ = -1;
-    std::vector<char> buffer_, inFlight_;
+    std::vector<char> buffer_, inFlight_;  ///< capacity_ bytes each (while open)
     std::size_t capacity_ = 0;
+    std::size_t used_ = 0;           ///< bytes of buffer_ filled
+    std::size_t inFlightBytes_ = 0;  ///< bytes of inFlight_ to write
     std::uint64_t written_ = 0;
     std::mutex mutex_;
     std::condition_variable done_;
@@ -105,12 +118,18 @@ class RecordCache {
     RecordCache& operator=(const RecordCache&) = delete;
 
     /// Record `index`; the pointer stays valid until the next Get or Invalidate.
-    const double* Get(std::int64_t index);
+    const double* Get(std::int64_t index) {
+        if ((index >> blockShift_) == lastBlock_)
+            return last_ + (index & (recordsPerBlock_ - 1)) * stride_;
+        return Load(index);
+    }
     /// Forgets every cached block (after the file grew).
     void Invalidate();
     std::int64_t Misses() const { return misses_; }
 
   private:
+    /// Get of a record outside the last block used.
+    const double* Load(std::int64_t index);
     struct Slot {
         std::int64_t block = -1;  ///< block held, -1: free
         std::uint64_t lastUse = 0;
@@ -119,12 +138,14 @@ class RecordCache {
     std::string path_;
     int fd_ = -1;
     int stride_ = 0;
-    std::int64_t recordsPerBlock_ = 0;
+    std::int64_t recordsPerBlock_ = 0;  ///< a power of two: 1 << blockShift_
+    int blockShift_ = 0;
     std::size_t maxBlocks_ = 0;
     std::vector<Slot> slots_;
     std::vector<std::int32_t> slotOf_;  ///< per block: its slot, -1 when not cached
     std::uint64_t clock_ = 0;
-    std::int64_t lastBlock_ = -1;
+    /// The block of last_; no index maps to the initial value.
+    std::int64_t lastBlock_ = std::numeric_limits<std::int64_t>::min();
     const double* last_ = nullptr;
     std::int64_t misses_ = 0;
 };

@@ -546,10 +546,22 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
             bool skip = false;
         } cached;
         std::int64_t previous = 0;
+        // Offsets, types and ghost flags decoded for a batch of cells at a time (their
+        // sizes are checked above, so a batch never reads past an array).
+        constexpr std::int64_t kBatch = 4096;
+        std::vector<std::int64_t> batchEnd(kBatch), batchType(kBatch), batchGhost(kBatch);
+        std::int64_t batchFirst = 0, batchCount = 0;
         for (std::int64_t c = 0; c < p.cells; ++c) {
-            std::int64_t end = 0, type = 0;
-            offs.Read(&end, 1);
-            types.Read(&type, 1);
+            if (c == batchFirst + batchCount) {
+                batchFirst = c;
+                batchCount = std::min(kBatch, p.cells - c);
+                const auto n = static_cast<std::size_t>(batchCount);
+                offs.Read(batchEnd.data(), n);
+                types.Read(batchType.data(), n);
+                if (ghost) ghost->Read(batchGhost.data(), n);
+            }
+            const std::int64_t end = batchEnd[c - batchFirst];
+            const std::int64_t type = batchType[c - batchFirst];
             const std::int64_t count = end - previous;
             if (count < 0)
                 Fail(f, p.offsets->where,
@@ -569,8 +581,7 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                     degree[k] = static_cast<int>(d[k]);
                 }
             }
-            std::int64_t g = 0;
-            if (ghost) ghost->Read(&g, 1);
+            const std::int64_t g = ghost ? batchGhost[c - batchFirst] : 0;
             // Cell field values: read every field (consumed even for skipped cells).
             {
                 int offset = 0;

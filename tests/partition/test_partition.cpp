@@ -2,6 +2,7 @@
 // ownership and ghost coverage against an independent cell model, manifest validation,
 // checksums, and the front-to-back order of bricks.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -9,7 +10,6 @@
 #include <map>
 #include <random>
 #include <set>
-#include <tbb/global_control.h>
 
 #include "cost_model.h"
 #include "io/mesh_io.h"
@@ -20,6 +20,7 @@
 #include "partition.h"
 #include "partition_test_util.h"
 #include "renumber.h"
+#include "spill.h"
 #include "util/error.h"
 #include "vtu_stream.h"
 
@@ -134,6 +135,28 @@ TEST(VtuStream, PvtuPiecesAndFieldSelection) {
     EXPECT_THROW(
         partition::StreamMesh(kData + "/mfem_escher_tet_p3.vtu", only, 1 << 16, sink),
         InputError);
+}
+
+TEST(VtuStream, GhostCopiesInPiecesAreSkipped) {
+    // A partition's bricks.pvtu streamed back (pieces of thousands of cells, ghost copies
+    // interleaved with owned cells, read in batches of offsets, types and ghost flags):
+    // exactly the cells of the original mesh, each once.
+    ScratchDir dir("vtu_stream_ghosts");
+    const std::string path = kData + "/mfem_fichera_mixed16_linear.vtu";
+    partition::PartitionOptions o;
+    o.bricks = 5;
+    o.outDir = dir / "p";
+    partition::PartitionMesh(path, o);
+    const Mesh ref = ReadMesh(path);
+    CollectSink sink;
+    const auto stats = partition::StreamMesh(o.outDir + "/bricks.pvtu", {}, 4096, sink);
+    EXPECT_GT(stats.skippedCells, 0);
+    std::multiset<test::CellKey> want, got;
+    for (std::int64_t c = 0; c < ref.CellCount(); ++c) want.insert(test::KeyOf(ref, c));
+    for (std::int64_t c = 0; c < sink.mesh.CellCount(); ++c)
+        got.insert(test::KeyOf(sink.mesh, c));
+    EXPECT_EQ(sink.mesh.CellCount(), ref.CellCount());
+    EXPECT_TRUE(got == want);
 }
 
 TEST(VtuStream, TruncatedFileIsAnInputError) {
@@ -402,6 +425,81 @@ TEST(Partition, SmallestMemoryLimitGivesValidPartitionsAndTheSameBricks) {
     }
 }
 
+TEST(Partition, TreeAndOwnedCostsEqualTheCostModelCellByCell) {
+    // Each cell's cost is rebuilt from spilled parts (the per-segment part per cell, the
+    // setup part from runs of equal values): on a mesh of four cell types and a curved
+    // one (curved and affine cells of one type cost differently), at a limit that holds
+    // everything and at the smallest one, the tree must be the one built from the cost
+    // model's own estimates in input order, and each brick's owned cost their sum.
+    ScratchDir dir("partition_costs");
+    struct Case {
+        std::string file;
+        int bricks;
+    };
+    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
+                          Case{"gmsh_boolean_tet_p4.vtu", 5}}) {
+        const std::string path = kData + "/" + c.file;
+        const Mesh mesh = ReadMesh(path);
+        for (const std::size_t limit : {std::size_t(4) << 20, std::size_t(256) << 20}) {
+            SCOPED_TRACE(c.file + " " + std::to_string(limit >> 20) + "M");
+            partition::PartitionOptions o;
+            o.bricks = c.bricks;
+            o.outDir = dir / "p";
+            o.memoryLimitBytes = limit;
+            partition::PartitionMesh(path, o);
+            const Partition p = partition::ReadPartition(o.outDir);
+            // The centroids as the scan computes them: the mean of the nodes, clamped to
+            // their bounds.
+            std::vector<partition::WeightedPoint> pts(mesh.CellCount());
+            for (std::int64_t k = 0; k < mesh.CellCount(); ++k) {
+                const auto x = test::Centroid(mesh, k);
+                for (int d = 0; d < 3; ++d) {
+                    double lo = 1e300, hi = -1e300;
+                    for (int j = 0; j < mesh.CellNodeCount(k); ++j) {
+                        const double v = mesh.points[3 * mesh.CellNodes(k)[j] + d];
+                        lo = std::min(lo, v);
+                        hi = std::max(hi, v);
+                    }
+                    pts[k].x[d] = std::clamp(x[d], lo, hi);
+                }
+                pts[k].cost = ModelCost(mesh, k, p.tree.box);
+            }
+            const partition::CentroidPass pass = [&](const auto& visit) {
+                for (std::size_t i = 0; i < pts.size(); i += 65536)
+                    visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
+            };
+            const std::size_t collectLimit = std::clamp<std::size_t>(
+                limit / 8 / 16 / static_cast<std::size_t>(c.bricks), 256,
+                std::size_t(1) << 20);
+            const KdTree tree =
+                partition::BuildKdTree(p.tree.box, c.bricks, pass, collectLimit);
+            // The same tree, node for node from the roots (the manifest numbers its nodes
+            // in its own order).
+            ASSERT_EQ(tree.nodes.size(), p.tree.nodes.size());
+            std::vector<std::pair<int, int>> stack{{tree.root, p.tree.root}};
+            while (!stack.empty()) {
+                const auto [i, j] = stack.back();
+                stack.pop_back();
+                const KdNode &a = tree.nodes[i], &b = p.tree.nodes[j];
+                ASSERT_EQ(a.axis, b.axis) << "node " << i;
+                EXPECT_EQ(a.leaf, b.leaf) << "node " << i;
+                if (a.axis < 0) continue;
+                EXPECT_EQ(a.split, b.split) << "node " << i;
+                EXPECT_EQ(a.tieBreak, b.tieBreak) << "node " << i;
+                if (a.tieBreak && b.tieBreak) {
+                    EXPECT_EQ(a.tie, b.tie) << "node " << i;
+                }
+                stack.push_back({a.low, b.low});
+                stack.push_back({a.high, b.high});
+            }
+            std::vector<double> owned(p.bricks.size(), 0.0);
+            for (const auto& w : pts) owned[partition::OwnerBrick(p.tree, w.x)] += w.cost;
+            for (std::size_t b = 0; b < p.bricks.size(); ++b)
+                EXPECT_EQ(p.bricks[b].cost, owned[b]) << "brick " << b;
+        }
+    }
+}
+
 /// The VTK cell types of a partition's bricks as their files store them (the raw
 /// `types` and `vtkGhostType` arrays, decoded without hpray's reader).
 struct BrickTypes {
@@ -563,6 +661,59 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
     }
 }
 
+TEST(Partition, TreeBuilderSplitEqualsTheExactWeightedMedian) {
+    // Two leaves over distinct random coordinates with random costs: the histogram
+    // rounds (1024 bins, narrowed until a bin holds at most `limit` centroids) and the
+    // exact selection must divide the centroids where a sort of all of them does: after
+    // the first coordinate whose cumulative cost is closest to half the total (the plane
+    // lies between that coordinate and the next, or the histogram bin's edge).
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<double> u(0.0, 40.0), w(0.1, 3.0);
+    for (int trial = 0; trial < 4; ++trial) {
+        std::vector<partition::WeightedPoint> pts;
+        const int n = trial == 0 ? 1000 : 150000;
+        // Clustered coordinates in some trials: bins of very unequal counts.
+        for (int i = 0; i < n; ++i) {
+            const double x = trial == 3 ? 20.0 + std::pow(u(rng) / 40.0, 9.0) : u(rng);
+            pts.push_back({{x, u(rng), u(rng) * 0.5}, w(rng)});
+        }
+        std::vector<std::pair<double, double>> sorted;
+        double total = 0;
+        for (const auto& p : pts) {
+            sorted.push_back({p.x[0], p.cost});
+            total += p.cost;
+        }
+        std::sort(sorted.begin(), sorted.end());
+        const double target = total / 2;
+        double best = std::abs(0 - target), cum = 0;
+        std::size_t lowCount = 0;
+        for (std::size_t i = 0; i < sorted.size(); ++i) {
+            cum += sorted[i].second;
+            if (std::abs(cum - target) < best) {
+                best = std::abs(cum - target);
+                lowCount = i + 1;
+            }
+        }
+        const partition::CentroidPass pass = [&](const auto& visit) {
+            for (std::size_t i = 0; i < pts.size(); i += 65536)
+                visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
+        };
+        Box root;
+        root.lo = {0, 0, 0};
+        root.hi = {40, 40, 40};
+        for (const std::size_t limit :
+             {std::size_t(64), std::size_t(4096), std::size_t(1) << 20}) {
+            const KdTree tree = partition::BuildKdTree(root, 2, pass, limit);
+            const KdNode& r = tree.nodes[tree.root];
+            EXPECT_EQ(r.axis, 0) << trial << " " << limit;
+            const auto low = std::count_if(
+                pts.begin(), pts.end(), [&](const auto& p) { return p.x[0] < r.split; });
+            EXPECT_EQ(static_cast<std::size_t>(low), lowCount) << trial << " " << limit;
+            EXPECT_FALSE(r.tieBreak) << trial << " " << limit;
+        }
+    }
+}
+
 TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
     // Centroids on a coarse lattice (equal coordinates, tie-breaks, bins of one
     // coordinate) and scattered ones, in blocks large enough to be routed by several
@@ -601,6 +752,49 @@ TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
                 EXPECT_EQ(a.tieBreak, b.tieBreak) << n << " " << limit << " node " << k;
                 EXPECT_EQ(a.tie, b.tie) << n << " " << limit << " node " << k;
                 EXPECT_EQ(a.leaf, b.leaf) << n << " " << limit << " node " << k;
+            }
+        }
+    }
+}
+
+TEST(Partition, RecordCacheReturnsTheStoredRecords) {
+    // Records of 3, 5, 8 and 4097 doubles (blocks of 2048, 1024, 1024 and 1 records),
+    // read in random order through caches that evict (the smallest holds 16 blocks) and
+    // after the file grew (Invalidate): each is the record written.
+    ScratchDir dir("partition_record_cache");
+    std::mt19937_64 rng(3);
+    for (const int stride : {3, 5, 8, 4097}) {
+        const std::string path = dir / ("r" + std::to_string(stride) + ".bin");
+        const std::int64_t count = stride > 100 ? 40 : 60000;
+        auto value = [&](std::int64_t i, int k) { return i * 10007.0 + k; };
+        auto write = [&](std::int64_t from, std::int64_t to) {
+            partition::SpillWriter w(path, 1 << 16);
+            std::vector<double> r(stride);
+            for (std::int64_t i = from; i < to; ++i) {
+                for (int k = 0; k < stride; ++k) r[k] = value(i, k);
+                w.Write(r.data(), sizeof(double) * stride);
+            }
+        };
+        { std::ofstream truncate(path, std::ios::binary | std::ios::trunc); }
+        write(0, count / 2);
+        for (const std::size_t cacheBytes : {std::size_t(0), std::size_t(64) << 20}) {
+            partition::RecordCache cache(path, stride, cacheBytes);
+            for (int round = 0; round < 2; ++round) {
+                const std::int64_t n = round == 0 ? count / 2 : count;
+                for (int q = 0; q < 20000; ++q) {
+                    const std::int64_t i =
+                        q % 3 == 0 ? q % n : static_cast<std::int64_t>(rng() % n);
+                    const double* r = cache.Get(i);
+                    ASSERT_EQ(r[0], value(i, 0)) << stride << " " << i;
+                    ASSERT_EQ(r[stride - 1], value(i, stride - 1)) << stride << " " << i;
+                }
+                if (round == 0 && cacheBytes == 0) {
+                    // Append the second half (SpillWriter truncates: rewrite all).
+                    write(0, count);
+                    cache.Invalidate();
+                } else if (round == 0) {
+                    cache.Invalidate();
+                }
             }
         }
     }
@@ -654,6 +848,41 @@ TEST(Partition, WideNodeIdsInSpillsGiveTheSameBricks) {
             sums[wide].push_back(b.sha256);
     }
     EXPECT_EQ(sums[0], sums[1]);
+}
+
+TEST(Partition, EscapedCellKindsInSpillsGiveTheSameBricks) {
+    // Cells' fixed parts are spilled as one-byte codes of their kinds, or as escaped
+    // records once the table of kinds is full: with tables of 0 or 1 kinds (all cells or
+    // all but the first kind escaped, on a mesh of four cell types, owned and ghost) the
+    // files are the same as with the full table.
+    ScratchDir dir("partition_kind_codes");
+    for (const std::string file :
+         {"mfem_fichera_mixed16_linear.vtu", "gmsh_boolean_tet_p4.vtu"}) {
+        std::vector<std::string> sums[3];
+        for (int capacity = 0; capacity < 3; ++capacity) {
+            if (capacity < 2)
+                ::setenv("HPRAY_PARTITION_TEST_KIND_CODES",
+                         std::to_string(capacity).c_str(), 1);
+            partition::PartitionOptions o;
+            o.bricks = 7;
+            o.outDir = dir / (file + std::to_string(capacity));
+            o.memoryLimitBytes = std::size_t(4) << 20;
+            try {
+                partition::PartitionMesh(kData + "/" + file, o);
+            } catch (...) {
+                ::unsetenv("HPRAY_PARTITION_TEST_KIND_CODES");
+                throw;
+            }
+            ::unsetenv("HPRAY_PARTITION_TEST_KIND_CODES");
+            for (const auto& b : partition::ReadPartition(o.outDir).bricks)
+                sums[capacity].push_back(b.sha256);
+        }
+        EXPECT_EQ(sums[0], sums[2]) << file;
+        EXPECT_EQ(sums[1], sums[2]) << file;
+    }
+    // And they satisfy every invariant against the independent cell model.
+    ExpectValidPartition(kData + "/mfem_fichera_mixed16_linear.vtu",
+                         dir / "mfem_fichera_mixed16_linear.vtu2");
 }
 
 /// True when boxes a and b are separated by an axis plane with `eye` on a's side (or on
