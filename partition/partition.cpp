@@ -571,24 +571,6 @@ Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wid
     return box;
 }
 
-/// KdTree::TouchedLeaves without an allocation per call: the leaves whose closed box
-/// meets `b`, in the same order, through a stack the caller keeps.
-void TouchedLeaves(const KdTree& tree, const Box& b, std::vector<int>& stack,
-                   std::vector<int>& leaves) {
-    stack.clear();
-    stack.push_back(tree.root);
-    while (!stack.empty()) {
-        const KdNode& n = tree.nodes[stack.back()];
-        stack.pop_back();
-        if (n.IsLeaf()) {
-            leaves.push_back(n.leaf);
-            continue;
-        }
-        if (b.hi[n.axis] >= n.split) stack.push_back(n.high);
-        if (b.lo[n.axis] <= n.split) stack.push_back(n.low);
-    }
-}
-
 /// Per-brick tallies of the distribution pass.
 struct BrickTally {
     std::int64_t cells = 0, ghosts = 0, nodes = 0;
@@ -942,7 +924,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             if (!r.boxStored) box = CellNodeBox(points, rest, r.nodeCount, r.wide != 0);
             const int owner = OwnerBrick(tree, c.x);
             hits.clear();
-            TouchedLeaves(tree, box, stack, hits);
+            tree.TouchedLeaves(box, hits, stack);
             HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
             const double cost =
                 CellRenderSeconds({setups.Next(), c.segmentArea}, 1.0, rootDiagonal);

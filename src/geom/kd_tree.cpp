@@ -79,7 +79,13 @@ int KdTree::LeafAt(const double x[3]) const {
 }
 
 void KdTree::TouchedLeaves(const Box& b, std::vector<int>& leaves) const {
-    std::vector<int> stack{root};
+    std::vector<int> stack;
+    TouchedLeaves(b, leaves, stack);
+}
+
+void KdTree::TouchedLeaves(const Box& b, std::vector<int>& leaves,
+                           std::vector<int>& stack) const {
+    stack.assign(1, root);
     while (!stack.empty()) {
         const KdNode& n = nodes[stack.back()];
         stack.pop_back();

@@ -68,6 +68,9 @@ struct KdTree {
     /// Appends the leaf number of every leaf whose closed region touches the closed box
     /// `b` (a conservative test).
     void TouchedLeaves(const Box& b, std::vector<int>& leaves) const;
+    /// The same with a traversal stack the caller keeps (no allocation per call).
+    void TouchedLeaves(const Box& b, std::vector<int>& leaves,
+                       std::vector<int>& stack) const;
     /// Leaf numbers front to back for `view` (in-order, the front child first).
     std::vector<int> FrontToBack(const ViewOrigin& view) const;
     /// Inner nodes on the longest root-to-leaf path (0 for one leaf).
