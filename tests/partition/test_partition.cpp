@@ -396,6 +396,32 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
     }
 }
 
+/// One pass over `pts` in blocks of `block` centroids.
+partition::CentroidPass PassOver(const std::vector<partition::WeightedPoint>& pts,
+                                 std::size_t block) {
+    return [&pts, block](const auto& visit) {
+        for (std::size_t i = 0; i < pts.size(); i += block)
+            visit(pts.data() + i, std::min(block, pts.size() - i));
+    };
+}
+
+/// The box [0, side]^3.
+Box CubeBox(double side) {
+    Box b;
+    b.lo = {0, 0, 0};
+    b.hi = {side, side, side};
+    return b;
+}
+
+/// A mesh of ../shared/data and a number of bricks for it.
+struct MeshCase {
+    std::string file;
+    int bricks;
+};
+/// Linear tets, hexes, wedges and pyramids; curved order-4 tets.
+const MeshCase kMixedAndCurved[] = {{"mfem_fichera_mixed16_linear.vtu", 7},
+                                    {"gmsh_boolean_tet_p4.vtu", 5}};
+
 TEST(Partition, SmallestMemoryLimitGivesValidPartitionsAndTheSameBricks) {
     // At 4M the point caches of the scan and of the distribution (which recomputes the
     // boxes of order-1 cells from their nodes) evict blocks, the scan's batches are
@@ -404,12 +430,7 @@ TEST(Partition, SmallestMemoryLimitGivesValidPartitionsAndTheSameBricks) {
     // the independent cell model, and equal, file for file, the one made with a limit
     // large enough to hold everything.
     ScratchDir dir("partition_small_limit");
-    struct Case {
-        std::string file;
-        int bricks;
-    };
-    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
-                          Case{"gmsh_boolean_tet_p4.vtu", 5}}) {
+    for (const MeshCase& c : kMixedAndCurved) {
         std::vector<std::string> sums[2];
         for (int small = 0; small < 2; ++small) {
             partition::PartitionOptions o;
@@ -432,12 +453,7 @@ TEST(Partition, TreeAndOwnedCostsEqualTheCostModelCellByCell) {
     // everything and at the smallest one, the tree must be the one built from the cost
     // model's own estimates in input order, and each brick's owned cost their sum.
     ScratchDir dir("partition_costs");
-    struct Case {
-        std::string file;
-        int bricks;
-    };
-    for (const Case& c : {Case{"mfem_fichera_mixed16_linear.vtu", 7},
-                          Case{"gmsh_boolean_tet_p4.vtu", 5}}) {
+    for (const MeshCase& c : kMixedAndCurved) {
         const std::string path = kData + "/" + c.file;
         const Mesh mesh = ReadMesh(path);
         for (const std::size_t limit : {std::size_t(4) << 20, std::size_t(256) << 20}) {
@@ -464,10 +480,7 @@ TEST(Partition, TreeAndOwnedCostsEqualTheCostModelCellByCell) {
                 }
                 pts[k].cost = ModelCost(mesh, k, p.tree.box);
             }
-            const partition::CentroidPass pass = [&](const auto& visit) {
-                for (std::size_t i = 0; i < pts.size(); i += 65536)
-                    visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
-            };
+            const partition::CentroidPass pass = PassOver(pts, 65536);
             const std::size_t collectLimit = std::clamp<std::size_t>(
                 limit / 8 / 16 / static_cast<std::size_t>(c.bricks), 256,
                 std::size_t(1) << 20);
@@ -637,10 +650,7 @@ TEST(Partition, TreeBuilderBalancesTiesAndAnyLeafCount) {
         pts.push_back({{static_cast<double>(rng() % 97), static_cast<double>(rng() % 89),
                         static_cast<double>(rng() % 83)},
                        1.0 + (rng() % 4)});
-    const partition::CentroidPass pass = [&](const auto& visit) {
-        for (std::size_t i = 0; i < pts.size(); i += 1000)
-            visit(pts.data() + i, std::min<std::size_t>(1000, pts.size() - i));
-    };
+    const partition::CentroidPass pass = PassOver(pts, 1000);
     Box root;
     root.lo = {0, 0, 0};
     root.hi = {96, 88, 82};
@@ -694,13 +704,8 @@ TEST(Partition, TreeBuilderSplitEqualsTheExactWeightedMedian) {
                 lowCount = i + 1;
             }
         }
-        const partition::CentroidPass pass = [&](const auto& visit) {
-            for (std::size_t i = 0; i < pts.size(); i += 65536)
-                visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
-        };
-        Box root;
-        root.lo = {0, 0, 0};
-        root.hi = {40, 40, 40};
+        const partition::CentroidPass pass = PassOver(pts, 65536);
+        const Box root = CubeBox(40);
         for (const std::size_t limit :
              {std::size_t(64), std::size_t(4096), std::size_t(1) << 20}) {
             const KdTree tree = partition::BuildKdTree(root, 2, pass, limit);
@@ -729,13 +734,8 @@ TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
                             static_cast<double>(rng() % 5)},
                            1.0 + (rng() % 3) * 0.1});
     }
-    const partition::CentroidPass pass = [&](const auto& visit) {
-        for (std::size_t i = 0; i < pts.size(); i += 65536)
-            visit(pts.data() + i, std::min<std::size_t>(65536, pts.size() - i));
-    };
-    Box root;
-    root.lo = {0, 0, 0};
-    root.hi = {40, 40, 40};
+    const partition::CentroidPass pass = PassOver(pts, 65536);
+    const Box root = CubeBox(40);
     for (int n : {2, 7, 32, 64}) {
         for (std::size_t limit : {std::size_t(64), std::size_t(4096), std::size_t(1) << 20}) {
             KdTree one;
