@@ -99,16 +99,6 @@ inline int ExactSumSign(const double p[4]) {
 
 }  // namespace detail
 
-namespace detail {
-/// ExactCrossSign where the filter cannot decide (rare: kept out of the callers' code).
-[[gnu::noinline, gnu::cold]] inline int ExactCrossSignExpansion(double px, double py,
-                                                                double qx, double qy,
-                                                                double a, double b) {
-    const double terms[4] = {a, std::fma(px, qy, -a), -b, -std::fma(py, qx, -b)};
-    return ExactSumSign(terms);
-}
-}  // namespace detail
-
 /// Exact sign of the 2-D cross product px * qy - py * qx.
 inline int ExactCrossSign(double px, double py, double qx, double qy) {
     const double a = px * qy, b = py * qx;
@@ -117,7 +107,8 @@ inline int ExactCrossSign(double px, double py, double qx, double qy) {
     const double bound = 3.3306690738754716e-16 * (std::fabs(a) + std::fabs(b));
     if (e > bound) return 1;
     if (e < -bound) return -1;
-    return detail::ExactCrossSignExpansion(px, py, qx, qy, a, b);
+    const double terms[4] = {a, std::fma(px, qy, -a), -b, -std::fma(py, qx, -b)};
+    return detail::ExactSumSign(terms);
 }
 
 /// Which side of the sheared edge (P, Q) the perturbed ray passes: the sign of
@@ -143,12 +134,9 @@ struct TriangleCrossing {
 /// Watertight crossing test of the (perturbed) ray with triangle (A, B, C) given in the
 /// ray frame. The decision uses only EdgeSign of the three edges; t and the barycentrics
 /// are computed in floating point from the same sheared points, so a triangle evaluated
-/// with its vertices in the same order always gives bitwise the same result (also
-/// inlined: -ffp-contract=off leaves the compiler nothing to fuse differently).
-[[gnu::always_inline]] inline bool CrossTriangle(const ShearedPoint& a,
-                                                 const ShearedPoint& b,
-                                                 const ShearedPoint& c,
-                                                 TriangleCrossing& out) {
+/// with its vertices in the same order always gives bitwise the same result.
+inline bool CrossTriangle(const ShearedPoint& a, const ShearedPoint& b,
+                          const ShearedPoint& c, TriangleCrossing& out) {
     const int sa = EdgeSign(b, c);
     if (sa == 0) return false;
     const int sb = EdgeSign(c, a);
