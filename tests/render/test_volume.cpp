@@ -403,6 +403,68 @@ TEST(VolumeLinear, FacePointFieldsOnAJitteredMeshAreWithinTheirErrorBound) {
     EXPECT_LT(stats.counters.volumeErrorMax, 1e-12);
 }
 
+// The gradient bound that turns a face point's distance from the ray into a field error:
+// on random tetrahedra (some nearly flat) with a linear field of known gradient, it is at
+// least the gradient's norm and within 1e-5 of it, and NaN (the cell's own path) exactly
+// where the tetrahedron is too flat to bound it.
+TEST(VolumeLinear, GradientBoundOfATetrahedronHoldsTheTrueGradient) {
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> uni(-1, 1);
+    int bounded = 0, flat = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        double points[12], u[4];
+        const double g[3] = {uni(rng) * 10, uni(rng), uni(rng) * 1e-3};
+        const double c = uni(rng);
+        // Every fourth tetrahedron nearly flat: its fourth corner within 10^-k of the
+        // plane of the others.
+        const double flatness = trial % 4 == 0 ? std::pow(10.0, -9 * (uni(rng) + 1)) : 1;
+        for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) points[3 * k + d] = 3 + uni(rng);
+        if (flatness < 1) {
+            const double w = 0.5 + 0.5 * uni(rng);
+            for (int d = 0; d < 3; ++d)
+                points[9 + d] = w * points[d] + (1 - w) * points[3 + d] +
+                                0.3 * (points[6 + d] - points[d]) +
+                                flatness * (d == 2 ? 1 : 0);
+        }
+        for (int k = 0; k < 4; ++k)
+            u[k] = c + g[0] * points[3 * k] + g[1] * points[3 * k + 1] +
+                   g[2] * points[3 * k + 2];
+        const std::int64_t ids[4] = {0, 1, 2, 3};
+        const float bound = LinearTetGradientBound(points, u, ids);
+        // The tetrahedron's determinant against the product of its edge rows' 1-norms.
+        using LD = long double;
+        LD e[3][3], scale = 1;
+        for (int k = 0; k < 3; ++k) {
+            LD norm = 0;
+            for (int d = 0; d < 3; ++d) {
+                e[k][d] = LD(points[3 * (k + 1) + d]) - LD(points[d]);
+                norm += std::abs(e[k][d]);
+            }
+            scale *= norm;
+        }
+        const LD det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) -
+                       e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
+                       e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
+        const LD ratio = std::abs(det) / scale;
+        if (std::isnan(bound)) {
+            ++flat;
+            EXPECT_LT(ratio, 1.001e-6L) << trial;
+            continue;
+        }
+        ++bounded;
+        EXPECT_GT(ratio, 0.999e-6L) << trial;
+        // The rounding of the values (|u| up to about 50) against the gradient, through
+        // the inverse edges: 1e-16 * 50 / (1e-6 of the edges' size) at most.
+        const double norm = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        const double slack = double(1e-14L / ratio);
+        EXPECT_GE(double(bound), norm * (1 - slack)) << trial;
+        EXPECT_LE(double(bound), norm * (1 + 1e-5) + slack * norm + 1e-6) << trial;
+    }
+    EXPECT_GT(bounded, 14000);
+    EXPECT_GT(flat, 1000);
+}
+
 // The lean path of linear tetrahedra (VolumeRayMarcher::LinearTet, taken when one point
 // field drives a volume alone; its pieces queued and composited in batches) gives bitwise
 // the pixel of the general one (BeginSegment and Integrate per segment), stops where it
