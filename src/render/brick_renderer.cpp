@@ -94,7 +94,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     s.tNear = std::max(0.0, scene.clip.near);
     s.tFar = scene.clip.far;
     if (scene.clip.box) s.clipBox = *scene.clip.box;
-    if (scene.volume) s.volume = MakeVolumeSetup(mesh, geometry, scene, *cache);
+    if (scene.volume) s.volume = MakeVolumeSetup(mesh, scene, *cache);
     for (std::size_t k = 0; k < scene.slices.size(); ++k) {
         const SceneSlice& in = scene.slices[k];
         const auto sel = SelectScalar(mesh, in.field);

@@ -3,6 +3,10 @@
 
 #include <tbb/parallel_for.h>
 
+#include <limits>
+
+#include "render/volume_ray.h"
+
 namespace hpray {
 
 std::shared_ptr<const std::vector<Interval>> FieldCache::Ranges(const ScalarSelector& sel) {
@@ -37,6 +41,33 @@ std::shared_ptr<const FieldCellData> FieldCache::Data(const ScalarSelector& sel)
     ++dataBuilt_;
     data_[key] = data;
     return data;
+}
+
+std::shared_ptr<const std::vector<float>> FieldCache::GradientBounds(
+    const ScalarSelector& sel) {
+    const Key key{sel.field, sel.component};
+    if (const auto it = gradientBounds_.find(key); it != gradientBounds_.end())
+        return it->second;
+    auto bounds = std::make_shared<std::vector<float>>();
+    const double* u =
+        sel.field->association == Association::Point ? Data(sel)->PointValues() : nullptr;
+    if (u && geometry_->derivedCells > 0) {
+        const std::int64_t cells = mesh_->CellCount();
+        bounds->assign(cells, std::numeric_limits<float>::quiet_NaN());
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
+                          [&](const tbb::blocked_range<std::int64_t>& range) {
+                              for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                                  if (!geometry_->IsDerived(c)) continue;
+                                  const std::int64_t* ids =
+                                      mesh_->connectivity.data() + mesh_->cellOffsets[c];
+                                  (*bounds)[c] = LinearTetGradientBound(
+                                      mesh_->points.data(), u, ids);
+                              }
+                          });
+    }
+    ++gradientBoundsBuilt_;
+    gradientBounds_[key] = bounds;
+    return bounds;
 }
 
 }  // namespace hpray

@@ -29,9 +29,16 @@ class FieldCache {
     /// The field's nodal values gathered per cell and its derivative bounds (ray_field.h).
     std::shared_ptr<const FieldCellData> Data(const ScalarSelector& field);
 
-    /// How many ranges and data sets were computed (not reused) so far.
+    /// Per cell, for the linear tetrahedra (derived geometry) of a point field with
+    /// per-point values (FieldCellData::PointValues), a bound of the field's gradient
+    /// norm (VolumeSetup::gradientBound; NaN elsewhere); empty when the field has no
+    /// per-point values or the mesh no such cells.
+    std::shared_ptr<const std::vector<float>> GradientBounds(const ScalarSelector& field);
+
+    /// How many ranges, data sets and gradient bounds were computed (not reused) so far.
     int RangesBuilt() const { return rangesBuilt_; }
     int DataBuilt() const { return dataBuilt_; }
+    int GradientBoundsBuilt() const { return gradientBoundsBuilt_; }
 
   private:
     using Key = std::pair<const Field*, int>;
@@ -39,7 +46,8 @@ class FieldCache {
     const MeshGeometry* geometry_;
     std::map<Key, std::shared_ptr<const std::vector<Interval>>> ranges_;
     std::map<Key, std::shared_ptr<const FieldCellData>> data_;
-    int rangesBuilt_ = 0, dataBuilt_ = 0;
+    std::map<Key, std::shared_ptr<const std::vector<float>>> gradientBounds_;
+    int rangesBuilt_ = 0, dataBuilt_ = 0, gradientBoundsBuilt_ = 0;
 };
 
 }  // namespace hpray

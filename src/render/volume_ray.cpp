@@ -335,8 +335,7 @@ float LinearTetGradientBound(const double* points, const double* u,
     return f;
 }
 
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                            const Scene& scene, FieldCache& cache) {
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache) {
     HPRAY_CHECK(scene.volume.has_value());
     const SceneVolume& vol = *scene.volume;
     const std::string source = scene.sourcePath.empty() ? "scene" : scene.sourcePath;
@@ -431,23 +430,10 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
                               }
                           });
     }
-    // Gradient bounds of the linear tetrahedra (see VolumeSetup::gradientBound).
-    for (int f = 0; f < count; ++f) {
-        if (!s.pointValues[f] || geometry.derivedCells == 0) continue;
-        const double* u = s.pointValues[f];
-        std::vector<float>& bound = s.gradientBound[f];
-        bound.assign(cells, std::numeric_limits<float>::quiet_NaN());
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
-                          [&](const tbb::blocked_range<std::int64_t>& range) {
-                              for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                                  if (!geometry.IsDerived(c)) continue;
-                                  const std::int64_t* ids =
-                                      mesh.connectivity.data() + mesh.cellOffsets[c];
-                                  bound[c] =
-                                      LinearTetGradientBound(mesh.points.data(), u, ids);
-                              }
-                          });
-    }
+    // Gradient bounds of the linear tetrahedra (see VolumeSetup::gradientBound), kept
+    // by the cache.
+    for (int f = 0; f < count; ++f)
+        if (s.pointValues[f]) s.gradientBound[f] = cache.GradientBounds(s.fields[f]);
     s.cellKind.assign(cells, VolumeSetup::kVarying);
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, cells, 4096),
@@ -508,8 +494,9 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     queued_ = 0;
     linearTetField_ = setup.sameField && setup.pointValues[0] &&
                       setup.fields[0].field->association != Association::Cell &&
-                      !setup.gradientBound[0].empty();
-    if (!setup.gradientBound[0].empty() || !setup.gradientBound[1].empty()) {
+                      setup.gradientBound[0] && !setup.gradientBound[0]->empty();
+    if ((setup.gradientBound[0] && !setup.gradientBound[0]->empty()) ||
+        (setup.gradientBound[1] && !setup.gradientBound[1]->empty())) {
         // In the frame (x, y, z) = (a_kx - sx a_kz, a_ky - sy a_kz, sz a_kz) of world
         // offsets a: d/dx = d/da_kx, d/dy = d/da_ky, d/dz = (sx d/da_kx + sy d/da_ky +
         // d/da_kz) / sz; each world component is at most the gradient's norm. Rounded up
@@ -572,8 +559,8 @@ bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
     const FacePoint& out = ends.exit;
     // The field's gradient in the ray frame, bounded from the cell's: it only bounds how
     // far the face points may lie off the ray. NaN: a sliver, the cell's own path.
-    if (s.gradientBound[f].empty()) return false;
-    const double g = s.gradientBound[f][seg_.cell];
+    if (!s.gradientBound[f] || s.gradientBound[f]->empty()) return false;
+    const double g = (*s.gradientBound[f])[seg_.cell];
     if (!(g >= 0)) return false;
     const double grad[3] = {g * frameGradient_[0], g * frameGradient_[1],
                             g * frameGradient_[2]};

@@ -67,7 +67,7 @@ struct VolumeSetup {
     /// of the field's gradient (world units), rounded up, or NaN for a tetrahedron too
     /// flat to bound it (|det| <= 1e-6 of the product of its edge rows). It turns how far
     /// a face point lies off the ray into an error of the field value there.
-    std::vector<float> gradientBound[2];
+    std::shared_ptr<const std::vector<float>> gradientBound[2];  ///< from the FieldCache
 
     /// Per cell, from the ranges: nothing to integrate (extinction zero and, for
     /// Wilhelms-Van Gelder, glow zero), both transfer functions constant over the range
@@ -112,8 +112,7 @@ PiecewiseLinearTf MakeColorTf(const std::vector<ColorControlPoint>& points);
 /// if a field is missing), takes their per-cell ranges from `cache` (computed there the
 /// first time a field is used) and classifies the cells for the transfer functions
 /// (parallel).
-VolumeSetup MakeVolumeSetup(const Mesh& mesh, const MeshGeometry& geometry,
-                            const Scene& scene, FieldCache& cache);
+VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& cache);
 
 /// VolumeSetup::gradientBound of the linear tetrahedron whose corners are points[3 id]
 /// for the four `ids`, with field values u[id].

@@ -558,6 +558,15 @@ TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
     EXPECT_EQ(first.fieldData[0].get(), second.fieldData[0].get());
     ASSERT_TRUE(second.volume);
     EXPECT_EQ(second.volume->ranges[0].get(), second.cellRanges[0].get());
+    // Gradient bounds (for linear tetrahedra; this mesh has none, so they are empty) are
+    // built once too.
+    EXPECT_EQ(cache.GradientBoundsBuilt(), 1);
+    scene.volume->extinctionTf = {{0.0, 1.5}, {3.0, 0.5}};
+    const BrickSetup third = MakeBrickSetup(mesh, geometry, traverser, scene, &cache);
+    EXPECT_EQ(cache.GradientBoundsBuilt(), 1);
+    ASSERT_TRUE(third.volume);
+    EXPECT_EQ(third.volume->gradientBound[0].get(),
+              second.volume->gradientBound[0].get());
     const auto sel = SelectScalar(mesh, "u");
     ASSERT_TRUE(sel);
     const std::vector<Interval>& ranges = *cache.Ranges(*sel);
