@@ -536,7 +536,6 @@ void VolumeRayMarcher::FinishRay(RayComposite& composite) const {
 void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin, double T,
                                      double colorError, double tauError,
                                      RayComposite& composite) const {
-    if (kind_ != VolumeSetup::kVarying) return;
     const VolumeSetup& s = *setup_;
     // Emission happens within lambda of the piece's start: integral_0^l exp(-phi) <=
     // lambda. First-order effects of a colour error dc and an extinction error dtau:
@@ -607,13 +606,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     mode_ = Mode::kClosed;
     if (kind_ == VolumeSetup::kEmpty) return false;
     if (kind_ == VolumeSetup::kConstant) {
-        // Both transfer functions are constant over the guaranteed ranges: any value in
-        // them gives the constants.
-        const Interval& rc = (*s.ranges[0])[seg.cell];
-        const Interval& re = (*s.ranges.back())[seg.cell];
-        s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
-        constTau_ = std::max(0.0, constTau_);
-        s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
+        BeginConstantCell(seg.cell);
         return true;
     }
     fieldCount_ = s.sameField ? 1 : 2;
@@ -845,21 +838,34 @@ void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
     const double dv = st.valueExit - st.valueEnter;
     if (dv == 0) return;
     const double length = seg.tExit - seg.tEnter;
-    // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)).
+    // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)). The
+    // control points this field drives, ascending: t is monotone in them (the same
+    // rounded operations), so the crossings come out in their order.
+    const std::vector<double>& breakpoints =
+        f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
+               : s.extinctionTf.Scalars();
     const double lo = std::min(st.valueEnter, st.valueExit);
     const double hi = std::max(st.valueEnter, st.valueExit);
-    auto visit = [&](const std::vector<double>& scalars) {
-        for (const double b : scalars) {
-            if (!(b > lo && b < hi)) continue;
-            const double x = (b - st.valueEnter) / dv;
-            if (x > 0 && x < 1) {
-                const double t = seg.tEnter + x * length;
-                if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
-            }
+    for (const double b : breakpoints) {
+        if (b >= hi) break;
+        if (!(b > lo)) continue;
+        const double x = (b - st.valueEnter) / dv;
+        if (x > 0 && x < 1) {
+            const double t = seg.tEnter + x * length;
+            if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
         }
-    };
-    if (f == 0) visit(s.colorTf.Scalars());
-    if (f == 1 || s.sameField) visit(s.extinctionTf.Scalars());
+    }
+}
+
+void VolumeRayMarcher::BeginConstantCell(std::int64_t cell) {
+    const VolumeSetup& s = *setup_;
+    // Both transfer functions are constant over the guaranteed ranges: any value in them
+    // gives the constants.
+    const Interval& rc = (*s.ranges[0])[cell];
+    const Interval& re = (*s.ranges.back())[cell];
+    s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
+    constTau_ = std::max(0.0, constTau_);
+    s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
 }
 
 void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
@@ -944,18 +950,32 @@ void VolumeRayMarcher::Sample(double t, double& tau, double emission[3]) {
     }
 }
 
+void VolumeRayMarcher::SetPiece(QueuedPiece& piece, double p0, double p1, bool varying,
+                                double tau0, double tau1, const double c0[3],
+                                const double c1[3]) {
+    piece.p0 = p0;
+    piece.p1 = p1;
+    piece.length = p1 - p0;
+    piece.varying = varying;
+    piece.tau0 = std::max(0.0, tau0);
+    piece.tau1 = std::max(0.0, tau1);
+    for (int c = 0; c < 3; ++c) {
+        piece.c0[c] = std::max(0.0, c0[c]);
+        piece.c1[c] = std::max(0.0, c1[c]);
+    }
+    if (!varying) piece.colorError = piece.tauError = 0;
+}
+
 void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite) {
-    const VolumeSetup& s = *setup_;
-    double tau0, tau1, c0[3], c1[3];
-    const double length = p1 - p0;
-    double colorSlope = 0, tauSlope = 0;
+    QueuedPiece piece;
     if (kind_ == VolumeSetup::kConstant) {
-        tau0 = tau1 = constTau_;
-        for (int c = 0; c < 3; ++c) c0[c] = c1[c] = constColor_[c];
+        SetPiece(piece, p0, p1, false, constTau_, constTau_, constColor_, constColor_);
     } else {
+        const VolumeSetup& s = *setup_;
         // Each transfer function is affine on the piece: its piece is the one holding the
         // field at the midpoint, extended to both ends (the ends are breakpoints up to
         // rounding).
+        double tau0, tau1, c0[3], c1[3];
         const double mid = 0.5 * (p0 + p1);
         const double vc0 = FieldAt(0, p0), vc1 = FieldAt(0, p1), vcm = FieldAt(0, mid);
         const int kc = s.colorTf.IntervalOf(vcm);
@@ -968,108 +988,90 @@ void VolumeRayMarcher::LinearPiece(double p0, double p1, RayComposite& composite
         const int ke = s.extinctionTf.IntervalOf(vem);
         s.extinctionTf.EvalOn(ke, ve0, &tau0);
         s.extinctionTf.EvalOn(ke, ve1, &tau1);
+        SetPiece(piece, p0, p1, true, tau0, tau1, c0, c1);
         // The slopes of the pieces in use turn field errors into value errors.
-        colorSlope = s.colorTf.SteepestOn(kc);
-        tauSlope = s.extinctionTf.SteepestOn(ke);
+        piece.colorError = s.colorTf.SteepestOn(kc) * state_[0].error;
+        piece.tauError = s.extinctionTf.SteepestOn(ke) * state_[fieldCount_ - 1].error;
     }
-    tau0 = std::max(0.0, tau0);
-    tau1 = std::max(0.0, tau1);
-    const LinearPieceIntegrals q = IntegrateLinearPiece(tau0, tau1, length);
+    CompositeLinearPiece(
+        piece, IntegrateLinearPiece(piece.tau0, piece.tau1, piece.length), composite);
+}
+
+void VolumeRayMarcher::CompositeLinearPiece(const QueuedPiece& piece,
+                                            const LinearPieceIntegrals& q,
+                                            RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    const double length = piece.length, tau0 = piece.tau0, tau1 = piece.tau1;
     const double T = composite.transmittance;
     const bool wm = s.glow == GlowModel::WilliamsMax;
-    double rgb[3], e0[3], e1[3];
+    double rgb[3];
     for (int c = 0; c < 3; ++c) {
-        c0[c] = std::max(0.0, c0[c]);
-        c1[c] = std::max(0.0, c1[c]);
-        const double e = wm ? WilliamsMaxEmission(q, c0[c], c1[c])
-                            : GlowEmission(q, c0[c], c1[c], length);
+        const double e = wm ? WilliamsMaxEmission(q, piece.c0[c], piece.c1[c])
+                            : GlowEmission(q, piece.c0[c], piece.c1[c], length);
         rgb[c] = T * e;
         // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of the
         // compositing.
         composite.error[c] += 16 * kEps * rgb[c];
-        e0[c] = wm ? c0[c] * tau0 : c0[c];
-        e1[c] = wm ? c1[c] * tau1 : c1[c];
     }
     // The piece's own colour first: the depth errors below affect only what lies behind.
     composite.AddColor(rgb);
-    AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T,
-                  colorSlope * state_[0].error, tauSlope * state_[fieldCount_ - 1].error,
-                  composite);
+    if (piece.varying)
+        AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T,
+                      piece.colorError, piece.tauError, composite);
     composite.rgba[3] += T * q.opacity;
     composite.transmittance = T * q.transmittance;
     composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
-    RecordEnds(p0, p1, tau0, e0, tau1, e1, composite.transmittance);
+    if (piece.p0 == tStart_ || piece.p1 == tEnd_) {
+        double e0[3], e1[3];
+        for (int c = 0; c < 3; ++c) {
+            e0[c] = wm ? piece.c0[c] * tau0 : piece.c0[c];
+            e1[c] = wm ? piece.c1[c] * tau1 : piece.c1[c];
+        }
+        RecordEnds(piece.p0, piece.p1, tau0, e0, tau1, e1, composite.transmittance);
+    }
 }
 
 void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
-    const VolumeSetup& s = *setup_;
     // Grown in steps, never cleared: no piece is zeroed before it is written.
     if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
     QueuedPiece& piece = queue_[queued_++];
-    piece.p0 = p0;
-    piece.p1 = p1;
-    piece.length = p1 - p0;
-    piece.varying = varying;
-    double r0, g0, b0, r1, g1, b1, tau0, tau1;
     if (!varying) {
-        // LinearPiece of a constant cell.
-        tau0 = tau1 = constTau_;
-        r0 = r1 = constColor_[0];
-        g0 = g1 = constColor_[1];
-        b0 = b1 = constColor_[2];
-        piece.colorError = piece.tauError = 0;
-    } else {
-        // As LinearPiece with one linear field (FieldAt, the transfer functions), the
-        // colour and extinction at the piece's start kept from the last piece's end
-        // where they are the same.
-        const FieldState& st = state_[0];
-        const double tE = seg_.tEnter, tX = seg_.tExit;
-        const double vE = st.valueEnter, vX = st.valueExit;
-        auto at = [&](double t) {
-            if (t == tE) return vE;
-            if (t == tX) return vX;
-            const double x = (t - tE) / (tX - tE);
-            return (1 - x) * vE + x * vX;
-        };
-        const double v0 = at(p0), v1 = at(p1), vm = at(0.5 * (p0 + p1));
-        const int kc = s.colorTf.IntervalOf(vm);
-        const int ke = s.extinctionTf.IntervalOf(vm);
-        if (kc == lastColor_.piece && v0 == lastColor_.value) {
-            r0 = lastColor_.out[0];
-            g0 = lastColor_.out[1];
-            b0 = lastColor_.out[2];
-        } else {
-            s.colorTf.EvalOn3(kc, v0, r0, g0, b0);
-        }
-        if (ke == lastExtinction_.piece && v0 == lastExtinction_.value) {
-            tau0 = lastExtinction_.out[0];
-        } else {
-            tau0 = s.extinctionTf.EvalOn1(ke, v0);
-        }
-        s.colorTf.EvalOn3(kc, v1, r1, g1, b1);
-        tau1 = s.extinctionTf.EvalOn1(ke, v1);
-        lastColor_ = {kc, v1, {r1, g1, b1}};
-        lastExtinction_ = {ke, v1, {tau1, 0, 0}};
-        // The slopes of the pieces in use turn field errors into value errors.
-        piece.colorError = s.colorTf.SteepestOn(kc) * st.error;
-        piece.tauError = s.extinctionTf.SteepestOn(ke) * st.error;
+        SetPiece(piece, p0, p1, false, constTau_, constTau_, constColor_, constColor_);
+        return;
     }
-    piece.tau0 = std::max(0.0, tau0);
-    piece.tau1 = std::max(0.0, tau1);
-    piece.c0[0] = std::max(0.0, r0);
-    piece.c0[1] = std::max(0.0, g0);
-    piece.c0[2] = std::max(0.0, b0);
-    piece.c1[0] = std::max(0.0, r1);
-    piece.c1[1] = std::max(0.0, g1);
-    piece.c1[2] = std::max(0.0, b1);
+    // As LinearPiece with one linear field, the colour and extinction at the piece's
+    // start kept from the last piece's end where they are the same.
+    const VolumeSetup& s = *setup_;
+    const FieldState& st = state_[0];
+    const double v0 = FieldAt(0, p0), v1 = FieldAt(0, p1),
+                 vm = FieldAt(0, 0.5 * (p0 + p1));
+    const int kc = s.colorTf.IntervalOf(vm);
+    const int ke = s.extinctionTf.IntervalOf(vm);
+    double c0[3], c1[3], tau0;
+    if (kc == lastColor_.piece && v0 == lastColor_.value) {
+        for (int c = 0; c < 3; ++c) c0[c] = lastColor_.out[c];
+    } else {
+        s.colorTf.EvalOn3(kc, v0, c0[0], c0[1], c0[2]);
+    }
+    if (ke == lastExtinction_.piece && v0 == lastExtinction_.value) {
+        tau0 = lastExtinction_.out[0];
+    } else {
+        tau0 = s.extinctionTf.EvalOn1(ke, v0);
+    }
+    s.colorTf.EvalOn3(kc, v1, c1[0], c1[1], c1[2]);
+    const double tau1 = s.extinctionTf.EvalOn1(ke, v1);
+    lastColor_ = {kc, v1, {c1[0], c1[1], c1[2]}};
+    lastExtinction_ = {ke, v1, {tau1, 0, 0}};
+    SetPiece(piece, p0, p1, true, tau0, tau1, c0, c1);
+    piece.colorError = s.colorTf.SteepestOn(kc) * st.error;
+    piece.tauError = s.extinctionTf.SteepestOn(ke) * st.error;
 }
 
 bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
     const std::size_t n = queued_;
     if (n == 0) return false;
-    const VolumeSetup& s = *setup_;
-    // The closed forms of all queued pieces at once, then LinearPiece's compositing and
-    // error terms piece by piece, and Terminate after each as Integrate does.
+    // The closed forms of all queued pieces at once, then each composited in order with
+    // Terminate after it, as Integrate does.
     pieceTau_[0].resize(n);
     pieceTau_[1].resize(n);
     pieceLength_.resize(n);
@@ -1081,49 +1083,10 @@ bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
     }
     IntegrateLinearPieces(static_cast<int>(n), pieceTau_[0].data(), pieceTau_[1].data(),
                           pieceLength_.data(), pieceIntegrals_.data());
-    const bool wm = s.glow == GlowModel::WilliamsMax;
     bool stop = false;
     for (std::size_t i = 0; i < n && !stop; ++i) {
-        const QueuedPiece& piece = queue_[i];
-        const LinearPieceIntegrals& q = pieceIntegrals_[i];
-        const double length = piece.length, tau0 = piece.tau0, tau1 = piece.tau1;
-        const double T = composite.transmittance;
-        double rgb[3];
-        for (int c = 0; c < 3; ++c) {
-            const double e = wm ? WilliamsMaxEmission(q, piece.c0[c], piece.c1[c])
-                                : GlowEmission(q, piece.c0[c], piece.c1[c], length);
-            rgb[c] = T * e;
-            // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of
-            // the compositing.
-            composite.error[c] += 16 * kEps * rgb[c];
-        }
-        // The piece's own colour first: the depth errors below affect only what lies
-        // behind.
-        composite.AddColor(rgb);
-        if (piece.varying) {
-            // AddFieldError.
-            const double depth = 0.5 * length * (tau0 + tau1);
-            const double tauMin = std::min(tau0, tau1);
-            const double lambda = tauMin * length > 1 ? 1 / tauMin : length;
-            const double own =
-                wm ? piece.colorError * std::min(1.0, depth) +
-                         2 * s.colorMax * piece.tauError * lambda
-                   : (piece.colorError + s.colorMax * piece.tauError * lambda) * lambda;
-            for (double& e : composite.error) e += T * own;
-            composite.depthError += length * piece.tauError;
-        }
-        composite.rgba[3] += T * q.opacity;
-        composite.transmittance = T * q.transmittance;
-        composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
-        if (piece.p0 == tStart_ || piece.p1 == tEnd_) {
-            double e0[3], e1[3];
-            for (int c = 0; c < 3; ++c) {
-                e0[c] = wm ? piece.c0[c] * tau0 : piece.c0[c];
-                e1[c] = wm ? piece.c1[c] * tau1 : piece.c1[c];
-            }
-            RecordEnds(piece.p0, piece.p1, tau0, e0, tau1, e1, composite.transmittance);
-        }
-        stop = Terminate(piece.p1, composite);
+        CompositeLinearPiece(queue_[i], pieceIntegrals_[i], composite);
+        stop = Terminate(queue_[i].p1, composite);
     }
     queued_ = 0;
     return stop;
@@ -1446,11 +1409,7 @@ VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
     if (kind == VolumeSetup::kConstant) {
         seg_ = seg;
         kind_ = kind;
-        const Interval& rc = (*s.ranges[0])[seg.cell];
-        const Interval& re = (*s.ranges.back())[seg.cell];
-        s.extinctionTf.Eval(0.5 * (re.lo + re.hi), &constTau_);
-        constTau_ = std::max(0.0, constTau_);
-        s.colorTf.Eval(0.5 * (rc.lo + rc.hi), constColor_);
+        BeginConstantCell(seg.cell);
     } else {
         if (!linearTetField_ || !ends.enter.Valid() || !ends.exit.Valid() ||
             !geometry.IsDerived(seg.cell))
@@ -1461,29 +1420,13 @@ VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
         if (!LinearFromFacePoints(0, ends)) return LinearTetResult::kOther;
         kind_ = kind;
         fieldCount_ = 1;
-        // LinearCrossings(0, seg), sorted and without repeats, from the breakpoints of
-        // both transfer functions in ascending order: t is monotone in the breakpoint
-        // (the same rounded operations), so the crossings come out sorted, descending
-        // where the field falls.
-        const FieldState& st = state_[0];
-        const double dv = st.valueExit - st.valueEnter;
-        if (dv != 0) {
-            const double length = seg.tExit - seg.tEnter;
-            const double lo = std::min(st.valueEnter, st.valueExit);
-            const double hi = std::max(st.valueEnter, st.valueExit);
-            for (const double b : s.breakpoints) {
-                if (b >= hi) break;
-                if (!(b > lo)) continue;
-                const double x = (b - st.valueEnter) / dv;
-                if (x > 0 && x < 1) {
-                    const double t = seg.tEnter + x * length;
-                    if (t > seg.tEnter && t < seg.tExit) crossings_.push_back(t);
-                }
-            }
-            if (dv < 0) std::reverse(crossings_.begin(), crossings_.end());
-            crossings_.erase(std::unique(crossings_.begin(), crossings_.end()),
-                             crossings_.end());
-        }
+        // LinearCrossings gives them in the order of the breakpoints, so ascending where
+        // the field rises and descending where it falls: sorted without a sort.
+        LinearCrossings(0, seg);
+        if (state_[0].valueExit < state_[0].valueEnter)
+            std::reverse(crossings_.begin(), crossings_.end());
+        crossings_.erase(std::unique(crossings_.begin(), crossings_.end()),
+                         crossings_.end());
     }
     mode_ = Mode::kClosed;
     // Integrate(seg.tEnter, seg.tExit) (the crossings lie strictly inside), its pieces

@@ -207,10 +207,10 @@ class VolumeRayMarcher {
         kSeries,  ///< every field a polynomial along the ray, held as a series
         kGeneric  ///< adaptive Gauss-Kronrod on the true field
     };
-    /// Error terms of a piece of length `length` and optical depth `depth` at
-    /// transmittance T, extinction >= tauMin on it: the field errors through the transfer
-    /// functions' slopes (`colorSlope`, `tauSlope`: |d value / d field| on the piece),
-    /// into the colour error and the depth error.
+    /// Error terms of a piece of a varying cell, of length `length` and optical depth
+    /// `depth` at transmittance T, extinction >= tauMin on it: the field errors through
+    /// the transfer functions' slopes (`colorSlope`, `tauSlope`: |d value / d field| on
+    /// the piece), into the colour error and the depth error.
     void AddFieldError(double length, double depth, double tauMin, double T,
                        double colorSlope, double tauSlope, RayComposite& composite) const;
     /// Records the emission density at the ray's ends (for FinishRay).
@@ -222,13 +222,23 @@ class VolumeRayMarcher {
     /// Queues LinearPiece(p0, p1) of LinearTet's current segment: a varying cell (one
     /// linear field drives both transfer functions) or a constant one.
     void QueueLinearTetPiece(double p0, double p1, bool varying);
-    /// A piece of LinearTet waiting for its closed form and compositing: what LinearPiece
-    /// computes before the closed form (the colours clamped at 0).
+    /// A linear piece before its closed form and compositing: LinearPiece's own, or one
+    /// that LinearTet queued (the colours clamped at 0).
     struct QueuedPiece {
         double p0, p1, length, tau0, tau1, c0[3], c1[3];
         double colorError, tauError;  ///< field errors through the transfer functions
         bool varying;
     };
+    /// Fills `piece` from its ends and its transfer-function values there (clamped at 0,
+    /// as LinearPiece does); colorError and tauError are 0 unless varying (the caller
+    /// sets them).
+    static void SetPiece(QueuedPiece& piece, double p0, double p1, bool varying,
+                         double tau0, double tau1, const double c0[3],
+                         const double c1[3]);
+    /// LinearPiece's compositing of `piece` with its closed form q: emission, error
+    /// terms, transmittance, the ray's end emissions.
+    void CompositeLinearPiece(const QueuedPiece& piece, const LinearPieceIntegrals& q,
+                              RayComposite& composite);
     /// Queued pieces beyond which LinearTet composites.
     static constexpr std::size_t kQueuedPieces = 8;
     std::vector<QueuedPiece> queue_;  ///< the first queued_ are queued
@@ -243,6 +253,9 @@ class VolumeRayMarcher {
     /// nothing set) for a tetrahedron too flat to bound that error in the ray frame.
     bool LinearFromFacePoints(int f, const SegmentEnds& ends);
     void FindCrossings(int f, const Segment& seg, RenderCounters& counters);
+    /// constTau_ and constColor_ of a cell whose transfer functions are constant over its
+    /// ranges.
+    void BeginConstantCell(std::int64_t cell);
     /// FindCrossings of a linear field f (state_[f].linear).
     void LinearCrossings(int f, const Segment& seg);
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
