@@ -198,6 +198,35 @@ void FinishLinearPiece(const PieceStart& start, const double m[3],
     q.farWeight = std::clamp(far, 0.0, q.opacity);
 }
 
+/// The moments of a piece outside the Taylor regime (BeginLinearPiece false), from its
+/// start and exponential.
+void MomentsBeyondTaylor(const PieceStart& start, const LinearPieceIntegrals& q,
+                         double m[3]) {
+    const double alpha = start.alpha, beta = start.beta;
+    if (std::abs(beta) <= 1 ||
+        (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
+        SlopeSeriesMoments(alpha, beta, m);
+        return;
+    }
+    // Complete the square. Here |beta| > 1 and either beta > alpha / 2 or |beta| >
+    // alpha^2 / 200, so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an absolute
+    // error of at most (1 + alpha / |beta|) <= 16 ulps of I0.
+    const double s = std::sqrt(std::abs(beta));
+    const double u0 = alpha / (2 * s);
+    double i0;
+    if (beta > 0) {
+        // I0 = sqrt(pi) / (2 s) (erfcx(u0) - erfcx(u0 + s) T(1)).
+        i0 = 0.88622692545275801365 / s * (erfcx(u0) - erfcx(u0 + s) * q.transmittance);
+    } else {
+        // u1 = u0 - s >= 0 since alpha >= 2 |beta|; I0 = (F(u0) - F(u1) T(1)) / s.
+        const double u1 = std::max(0.0, u0 - s);
+        i0 = (dawson(u0) - dawson(u1) * q.transmittance) / s;
+    }
+    m[0] = i0;
+    m[1] = (q.opacity - alpha * i0) / (2 * beta);
+    m[2] = std::numeric_limits<double>::quiet_NaN();
+}
+
 #if defined(__AVX2__) && defined(__FMA__)
 /// TaylorMoments of four pieces at once, bitwise TaylorMoments per lane: every lane runs
 /// the same operations, and a lane whose series has ended takes no more terms.
@@ -263,7 +292,9 @@ void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
             beta[lanes] = ps.beta;
             if (++lanes == 4) runLanes();
         } else {
-            q = IntegrateLinearPiece(tau0[i], tau1[i], length[i]);
+            double mm[3];
+            MomentsBeyondTaylor(ps, q, mm);
+            FinishLinearPiece(ps, mm, q);
         }
     }
     if (lanes == 1) {
@@ -278,33 +309,11 @@ void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
 LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {
     LinearPieceIntegrals q;
     PieceStart start;
-    const bool taylor = BeginLinearPiece(tau0, tau1, length, q, start);
-    const double alpha = start.alpha, beta = start.beta;
     double m[3];
-    if (taylor) {
-        TaylorMoments(alpha, beta, m);
-    } else if (std::abs(beta) <= 1 ||
-               (beta <= 0.5 * alpha && std::abs(beta) <= 0.005 * alpha * alpha)) {
-        SlopeSeriesMoments(alpha, beta, m);
+    if (BeginLinearPiece(tau0, tau1, length, q, start)) {
+        TaylorMoments(start.alpha, start.beta, m);
     } else {
-        // Complete the square. Here |beta| > 1 and either beta > alpha / 2 or |beta| >
-        // alpha^2 / 200, so I1 = (1 - T(1) - alpha I0) / (2 beta) below carries an
-        // absolute error of at most (1 + alpha / |beta|) <= 16 ulps of I0.
-        const double s = std::sqrt(std::abs(beta));
-        const double u0 = alpha / (2 * s);
-        double i0;
-        if (beta > 0) {
-            // I0 = sqrt(pi) / (2 s) (erfcx(u0) - erfcx(u0 + s) T(1)).
-            i0 = 0.88622692545275801365 / s *
-                 (erfcx(u0) - erfcx(u0 + s) * q.transmittance);
-        } else {
-            // u1 = u0 - s >= 0 since alpha >= 2 |beta|; I0 = (F(u0) - F(u1) T(1)) / s.
-            const double u1 = std::max(0.0, u0 - s);
-            i0 = (dawson(u0) - dawson(u1) * q.transmittance) / s;
-        }
-        m[0] = i0;
-        m[1] = (q.opacity - alpha * i0) / (2 * beta);
-        m[2] = std::numeric_limits<double>::quiet_NaN();
+        MomentsBeyondTaylor(start, q, m);
     }
     FinishLinearPiece(start, m, q);
     return q;

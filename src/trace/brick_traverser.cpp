@@ -1971,11 +1971,11 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                 g.tEnter = a;
                 g.tExit = b;
                 if (pending) {
-                    const FacePoint& exitPoint = pending->exit;
-                    const bool valid = exitPoint.Valid();
-                    SegmentEnds& next = ends->emplace_back();
-                    next.enter = (ends->end() - 2)->exit;
-                    if (!valid) (ends->end() - 2)->enter.v[0] = -1;
+                    // The kept segment's ends (an entry is only valid with its exit),
+                    // and the next pending one entered where this one leaves.
+                    if (!pending->exit.Valid()) pending->enter.v[0] = -1;
+                    ends->emplace_back();
+                    ends->back().enter = (ends->end() - 2)->exit;
                 }
             } else if (pending) {
                 pending->enter = pending->exit;
@@ -2010,7 +2010,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     // brick decomposition starts such a span the same way.
     bool located = false;
     if (tLo == tMin && tLo > hits.front().t) {
-        std::int64_t c0;
+        std::int64_t c0 = -1;
         Crossing e0;
         if (im.LocateStart(tLo, ray, frame, c0, e0)) {
             located = true;
