@@ -76,9 +76,6 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         iso.residualTarget = acc.targetResidual * (r[1] - r[0]);
     }
     s.projection.tolerance = acc.projectionTolerance;
-    // A looser projection converges at a lower degree: start there (a too low start costs
-    // one retry at twice the degree).
-    s.projection.startDegree = acc.projectionTolerance >= 1e-10 ? 6 : 8;
     if (acc.projectionOrder > 0) {
         s.projection.startDegree = acc.projectionOrder;
         s.projection.maxDegree = acc.projectionOrder;

@@ -102,6 +102,73 @@ const LglRule& LglNodes(int n) {
 
 namespace {
 
+ChebyshevLobattoRule BuildChebyshevLobatto(int n) {
+    ChebyshevLobattoRule r;
+    r.nodes.resize(n + 1);
+    // sin of the angle from the middle: exactly antisymmetric, and the argument of node j
+    // of n is bitwise that of node 2j of 2n (numerator and denominator both doubled).
+    for (int j = 0; j <= n; ++j)
+        r.nodes[j] = std::sin(M_PI * double(2 * j - n) / double(2 * n));
+    r.nodes[0] = -1;
+    r.nodes[n] = 1;
+    if (n % 2 == 0) r.nodes[n / 2] = 0;
+    // The inverse of V[i][k] = P_k(x_i) by Gauss–Jordan elimination with partial pivoting
+    // in long double (V is well conditioned at these nodes: the rounding left is far
+    // below a double's).
+    const int m = n + 1;
+    std::vector<long double> a(std::size_t(m) * 2 * m, 0.0L);
+    auto at = [&](int i, int j) -> long double& { return a[std::size_t(i) * 2 * m + j]; };
+    for (int i = 0; i < m; ++i) {
+        const long double x = r.nodes[i];
+        long double p0 = 1, p1 = x;
+        at(i, 0) = 1;
+        if (n >= 1) at(i, 1) = x;
+        for (int k = 2; k <= n; ++k) {
+            const long double p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
+            at(i, k) = p2;
+            p0 = p1;
+            p1 = p2;
+        }
+        at(i, m + i) = 1;
+    }
+    for (int col = 0; col < m; ++col) {
+        int pivot = col;
+        for (int i = col + 1; i < m; ++i)
+            if (std::abs(at(i, col)) > std::abs(at(pivot, col))) pivot = i;
+        if (pivot != col)
+            for (int j = 0; j < 2 * m; ++j) std::swap(at(pivot, j), at(col, j));
+        const long double inv = 1 / at(col, col);
+        for (int j = 0; j < 2 * m; ++j) at(col, j) *= inv;
+        for (int i = 0; i < m; ++i) {
+            if (i == col || at(i, col) == 0) continue;
+            const long double f = at(i, col);
+            for (int j = 0; j < 2 * m; ++j) at(i, j) -= f * at(col, j);
+        }
+    }
+    // Row k of the inverse maps the values to coefficient k.
+    r.transformStride = (m + 3) / 4 * 4;
+    r.transformByNode.assign(std::size_t(m) * r.transformStride, 0.0);
+    for (int k = 0; k < m; ++k)
+        for (int i = 0; i < m; ++i)
+            r.transformByNode[std::size_t(i) * r.transformStride + k] =
+                static_cast<double>(at(k, m + i));
+    return r;
+}
+
+}  // namespace
+
+const ChebyshevLobattoRule& ChebyshevLobattoNodes(int n) {
+    HPRAY_CHECK(n >= 1 && n <= kMaxLegendreDegree);
+    static std::once_flag flags[kMaxLegendreDegree + 1];
+    static std::unique_ptr<ChebyshevLobattoRule> rules[kMaxLegendreDegree + 1];
+    std::call_once(flags[n], [n] {
+        rules[n] = std::make_unique<ChebyshevLobattoRule>(BuildChebyshevLobatto(n));
+    });
+    return *rules[n];
+}
+
+namespace {
+
 /// The three-term recurrence P_k = A_k x P_{k-1} - B_k P_{k-2} with A_k = (2k - 1) / k and
 /// B_k = (k - 1) / k as products (no division per term).
 constexpr int kRecurrenceSize = 2 * kMaxLegendreDegree + 4;
@@ -293,6 +360,21 @@ void InterpolateLgl(const double* values, int n, double a, double b, LegendreSer
     s.b = b;
     // c += value_i * column i of the transform (vectorised over k, the sums in a local
     // array the compiler keeps in registers; rows padded to whole vectors).
+    const int stride = rule.transformStride;
+    double c[kMaxLegendreDegree + 4] = {};
+    const double* m = rule.transformByNode.data();
+    for (int i = 0; i <= n; ++i, m += stride) {
+        const double v = values[i];
+        for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);
+    }
+    s.c.assign(c, c + n + 1);
+}
+
+void InterpolateChebyshevLobatto(const double* values, int n, double a, double b,
+                                 LegendreSeries& s) {
+    const ChebyshevLobattoRule& rule = ChebyshevLobattoNodes(n);
+    s.a = a;
+    s.b = b;
     const int stride = rule.transformStride;
     double c[kMaxLegendreDegree + 4] = {};
     const double* m = rule.transformByNode.data();

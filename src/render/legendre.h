@@ -23,6 +23,21 @@ struct LglRule {
 inline constexpr int kMaxLegendreDegree = 64;
 const LglRule& LglNodes(int n);
 
+/// The n + 1 Chebyshev–Lobatto nodes x_j = sin(pi (2j - n) / (2n)) = -cos(j pi / n) on
+/// [-1, 1] (ascending, endpoints exact, exactly antisymmetric), with the transform from
+/// values at them to the Legendre coefficients of their interpolant. The nodes nest:
+/// those of n are bitwise the even-indexed nodes of 2n, so a projection raised from
+/// degree n to 2n keeps its n + 1 samples and adds n. Cached per n; thread-safe. 1 <= n
+/// <= kMaxLegendreDegree.
+struct ChebyshevLobattoRule {
+    std::vector<double> nodes;
+    /// transformByNode[i * transformStride + k]: coefficient k = sum_i of it times
+    /// value_i (rows padded with zeros to a multiple of 4).
+    std::vector<double> transformByNode;
+    int transformStride = 0;
+};
+const ChebyshevLobattoRule& ChebyshevLobattoNodes(int n);
+
 /// A polynomial of degree coeffs.size() - 1 on [a, b], p(t) = sum_k c_k P_k(x(t)) with
 /// x = (2t - a - b) / (b - a) in [-1, 1].
 struct LegendreSeries {
@@ -61,6 +76,11 @@ void EvalPair(const LegendreSeries& p, const LegendreSeries& q, const double* t,
 LegendreSeries InterpolateLgl(const double* values, int n, double a, double b);
 /// The same into `out` (reusing its storage).
 void InterpolateLgl(const double* values, int n, double a, double b, LegendreSeries& out);
+
+/// Interpolates `values` at the n + 1 Chebyshev–Lobatto nodes of [a, b] (values[i] at
+/// node i) by the degree-n Legendre series, into `out` (reusing its storage).
+void InterpolateChebyshevLobatto(const double* values, int n, double a, double b,
+                                 LegendreSeries& out);
 
 /// Re-expands `p` on the sub-interval [lo, hi] (same degree), by evaluating it at the LGL
 /// nodes of [lo, hi]. `scratch` is caller-owned and resized as needed.

@@ -33,7 +33,9 @@ struct ProjectionOptions {
     /// Degree used when the field is a polynomial of known degree along the ray (affine
     /// cells): the interpolant is then exact. <= 0: choose adaptively.
     int exactDegree = 0;
-    int startDegree = 8;
+    /// The first degree of the adaptive projection, doubled (nested Chebyshev–Lobatto
+    /// nodes: every sample is kept) until the tail converges or maxDegree is reached.
+    int startDegree = 3;
     int maxDegree = 48;
     /// Pieces are halved when maxDegree does not reach the tolerance, down to this length.
     /// startDegree == maxDegree pins the degree (order studies): it then also overrides
@@ -113,7 +115,8 @@ double TailExcluded(const LegendreSeries& q, double C);
 }  // namespace detail
 
 /// Projects f on [a, b] into pieces (ordered, covering [a, b]). `f(t)` returns the true
-/// field at ray parameter t. Pieces' samples are LGL nodes of each piece.
+/// field at ray parameter t. An adaptive piece's samples are Chebyshev–Lobatto nodes of
+/// it (nested from level to level), a pinned or exact one's are LGL nodes.
 template <typename F>
 void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     std::vector<ProjectedPiece>& pieces, ProjectionStats& stats,
@@ -171,46 +174,91 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
             double scale = 0;
             for (double v : scratch) scale = std::max(scale, std::abs(v));
             piece.eps = 64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
-        } else {
-            int n = options.startDegree;
+        } else if (!pinned) {
+            // Nested Chebyshev–Lobatto levels n, 2n, 4n, ...: raising the degree keeps
+            // every sample taken, so a segment pays for the degree it needs and no more.
+            double values[kMaxLegendreDegree + 1], ts[kMaxLegendreDegree + 1],
+                fresh[kMaxLegendreDegree + 1];
+            int n = std::max(1, std::min(options.startDegree, options.maxDegree));
+            auto sampleLevel = [&](int degree) {
+                const ChebyshevLobattoRule& rule = ChebyshevLobattoNodes(degree);
+                for (int i = 0; i <= degree; ++i) ts[i] = mid + half * rule.nodes[i];
+                detail::SampleMany(f, ts, degree + 1, values);
+                stats.evaluations += degree + 1;
+            };
+            // Node j of level N, as ChebyshevLobattoNodes computes it (bitwise).
+            auto node = [](int j, int N) {
+                return std::sin(M_PI * double(2 * j - N) / double(2 * N));
+            };
+            sampleLevel(n);
             for (;;) {
-                piece.p = sample(n);
+                InterpolateChebyshevLobatto(values, n, w.lo, w.hi, piece.p);
                 double scale = options.scaleFloor;
-                for (double v : scratch) scale = std::max(scale, std::abs(v));
+                for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(values[i]));
                 const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
                 const double floor =
                     64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
-                if (tail <= options.tolerance * scale || n >= options.maxDegree) {
-                    // Measure: f against p halfway between interpolation nodes.
-                    const LglRule& rule = LglNodes(n);
-                    double checkT[kMaxLegendreDegree + 1], checkF[kMaxLegendreDegree + 1];
-                    int checks = 0;
-                    // About four checks (every gap when the degree is pinned, where
-                    // they are the only error estimate).
-                    const int stride = pinned ? std::max(1, n / 4) : std::max(2, n / 4);
-                    for (int i = 0; i < n; i += stride)
-                        checkT[checks++] = mid + half * 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
-                    detail::SampleMany(f, checkT, checks, checkF);
+                const bool converged = tail <= options.tolerance * scale;
+                if (converged || n >= options.maxDegree) {
+                    // Measure: f against p at about four nodes of the next level (each
+                    // halfway in angle between two of this level's).
+                    const int checks = std::min(n, 4);
+                    for (int k = 0; k < checks; ++k) {
+                        const int i = (2 * k + 1) * n / (2 * checks);
+                        ts[k] = mid + half * node(2 * i + 1, 2 * n);
+                    }
+                    detail::SampleMany(f, ts, checks, fresh);
                     stats.evaluations += checks;
                     double discrepancy = 0;
-                    for (int i = 0; i < checks; ++i)
-                        discrepancy = std::max(discrepancy, std::abs(checkF[i] - piece.p(checkT[i])));
-                    // A pinned degree need not have converged, so its tail is no error
-                    // estimate: only the measured discrepancy is.
-                    piece.eps = 2 * std::max({pinned ? 0.0 : tail, discrepancy, floor});
-                    piece.converged = tail <= options.tolerance * scale;
+                    for (int k = 0; k < checks; ++k)
+                        discrepancy =
+                            std::max(discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
+                    piece.eps = 2 * std::max({tail, discrepancy, floor});
+                    piece.converged = converged;
                     break;
                 }
-                // Raised by half (8, 12, 18, 27, ...): the nodes of two degrees are not
-                // nested, so doubling pays for twice the samples where a little more
-                // would have converged.
-                n = std::min(n + std::max(4, n / 2), options.maxDegree);
+                if (2 * n <= options.maxDegree) {
+                    // The n new nodes of level 2n sit between this level's.
+                    for (int i = 0; i < n; ++i)
+                        ts[i] = mid + half * node(2 * i + 1, 2 * n);
+                    detail::SampleMany(f, ts, n, fresh);
+                    stats.evaluations += n;
+                    for (int i = n; i >= 0; --i) values[2 * i] = values[i];
+                    for (int i = 0; i < n; ++i) values[2 * i + 1] = fresh[i];
+                    n *= 2;
+                } else {
+                    n = options.maxDegree;
+                    sampleLevel(n);
+                }
             }
-            if (!piece.converged && !pinned && w.depth < options.maxSplits && top + 2 <= 64) {
+            if (!piece.converged && w.depth < options.maxSplits && top + 2 <= 64) {
                 stack[top++] = {mid, w.hi, w.depth + 1};
                 stack[top++] = {w.lo, mid, w.depth + 1};
                 continue;
             }
+        } else {
+            // A pinned degree (order studies): LGL nodes, every gap checked, since the
+            // degree need not have converged and its tail is then no error estimate.
+            const int n = options.startDegree;
+            piece.p = sample(n);
+            double scale = options.scaleFloor;
+            for (double v : scratch) scale = std::max(scale, std::abs(v));
+            const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
+            const double floor =
+                64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
+            const LglRule& rule = LglNodes(n);
+            double checkT[kMaxLegendreDegree + 1], checkF[kMaxLegendreDegree + 1];
+            int checks = 0;
+            for (int i = 0; i < n; i += std::max(1, n / 4))
+                checkT[checks++] = mid + half * 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
+            detail::SampleMany(f, checkT, checks, checkF);
+            stats.evaluations += checks;
+            double discrepancy = 0;
+            for (int i = 0; i < checks; ++i)
+                discrepancy =
+                    std::max(discrepancy, std::abs(checkF[i] - piece.p(checkT[i])));
+            piece.eps = 2 * std::max(discrepancy, floor);
+            piece.converged = tail <= options.tolerance * scale;
         }
         stats.maxDegree = std::max(stats.maxDegree, piece.p.Degree());
         stats.degreeSum += piece.p.Degree();
@@ -397,13 +445,37 @@ int FindRoots(F&& f, const std::vector<ProjectedPiece>& pieces, double C,
                     if (detail::TightBracket(piece.p, C, piece.eps, lo, hi, minWidth, a, b, r)) {
                         detail::RecentValues g{f, C};
                         const double target = options.residualTarget;
-                        if (target > 0) {
-                            // The projection's root is within eps of the true one: often
-                            // good enough already.
-                            const double gr = std::abs(g(r));
-                            if (gr <= target) {
-                                result = {RootKind::Simple, r, gr, result.failures};
-                                return stop = onRoot(result);
+                        // The projection's root: |f - C| <= eps there if eps holds.
+                        const double gr = g(r);
+                        if (target > 0 && std::abs(gr) <= target) {
+                            result = {RootKind::Simple, r, std::abs(gr), result.failures};
+                            return stop = onRoot(result);
+                        }
+                        // Newton on the true field with the projection's slope (p' is
+                        // within about n^2 eps / length of f'), then secant steps:
+                        // accepted once the step left is below a quarter of the root
+                        // tolerance, inside [a, b], where every root of f - C in the
+                        // window lies.
+                        double pr, slope;
+                        piece.p.Eval(r, pr, slope);
+                        if (std::abs(gr) <= piece.eps && slope != 0 &&
+                            std::isfinite(gr)) {
+                            double t0 = r, g0 = gr, s0 = slope;
+                            for (int step = 0; step < 3; ++step) {
+                                const double t1 = t0 - g0 / s0;
+                                if (!(t1 >= a && t1 <= b)) break;
+                                const double g1 = g(t1);
+                                if (g1 == 0 ||
+                                    std::abs(g1) <= 0.25 * std::abs(slope) * minWidth) {
+                                    result = {RootKind::Simple, t1, std::abs(g1),
+                                              result.failures};
+                                    return stop = onRoot(result);
+                                }
+                                if (t1 == t0 || g1 == g0) break;
+                                s0 = (g1 - g0) / (t1 - t0);
+                                t0 = t1;
+                                g0 = g1;
+                                if (!(s0 != 0) || !std::isfinite(s0)) break;
                             }
                         }
                         const double ga = g(a), gb = g(b);

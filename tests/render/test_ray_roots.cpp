@@ -40,6 +40,48 @@ TEST(Legendre, InterpolationReproducesLegendrePolynomials) {
     }
 }
 
+TEST(Legendre, ChebyshevLobattoNodesNestAndInterpolateExactly) {
+    for (int n = 1; n <= kMaxLegendreDegree; ++n) {
+        const ChebyshevLobattoRule& r = ChebyshevLobattoNodes(n);
+        ASSERT_EQ(r.nodes.size(), std::size_t(n + 1));
+        EXPECT_EQ(r.nodes.front(), -1.0);
+        EXPECT_EQ(r.nodes.back(), 1.0);
+        for (int j = 0; j <= n; ++j) {
+            EXPECT_NEAR(r.nodes[j], -std::cos(M_PI * j / n), 1e-15) << n << " " << j;
+            EXPECT_EQ(r.nodes[j], -r.nodes[n - j]) << n << " " << j;
+        }
+        // Level n's nodes are bitwise level 2n's even ones: a raised projection keeps
+        // them.
+        if (2 * n <= kMaxLegendreDegree) {
+            const ChebyshevLobattoRule& r2 = ChebyshevLobattoNodes(2 * n);
+            for (int j = 0; j <= n; ++j)
+                EXPECT_EQ(r.nodes[j], r2.nodes[2 * j]) << n << " " << j;
+        }
+    }
+    // P_k itself comes out as the unit vector e_k for k <= n.
+    for (int n : {1, 2, 3, 6, 12, 24, 48, 64}) {
+        const ChebyshevLobattoRule& r = ChebyshevLobattoNodes(n);
+        for (int k = 0; k <= n; ++k) {
+            std::vector<double> v(n + 1);
+            for (int i = 0; i <= n; ++i) v[i] = std::legendre(k, r.nodes[i]);
+            LegendreSeries s;
+            InterpolateChebyshevLobatto(v.data(), n, -1, 1, s);
+            for (int j = 0; j <= n; ++j)
+                EXPECT_NEAR(s.c[j], j == k ? 1.0 : 0.0, 1e-13)
+                    << n << " " << k << " " << j;
+        }
+    }
+    // exp on [0.5, 2] at degree 30, against the closed form between the nodes.
+    const int n = 30;
+    const ChebyshevLobattoRule& r = ChebyshevLobattoNodes(n);
+    std::vector<double> v(n + 1);
+    for (int i = 0; i <= n; ++i) v[i] = std::exp(1.25 + 0.75 * r.nodes[i]);
+    LegendreSeries s;
+    InterpolateChebyshevLobatto(v.data(), n, 0.5, 2.0, s);
+    for (double t = 0.5; t <= 2.0; t += 0.0137)
+        EXPECT_NEAR(s(t), std::exp(t), (n + 1) * (n + 1) * 2.2e-16 * std::exp(t)) << t;
+}
+
 TEST(Legendre, EvaluationDerivativeAndRestriction) {
     // p(t) = exp(t) on [0.5, 2] interpolated at degree 30 is exact to rounding.
     const int n = 30;
@@ -250,6 +292,84 @@ TEST(RayRoots, FieldEqualToTheLevelOverAnIntervalIsOneContact) {
         const RootResult first = FirstRoot(f, pieces, 0.7, finder.roots, finder.scratch);
         EXPECT_NE(first.kind, RootKind::None);
         EXPECT_EQ(first.t, found.front().t);
+    }
+}
+
+TEST(RayRoots, RaisedProjectionKeepsItsSamples) {
+    // A quartic converges at level 6 of 3, 6, 12, ... (the tail test wants the last two
+    // coefficients negligible): 4 samples at level 3, the 3 new nodes of level 6, then 4
+    // checks between those; resampling from scratch at each level would take 4 + 7 + 4.
+    long evaluations = 0;
+    auto f = [&](double t) {
+        ++evaluations;
+        return 0.3 + t * (1 - t) * (t - 0.25) * (t + 2);
+    };
+    ProjectionOptions projection;
+    ASSERT_EQ(projection.startDegree, 3);
+    std::vector<ProjectedPiece> pieces;
+    ProjectionStats stats;
+    std::vector<double> scratch;
+    ProjectSegment(f, 0.0, 1.0, projection, pieces, stats, scratch);
+    ASSERT_EQ(pieces.size(), 1u);
+    EXPECT_EQ(pieces[0].p.Degree(), 6);
+    EXPECT_TRUE(pieces[0].converged);
+    EXPECT_EQ(evaluations, 11);
+    EXPECT_EQ(stats.evaluations, 11);
+    // The interpolant is the quartic: the error claimed is the rounding floor, 2 * 64
+    // (n + 1) eps times the largest sample (below 0.6).
+    EXPECT_LE(pieces[0].eps, 2 * 64 * 7 * 2.3e-16 * 0.6);
+    for (double t = 0; t <= 1; t += 0.01) {
+        const double expect = 0.3 + t * (1 - t) * (t - 0.25) * (t + 2);
+        EXPECT_NEAR(pieces[0].p(t), expect, 1e-15) << t;
+    }
+    // exp(8 t) needs a higher level: every level's samples are kept, so the evaluations
+    // are the final level's nodes and its checks.
+    evaluations = 0;
+    auto g = [&](double t) {
+        ++evaluations;
+        return std::exp(8 * t);
+    };
+    stats = ProjectionStats{};
+    ProjectSegment(g, 0.0, 1.0, projection, pieces, stats, scratch);
+    ASSERT_EQ(pieces.size(), 1u);
+    const int n = pieces[0].p.Degree();
+    EXPECT_EQ(n, 24);
+    EXPECT_EQ(evaluations, n + 1 + 4);
+    for (double t = 0; t <= 1; t += 0.01)
+        EXPECT_NEAR(pieces[0].p(t), std::exp(8 * t), 1e-12 * std::exp(8.0));
+}
+
+TEST(RayRoots, PolishingNeedsFewSamplesAndReachesTheRootTolerance) {
+    // Simple roots of smooth fields: Newton from the projection's root with its slope
+    // ends within the root tolerance in one or two samples of the true field.
+    for (double C : {0.1, 0.5, 0.9, -0.3}) {
+        long evaluations = 0;
+        auto f = [&](double t) {
+            ++evaluations;
+            return std::sin(2 * t) + 0.2 * t * t;
+        };
+        Finder finder;
+        ProjectSegment(f, 0.0, 1.3, finder.projection, finder.pieces, finder.stats,
+                       finder.scratch);
+        const long projection = evaluations;
+        const RootResult r = FirstRoot(f, finder.pieces, C, finder.roots, finder.scratch);
+        if (C < 0) {  // no root: sin(2t) + 0.2 t^2 >= 0 on [0, 1.3]
+            EXPECT_EQ(r.kind, RootKind::None);
+            continue;
+        }
+        ASSERT_EQ(r.kind, RootKind::Simple) << C;
+        EXPECT_LE(evaluations - projection, 3) << C;
+        // The true root by bisection on the closed form, on the rising part (the field
+        // peaks at about t = 0.82).
+        double lo = 0, hi = 0.8;
+        auto h = [&](double t) { return std::sin(2 * t) + 0.2 * t * t - C; };
+        for (int it = 0; it < 200; ++it) {
+            const double m = 0.5 * (lo + hi);
+            ((h(lo) < 0) == (h(m) < 0) ? lo : hi) = m;
+        }
+        EXPECT_NEAR(r.t, lo, 1e-14 * 1.3) << C;
+        EXPECT_EQ(r.residual, std::abs(h(r.t))) << C;
+        EXPECT_LE(r.residual, 1e-15) << C;
     }
 }
 
