@@ -384,43 +384,59 @@ void SegmentField::RefAt(double t, double ref[3]) {
     // line at one.
     double start[3];
     const int n = histCount_;
-    // First index with histT_ > t (points mostly come in increasing t: search from the
-    // end).
-    int hi = n;
-    while (hi > 0 && histT_[hi - 1] > t) --hi;
+    // The points in order of t are histT_[histOrder_[k]] (stored in the order they came,
+    // indexed in order of t). First rank with a larger t than this one (binary search).
+    const std::uint8_t* order = histOrder_;
+    int hi = 0;
+    for (int len = n; len > 0;) {
+        const int half = len / 2;
+        if (histT_[order[hi + half]] > t) {
+            len = half;
+        } else {
+            hi += half + 1;
+            len -= half + 1;
+        }
+    }
     if (n >= 3) {
         // The three nearest: the bracketing pair and the nearer of their outer
         // neighbours.
         int i0 = hi == 0 ? 0 : hi == n ? n - 2 : hi - 1;
-        if (i0 + 2 >= n || (i0 > 0 && t - histT_[i0 - 1] < histT_[i0 + 2] - t)) --i0;
+        if (i0 + 2 >= n ||
+            (i0 > 0 && t - histT_[order[i0 - 1]] < histT_[order[i0 + 2]] - t))
+            --i0;
         i0 = std::max(0, std::min(i0, n - 3));
         // H_k = (1 - 2 L_k'(t_k) (t - t_k)) L_k^2 and K_k = (t - t_k) L_k^2 with L_k the
         // quadratic Lagrange basis on the three points.
-        const double t0 = histT_[i0], t1 = histT_[i0 + 1], t2 = histT_[i0 + 2];
+        const int k0 = order[i0], k1 = order[i0 + 1], k2 = order[i0 + 2];
+        const double t0 = histT_[k0], t1 = histT_[k1], t2 = histT_[k2];
         if (t0 != t1 && t1 != t2 && t0 != t2) {
             const double d01 = t0 - t1, d02 = t0 - t2, d12 = t1 - t2;
             const double inv = 1 / (d01 * d02 * d12);
             const double r01 = d02 * d12 * inv, r02 = d01 * d12 * inv,
                          r12 = d01 * d02 * inv;
             const double a0 = t - t0, a1 = t - t1, a2 = t - t2;
-            const double l[3] = {a1 * a2 * r01 * r02, -a0 * a2 * r01 * r12,
-                                 a0 * a1 * r02 * r12};
-            const double dl[3] = {r01 + r02, r12 - r01, -r02 - r12};  // L_k'(t_k)
-            const double a[3] = {a0, a1, a2};
-            double wv[3], ws[3];
-            for (int k = 0; k < 3; ++k) {
-                const double l2 = l[k] * l[k];
-                wv[k] = (1 - 2 * dl[k] * a[k]) * l2;
-                ws[k] = a[k] * l2;
-            }
+            // (Scalars, not arrays: stored lane by lane and reloaded as vectors, those
+            // stalled on store forwarding.)
+            const double l0 = a1 * a2 * r01 * r02, l1 = -a0 * a2 * r01 * r12,
+                         l2 = a0 * a1 * r02 * r12;
+            const double q0 = l0 * l0, q1 = l1 * l1, q2 = l2 * l2;
+            const double wv0 = (1 - 2 * (r01 + r02) * a0) * q0,
+                         wv1 = (1 - 2 * (r12 - r01) * a1) * q1,
+                         wv2 = (1 - 2 * (-r02 - r12) * a2) * q2;  // L_k'(t_k) inside
+            const double ws0 = a0 * q0, ws1 = a1 * q1, ws2 = a2 * q2;
+            const double* R0 = histRef_[k0];
+            const double* R1 = histRef_[k1];
+            const double* R2 = histRef_[k2];
+            const double* S0 = histSlope_[k0];
+            const double* S1 = histSlope_[k1];
+            const double* S2 = histSlope_[k2];
             for (int i = 0; i < 3; ++i)
-                start[i] = wv[0] * histRef_[i0][i] + ws[0] * histSlope_[i0][i] +
-                           wv[1] * histRef_[i0 + 1][i] + ws[1] * histSlope_[i0 + 1][i] +
-                           wv[2] * histRef_[i0 + 2][i] + ws[2] * histSlope_[i0 + 2][i];
+                start[i] = wv0 * R0[i] + ws0 * S0[i] + wv1 * R1[i] + ws1 * S1[i] +
+                           wv2 * R2[i] + ws2 * S2[i];
             options.initialGuess = start;
         }
     } else if (n == 2) {
-        const int i0 = 0, i1 = 1;
+        const int i0 = order[0], i1 = order[1];
         const double h = histT_[i1] - histT_[i0];
         if (h != 0) {
             const double s = (t - histT_[i0]) / h;
@@ -462,21 +478,16 @@ void SegmentField::RefAt(double t, double ref[3]) {
     iterations_ += outIterations;
     if (!converged) failures_ += 1;
     for (int i = 0; i < 3; ++i) ref[i] = outRef[i];
-    if (converged && n < kHistory && (hi == 0 || histT_[hi - 1] != t)) {
-        // Insert at hi, keeping the history sorted.
-        for (int k = n; k > hi; --k) {
-            histT_[k] = histT_[k - 1];
-            for (int i = 0; i < 3; ++i) {
-                histRef_[k][i] = histRef_[k - 1][i];
-                histSlope_[k][i] = histSlope_[k - 1][i];
-            }
-        }
-        histT_[hi] = t;
+    if (converged && n < kHistory && (hi == 0 || histT_[order[hi - 1]] != t)) {
+        // Stored at n, its rank inserted at hi.
+        for (int k = n; k > hi; --k) histOrder_[k] = histOrder_[k - 1];
+        histOrder_[hi] = static_cast<std::uint8_t>(n);
+        histT_[n] = t;
         const double* inv = outInverse;
         for (int i = 0; i < 3; ++i) {
-            histRef_[hi][i] = outRef[i];
-            histSlope_[hi][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
-                                inv[3 * i + 2] * ray_.dir[2];
+            histRef_[n][i] = outRef[i];
+            histSlope_[n][i] = inv[3 * i] * ray_.dir[0] + inv[3 * i + 1] * ray_.dir[1] +
+                               inv[3 * i + 2] * ray_.dir[2];
         }
         histCount_ = n + 1;
     }

@@ -138,10 +138,12 @@ private:
     bool exact_ = false;
     int lineDegree_ = 0;
     double ref0_[3] = {0, 0, 0}, dref_[3] = {0, 0, 0};
-    // Converged inversions (t, ref, d ref / dt) in this segment, sorted by t: Newton's
-    // predictor (see RefAt). At most kHistory are kept; later ones are not.
+    // Converged inversions (t, ref, d ref / dt) in this segment in the order they came,
+    // and histOrder_ their indices in order of t: Newton's predictor (see RefAt). At most
+    // kHistory are kept; later ones are not.
     static constexpr int kHistory = 48;
     double histT_[kHistory];
+    std::uint8_t histOrder_[kHistory];
     double histRef_[kHistory][3];
     double histSlope_[kHistory][3];
     int histCount_ = 0;
