@@ -2,6 +2,7 @@
 #include "elements/tensor_eval.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "mesh/cell.h"
 
@@ -54,10 +55,10 @@ double HexFieldValue(int p, const double* u, const double ref[3]) {
         for (int j = 0; j < n; ++j) {
             const double* row = u + n * (j + n * k);
             double fj = 0;
-            for (int i = 0; i < n; ++i) fj += row[i] * l[0][i];
-            fk += fj * l[1][j];
+            for (int i = 0; i < n; ++i) fj = std::fma(row[i], l[0][i], fj);
+            fk = std::fma(fj, l[1][j], fk);
         }
-        f += fk * l[2][k];
+        f = std::fma(fk, l[2][k], f);
     }
     return f;
 }
@@ -73,17 +74,17 @@ double HexFieldValueGradient(int p, const double* u, const double ref[3], double
             const double* row = u + n * (j + n * k);
             double fj = 0, frj = 0;
             for (int i = 0; i < n; ++i) {
-                fj += row[i] * l[0][i];
-                frj += row[i] * dl[0][i];
+                fj = std::fma(row[i], l[0][i], fj);
+                frj = std::fma(row[i], dl[0][i], frj);
             }
-            fk += fj * l[1][j];
-            frk += frj * l[1][j];
-            fsk += fj * dl[1][j];
+            fk = std::fma(fj, l[1][j], fk);
+            frk = std::fma(frj, l[1][j], frk);
+            fsk = std::fma(fj, dl[1][j], fsk);
         }
-        f += fk * l[2][k];
-        fr += frk * l[2][k];
-        fs += fsk * l[2][k];
-        ft += fk * dl[2][k];
+        f = std::fma(fk, l[2][k], f);
+        fr = std::fma(frk, l[2][k], fr);
+        fs = std::fma(fsk, l[2][k], fs);
+        ft = std::fma(fk, dl[2][k], ft);
     }
     dRef[0] = fr;
     dRef[1] = fs;
@@ -105,23 +106,23 @@ void HexMapValueJacobian(int p, const double* xyz, const double ref[3], double w
         for (int j = 0; j < n; ++j) {
             const double* row = xyz + m * (j + n * k);
             const double w = l[1][j] * l[2][k];
-            for (int q = 0; q < m; ++q) r[q] += w * row[q];
+            for (int q = 0; q < m; ++q) r[q] = std::fma(w, row[q], r[q]);
             if (jacobian) {
                 const double ws = dl[1][j] * l[2][k], wt = l[1][j] * dl[2][k];
                 for (int q = 0; q < m; ++q) {
-                    rs[q] += ws * row[q];
-                    rt[q] += wt * row[q];
+                    rs[q] = std::fma(ws, row[q], rs[q]);
+                    rt[q] = std::fma(wt, row[q], rt[q]);
                 }
             }
         }
     double x[3] = {0, 0, 0}, dr[3] = {0, 0, 0}, ds[3] = {0, 0, 0}, dt[3] = {0, 0, 0};
     for (int i = 0; i < n; ++i)
         for (int c = 0; c < 3; ++c) {
-            x[c] += r[3 * i + c] * l[0][i];
+            x[c] = std::fma(r[3 * i + c], l[0][i], x[c]);
             if (jacobian) {
-                dr[c] += r[3 * i + c] * dl[0][i];
-                ds[c] += rs[3 * i + c] * l[0][i];
-                dt[c] += rt[3 * i + c] * l[0][i];
+                dr[c] = std::fma(r[3 * i + c], dl[0][i], dr[c]);
+                ds[c] = std::fma(rs[3 * i + c], l[0][i], ds[c]);
+                dt[c] = std::fma(rt[3 * i + c], l[0][i], dt[c]);
             }
         }
     for (int c = 0; c < 3; ++c) world[c] = x[c];
@@ -150,13 +151,13 @@ void ContractLine(const double* u, const double* L0, const double* L1, const dou
             for (int i = 0; i < N; ++i) {
                 const double c = row[i];
                 const double* l0 = L0 + i * S;
-                for (int s = 0; s < S; ++s) fj[s] += c * l0[s];
+                for (int s = 0; s < S; ++s) fj[s] = std::fma(c, l0[s], fj[s]);
             }
             const double* l1 = L1 + j * S;
-            for (int s = 0; s < S; ++s) fk[s] += fj[s] * l1[s];
+            for (int s = 0; s < S; ++s) fk[s] = std::fma(fj[s], l1[s], fk[s]);
         }
         const double* l2 = L2 + k * S;
-        for (int s = 0; s < S; ++s) f[s] += fk[s] * l2[s];
+        for (int s = 0; s < S; ++s) f[s] = std::fma(fk[s], l2[s], f[s]);
     }
     for (int s = 0; s < S; ++s) out[s] = f[s];
 }
@@ -172,13 +173,13 @@ void ContractLineGeneric(int n, int S, const double* u, const double* L0, const 
             for (int i = 0; i < n; ++i) {
                 const double c = row[i];
                 const double* l0 = L0 + i * S;
-                for (int s = 0; s < S; ++s) fj[s] += c * l0[s];
+                for (int s = 0; s < S; ++s) fj[s] = std::fma(c, l0[s], fj[s]);
             }
             const double* l1 = L1 + j * S;
-            for (int s = 0; s < S; ++s) fk[s] += fj[s] * l1[s];
+            for (int s = 0; s < S; ++s) fk[s] = std::fma(fj[s], l1[s], fk[s]);
         }
         const double* l2 = L2 + k * S;
-        for (int s = 0; s < S; ++s) out[s] += fk[s] * l2[s];
+        for (int s = 0; s < S; ++s) out[s] = std::fma(fk[s], l2[s], out[s]);
     }
 }
 
