@@ -186,9 +186,12 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                 detail::SampleMany(f, ts, degree + 1, values);
                 stats.evaluations += degree + 1;
             };
-            // Node j of level N, as ChebyshevLobattoNodes computes it (bitwise).
+            // Node j of level N: ChebyshevLobattoNodes' table, or (beyond it, for the
+            // checks of the last level) its formula.
             auto node = [](int j, int N) {
-                return std::sin(M_PI * double(2 * j - N) / double(2 * N));
+                return N <= kMaxLegendreDegree
+                           ? ChebyshevLobattoNodes(N).nodes[j]
+                           : std::sin(M_PI * double(2 * j - N) / double(2 * N));
             };
             sampleLevel(n);
             for (;;) {
