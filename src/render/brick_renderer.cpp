@@ -550,6 +550,10 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 }
                 ProjectionOptions projection = setup.projection;
                 projection.scaleFloor = setup.fieldScale[f];
+                // Only the isovalues matter: a projection far from all of them may stop
+                // before it converges.
+                projection.exclude = isoValues_.data();
+                projection.excludeCount = int(isoValues_.size());
                 if (field_.ExactAlongLine())
                     projection.exactDegree = std::max(1, field_.LineDegree());
                 projectionStats_ = ProjectionStats{};

@@ -41,6 +41,14 @@ struct ProjectionOptions {
     /// startDegree == maxDegree pins the degree (order studies): it then also overrides
     /// exactDegree, and pieces are not split.
     int maxSplits = 6;
+    /// Levels the caller needs only to know are not crossed (isovalues): once a raised
+    /// degree's interpolant keeps farther from every one of them than twice its change
+    /// since the previous level (the sum of the coefficients' differences, a bound of
+    /// |p_2n - p_n| on the piece) plus the rounding floor, the piece stops there, with
+    /// that as its error: the previous level's error bounds the new one's wherever the
+    /// expansion converges. Not used below degree 6.
+    const double* exclude = nullptr;
+    int excludeCount = 0;
     /// The scale the tolerance is relative to is at least this (e.g. the magnitude of the
     /// field over the whole mesh), so pieces where the field is nearly zero converge.
     double scaleFloor = 0;
@@ -59,6 +67,7 @@ struct ProjectionStats {
     double degreeSum = 0;
     int pieces = 0;
     int unconverged = 0;
+    int excluded = 0;  ///< pieces stopped early, far from every level to exclude
 };
 
 struct RootOptions {
@@ -194,8 +203,12 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                            : std::sin(M_PI * double(2 * j - N) / double(2 * N));
             };
             sampleLevel(n);
+            LegendreSeries previous;
+            bool interpolated = false;  // piece.p already holds this level's interpolant
             for (;;) {
-                InterpolateChebyshevLobatto(values, n, w.lo, w.hi, piece.p);
+                if (!interpolated)
+                    InterpolateChebyshevLobatto(values, n, w.lo, w.hi, piece.p);
+                interpolated = false;
                 double scale = options.scaleFloor;
                 for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(values[i]));
                 const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
@@ -228,6 +241,57 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     stats.evaluations += n;
                     for (int i = n; i >= 0; --i) values[2 * i] = values[i];
                     for (int i = 0; i < n; ++i) values[2 * i + 1] = fresh[i];
+                    if (options.excludeCount > 0 && 2 * n >= 6) {
+                        // Far from every level at this degree already?
+                        previous.c.swap(piece.p.c);
+                        InterpolateChebyshevLobatto(values, 2 * n, w.lo, w.hi, piece.p);
+                        interpolated = true;
+                        double change = 0;
+                        for (int k = 0; k <= 2 * n; ++k)
+                            change +=
+                                std::abs(piece.p.c[k] - (k <= n ? previous.c[k] : 0.0));
+                        double scale2 = options.scaleFloor;
+                        for (int i = 0; i <= 2 * n; ++i)
+                            scale2 = std::max(scale2, std::abs(values[i]));
+                        const double eps =
+                            2 * change + 2 * 64 * (2 * n + 1) *
+                                             std::numeric_limits<double>::epsilon() *
+                                             scale2;
+                        auto far = [&](double e) {
+                            for (int k = 0; k < options.excludeCount; ++k)
+                                if (!(detail::TailExcluded(piece.p, options.exclude[k]) >
+                                      e))
+                                    return false;
+                            return true;
+                        };
+                        if (far(eps)) {
+                            // Measured as a converged piece is: f against p at about four
+                            // nodes of the next level.
+                            n *= 2;
+                            const int checks = std::min(n, 4);
+                            for (int k = 0; k < checks; ++k) {
+                                const int i = (2 * k + 1) * n / (2 * checks);
+                                ts[k] = mid + half * node(2 * i + 1, 2 * n);
+                            }
+                            detail::SampleMany(f, ts, checks, fresh);
+                            stats.evaluations += checks;
+                            double discrepancy = 0;
+                            for (int k = 0; k < checks; ++k)
+                                discrepancy = std::max(
+                                    discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
+                            const double measured = std::max(eps, 2 * discrepancy);
+                            if (far(measured)) {
+                                piece.eps = measured;
+                                piece.converged = true;
+                                stats.excluded += 1;
+                                break;
+                            }
+                            // The checks disagree: go on from this level (its
+                            // interpolant is piece.p; the checks are not kept: they are
+                            // few, and this is rare).
+                            continue;
+                        }
+                    }
                     n *= 2;
                 } else {
                     n = options.maxDegree;

@@ -339,6 +339,69 @@ TEST(RayRoots, RaisedProjectionKeepsItsSamples) {
         EXPECT_NEAR(pieces[0].p(t), std::exp(8 * t), 1e-12 * std::exp(8.0));
 }
 
+TEST(RayRoots, ProjectionFarFromTheIsovaluesStopsEarly) {
+    // exp(t) on [0, 1] converges at 1e-12 only beyond level 6. Far from the level 0.5
+    // (below its range [1, e]), level 6 already proves that it is not crossed: 7 samples
+    // and 4 checks. Near a crossed level nothing stops early.
+    long evaluations = 0;
+    auto g = [&](double t) {
+        ++evaluations;
+        return std::exp(t);
+    };
+    ProjectionOptions projection;
+    std::vector<ProjectedPiece> pieces;
+    ProjectionStats stats;
+    std::vector<double> scratch;
+    ProjectSegment(g, 0.0, 1.0, projection, pieces, stats, scratch);
+    ASSERT_EQ(pieces.size(), 1u);
+    const int converged = pieces[0].p.Degree();
+    EXPECT_GT(converged, 6);
+    EXPECT_EQ(evaluations, converged + 1 + 4);
+
+    const double far = 0.5, crossed = 2.0;
+    projection.exclude = &far;
+    projection.excludeCount = 1;
+    evaluations = 0;
+    stats = ProjectionStats{};
+    ProjectSegment(g, 0.0, 1.0, projection, pieces, stats, scratch);
+    ASSERT_EQ(pieces.size(), 1u);
+    EXPECT_EQ(stats.excluded, 1);
+    EXPECT_EQ(pieces[0].p.Degree(), 6);
+    EXPECT_EQ(evaluations, 7 + 4);
+    // Its error is an honest bound of |f - p| on the piece (checked densely), and the
+    // root finder excludes the level with it.
+    double worst = 0;
+    for (double t = 0; t <= 1; t += 1e-3)
+        worst = std::max(worst, std::abs(pieces[0].p(t) - std::exp(t)));
+    EXPECT_LE(worst, pieces[0].eps);
+    RootOptions roots;
+    EXPECT_EQ(FirstRoot(g, pieces, far, roots, scratch).kind, RootKind::None);
+
+    stats = ProjectionStats{};
+    projection.exclude = &crossed;
+    ProjectSegment(g, 0.0, 1.0, projection, pieces, stats, scratch);
+    EXPECT_EQ(stats.excluded, 0);
+    EXPECT_EQ(pieces[0].p.Degree(), converged);
+    const RootResult r = FirstRoot(g, pieces, crossed, roots, scratch);
+    ASSERT_EQ(r.kind, RootKind::Simple);
+    EXPECT_NEAR(r.t, std::log(crossed), 1e-14);
+}
+
+TEST(RayRoots, EarlyStopMeasuresBetweenTheNodes) {
+    // A narrow bump between the nodes of levels 3 and 6 (both interpolants are nearly
+    // zero and agree): only the checks, one of which lands on it, show that the level
+    // 0.9 is crossed. Its first root must be found (pieces away from the bump, after
+    // splitting, may still stop early).
+    auto f = [](double t) { return std::exp(-std::pow((t - 0.37) / 0.04, 2)); };
+    Finder finder;
+    const double C = 0.9;
+    finder.projection.exclude = &C;
+    finder.projection.excludeCount = 1;
+    const RootResult r = finder.First(f, 0.0, 1.0, C);
+    ASSERT_EQ(r.kind, RootKind::Simple);
+    EXPECT_NEAR(r.t, 0.37 - 0.04 * std::sqrt(std::log(1 / C)), 1e-13);
+}
+
 TEST(RayRoots, PolishingNeedsFewSamplesAndReachesTheRootTolerance) {
     // Simple roots of smooth fields: Newton from the projection's root with its slope
     // ends within the root tolerance in one or two samples of the true field.
