@@ -31,7 +31,9 @@ constexpr int kMaxKronrodEvaluations = 4096;
 /// integrates by rule L, estimated by rule L + 1) climbed to before an interval is
 /// bisected, and the rung every piece starts on. Climbing evaluates only the nodes the
 /// higher rule adds, so a piece costs the nodes of the rung that suffices, wherever it
-/// starts at or below it: rung 1 (7 nodes; rung 0's 3 rarely suffice) for all.
+/// starts at or below it. Rung 1 for all: rung 0's estimate (the midpoint against Gauss
+/// 3) can vanish by accident where the integrand is far from a polynomial (the claimed
+/// error then fails to bound the true one on test scenes).
 constexpr int kTopLevel = 3;
 constexpr int kStartLevel = 1;
 /// An interval's result is its lower rule (Gauss; in series mode rule L of the nested
@@ -163,6 +165,7 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
 double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
                     double fHi, double guess, double tol, double noise) {
     double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
+    bool probed = false;
     for (int it = 0; it < 100; ++it) {
         double v, dv;
         p.Eval(t, v, dv);
@@ -176,8 +179,22 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
             hi = t;
         }
         double next = dv != 0 ? t - f / dv : 0.5 * (lo + hi);
-        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-        if (std::abs(next - t) <= tol || hi - lo <= tol) return next;
+        bool probe = false;
+        if (!(next > lo && next < hi)) {
+            // Newton points past an end of the bracket: mostly a root within rounding of
+            // that end (a crossing at a critical point or at the segment's end), which
+            // bisection would take some 40 halvings to reach. Probe once just inside that
+            // end (a bracket of width tol then ends the search), else bisect.
+            const double inside = std::min(tol, 0.25 * (hi - lo));
+            if (!probed && dv != 0 && inside > 0) {
+                next = next <= lo ? lo + inside : hi - inside;
+                probed = probe = true;
+            } else {
+                next = 0.5 * (lo + hi);
+            }
+        }
+        // A probe's step says nothing of convergence; only the bracket's width does.
+        if (hi - lo <= tol || (!probe && std::abs(next - t) <= tol)) return next;
         t = next;
     }
     return t;
@@ -637,6 +654,10 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         SegmentField& sf = field_[f];
         truncated_[f] = unresolved_[f] = 0;
         sampleV_[f].clear();
+        // The exact series' coefficients keep their storage for the next segment's.
+        if (!pieces_[f].empty() &&
+            pieces_[f][0].p.c.capacity() > spareCoefficients_[f].capacity())
+            std::swap(pieces_[f][0].p.c, spareCoefficients_[f]);
         pieces_[f].clear();
         if (ends && ends->enter.Valid() && ends->exit.Valid() && s.pointValues[f] &&
             geometry.IsDerived(seg.cell) && LinearFromFacePoints(f, *ends)) {
@@ -650,7 +671,6 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         } else {
             sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
         }
-        pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
         // (reference units) times the field's variation over the cell (affine cells map
         // back in closed form, also those whose field is not a polynomial, as pyramids').
@@ -826,6 +846,7 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
     pieces_[f].resize(1);
     ProjectedPiece& piece = pieces_[f][0];
+    std::swap(piece.p.c, spareCoefficients_[f]);
     InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit, piece.p);
     // As ProjectSegment's exact projection: rounding in the samples and the transform.
     piece.eps = 64 * (n + 1) * kEps * scale;

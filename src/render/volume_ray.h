@@ -309,6 +309,9 @@ class VolumeRayMarcher {
     FieldState state_[2];
     SegmentField field_[2];
     std::vector<ProjectedPiece> pieces_[2];
+    /// Storage of the last exact series' coefficients (ProjectExact), reused without an
+    /// allocation per segment.
+    std::vector<double> spareCoefficients_[2];
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
