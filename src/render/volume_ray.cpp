@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "render/hex_line_sampler.h"
+#include "render/series_eval_kernel.h"
 #include "trace/ray_frame.h"
 #include "util/check.h"
 #include "util/dense_inverse.h"
@@ -1217,15 +1218,24 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
                 const int first = cached, count = n - cached;
                 for (int i = first; i < n; ++i) nodeT[i] = m + half * rules.nodes[i];
                 double* ueAt = fe == 0 ? nodeU : nodeE;
+                // The vectorised evaluations where the build has them (bitwise the same).
+                auto many = [&](const LegendreSeries& p, double* out) {
+                    if (!EvalManyKernel(p, nodeT + first, count, out))
+                        p.EvalMany(nodeT + first, count, out);
+                };
+                auto pair = [&](const LegendreSeries& p, double* outP) {
+                    if (!EvalPairKernel(p, depthLine_, nodeT + first, count, outP,
+                                        nodeDepth + first))
+                        EvalPair(p, depthLine_, nodeT + first, count, outP,
+                                 nodeDepth + first);
+                };
                 if (be == 0) {
-                    uc.EvalMany(nodeT + first, count, nodeU + first);
+                    many(uc, nodeU + first);
                 } else if (fe == 0) {
-                    EvalPair(uc, depthLine_, nodeT + first, count, nodeU + first,
-                             nodeDepth + first);
+                    pair(uc, nodeU + first);
                 } else {
-                    uc.EvalMany(nodeT + first, count, nodeU + first);
-                    EvalPair(ue, depthLine_, nodeT + first, count, nodeE + first,
-                             nodeDepth + first);
+                    many(uc, nodeU + first);
+                    pair(ue, nodeE + first);
                 }
                 quadratureNodes_ += count;
                 for (int i = first; i < n; ++i) {
