@@ -801,8 +801,15 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
             // degree that fails with it fails (most segments at tight tolerances, one
             // lookup).
             const double least = costOver(range.lo, range.hi);
+            // tail[m] falls with m: where the highest candidate's fails, all do (one
+            // load of the cell's tail, not one per candidate).
+            int highest = -1;
+            for (int m : kSampledDegrees)
+                if (m < n - 1) highest = m;
+            const bool any =
+                highest >= 0 && !(kLebesgueBound * tail[highest] * least > allowed);
             for (int m : kSampledDegrees) {
-                if (m >= n - 1) break;
+                if (!any || m >= n - 1) break;
                 const double miss = kLebesgueBound * tail[m];
                 if (miss * least > allowed) continue;
                 if (miss * costOver(range.lo - miss, range.hi + miss) <= allowed) {
