@@ -384,46 +384,161 @@ const KronrodRule& GetKronrodRule() {
 
 namespace {
 
-template <unsigned N>
-GaussKronrodPair MakeGaussKronrodPair() {
-    using LD = long double;
-    using GK = boost::math::quadrature::gauss_kronrod<LD, N>;
-    using G = boost::math::quadrature::gauss<LD, (N - 1) / 2>;
-    GaussKronrodPair r;
-    r.gaussPoints = (N - 1) / 2;
-    r.size = N;
-    const int half = N / 2;
-    r.nodes.assign(N, 0.0);
-    r.kronrodWeights.assign(N, 0.0);
-    r.gaussWeights.assign(N, 0.0);
-    const auto& x = GK::abscissa();  // 0, then the positive nodes ascending
-    const auto& w = GK::weights();
-    for (int i = 0; i <= half; ++i) {
-        r.nodes[half + i] = double(x[i]);
-        r.nodes[half - i] = -double(x[i]);
-        r.kronrodWeights[half + i] = r.kronrodWeights[half - i] = double(w[i]);
+using LD = long double;
+
+/// P_0(x) .. P_n(x) into p[0..n].
+void LegendreValues(LD x, int n, LD* p) {
+    p[0] = 1;
+    if (n >= 1) p[1] = x;
+    for (int k = 1; k < n; ++k)
+        p[k + 1] = ((2 * k + 1) * x * p[k] - k * p[k - 1]) / (k + 1);
+}
+
+/// Solves a x = b (n x n, row-major) by Gauss-Jordan with partial pivoting.
+std::vector<LD> SolveDense(int n, std::vector<LD> a, std::vector<LD> b) {
+    for (int c = 0; c < n; ++c) {
+        int pivot = c;
+        for (int i = c + 1; i < n; ++i)
+            if (std::abs(a[i * n + c]) > std::abs(a[pivot * n + c])) pivot = i;
+        for (int j = 0; j < n; ++j) std::swap(a[c * n + j], a[pivot * n + j]);
+        std::swap(b[c], b[pivot]);
+        const LD d = a[c * n + c];
+        HPRAY_CHECK(d != 0);
+        for (int j = 0; j < n; ++j) a[c * n + j] /= d;
+        b[c] /= d;
+        for (int i = 0; i < n; ++i) {
+            if (i == c) continue;
+            const LD f = a[i * n + c];
+            if (f == 0) continue;
+            for (int j = 0; j < n; ++j) a[i * n + j] -= f * a[c * n + j];
+            b[i] -= f * b[c];
+        }
     }
-    // The Gauss nodes are among the Kronrod nodes: match each to the nearest.
-    const auto& gx = G::abscissa();
-    const auto& gw = G::weights();
-    for (std::size_t j = 0; j < gx.size(); ++j) {
-        int best = 0;
-        for (int i = 1; i <= half; ++i)
-            if (std::abs(x[i] - gx[j]) < std::abs(x[best] - gx[j])) best = i;
-        HPRAY_CHECK(std::abs(x[best] - gx[j]) < 1e-15L);
-        r.gaussWeights[half + best] = r.gaussWeights[half - best] = double(gw[j]);
+    return b;
+}
+
+/// Patterson's extension of the symmetric rule with the m nodes `x` (m odd, holding 0):
+/// the m + 1 roots of the polynomial pi of degree m + 1 with integral_{-1}^1 w pi P_k = 0
+/// for k <= m, w = prod (x - x_i), appended to `x`. pi is even, P_{m+1} plus even
+/// Legendre polynomials of lower degree; the conditions for odd k determine it. The
+/// integrals are exact by 30-point Gauss-Legendre (degree 59 >= 3m + 1 for m <= 15).
+void PattersonExtension(std::vector<LD>& x) {
+    const int m = static_cast<int>(x.size()), deg = m + 1, half = deg / 2;
+    HPRAY_CHECK(m % 2 == 1 && 3 * m + 1 <= 59);
+    using G = boost::math::quadrature::gauss<LD, 30>;
+    std::vector<LD> gx, gw;
+    for (std::size_t i = 0; i < G::abscissa().size(); ++i) {
+        const LD a = G::abscissa()[i], w = G::weights()[i];
+        gx.push_back(a);
+        gw.push_back(w);
+        if (a != 0) {
+            gx.push_back(-a);
+            gw.push_back(w);
+        }
     }
+    auto omega = [&](LD t) {
+        LD w = 1;
+        for (LD xi : x) w *= t - xi;
+        return w;
+    };
+    // Unknowns c_j for the even degrees 2j < deg; condition rows for odd k = 2r + 1 <= m.
+    std::vector<LD> a(std::size_t(half) * half, 0), b(half, 0);
+    std::vector<LD> p(deg + 1);
+    for (std::size_t g = 0; g < gx.size(); ++g) {
+        LegendreValues(gx[g], deg, p.data());
+        const LD wo = gw[g] * omega(gx[g]);
+        for (int r = 0; r < half; ++r) {
+            const LD pk = p[2 * r + 1] * wo;
+            for (int j = 0; j < half; ++j) a[std::size_t(r) * half + j] += pk * p[2 * j];
+            b[r] -= pk * p[deg];
+        }
+    }
+    const std::vector<LD> c = SolveDense(half, a, b);
+    auto pi = [&](LD t) {
+        LegendreValues(t, deg, p.data());
+        LD v = p[deg];
+        for (int j = 0; j < half; ++j) v += c[j] * p[2 * j];
+        return v;
+    };
+    // Its positive roots: sign changes on a fine grid, then bisection to the last bit.
+    constexpr int kGrid = 1 << 12;
+    int found = 0;
+    LD lo = 0, vlo = pi(lo);
+    for (int i = 1; i <= kGrid; ++i) {
+        const LD hi = LD(i) / kGrid, vhi = pi(hi);
+        if ((vlo < 0) != (vhi < 0)) {
+            LD l = lo, h = hi, fl = vlo;
+            for (int it = 0; it < 200 && l < h; ++it) {
+                const LD mid = (l + h) / 2;
+                if (mid <= l || mid >= h) break;
+                const LD fm = pi(mid);
+                if ((fm < 0) == (fl < 0)) {
+                    l = mid;
+                    fl = fm;
+                } else {
+                    h = mid;
+                }
+            }
+            const LD root = (l + h) / 2;
+            x.push_back(root);
+            x.push_back(-root);
+            ++found;
+        }
+        lo = hi;
+        vlo = vhi;
+    }
+    HPRAY_CHECK(found == half);
+}
+
+/// The weights of the interpolatory rule on the nodes x: sum_i w_i P_k(x_i) = 2 [k = 0]
+/// for k < size.
+std::vector<LD> InterpolatoryWeights(const std::vector<LD>& x) {
+    const int n = static_cast<int>(x.size());
+    std::vector<LD> a(std::size_t(n) * n), b(n, 0), p(n);
+    for (int i = 0; i < n; ++i) {
+        LegendreValues(x[i], n - 1, p.data());
+        for (int k = 0; k < n; ++k) a[std::size_t(k) * n + i] = p[k];
+    }
+    b[0] = 2;
+    return SolveDense(n, a, b);
+}
+
+NestedQuadratureRules MakeNestedQuadratureRules() {
+    using R = NestedQuadratureRules;
+    R r;
+    // The midpoint, Gauss 3 and Kronrod 7 from Boost's tables (the Gauss 3 nodes are
+    // among the Kronrod nodes), then Patterson's extensions.
+    using GK7 = boost::math::quadrature::gauss_kronrod<LD, 7>;
+    using G3 = boost::math::quadrature::gauss<LD, 3>;
+    const auto& kx = GK7::abscissa();  // 0, then the positive nodes ascending
+    const auto& kw = GK7::weights();
+    const auto& gx = G3::abscissa();
+    const auto& gw = G3::weights();
+    HPRAY_CHECK(kx.size() == 4 && gx.size() == 2 && std::abs(kx[2] - gx[1]) < 1e-18L);
+    std::vector<LD> x = {0, kx[2], -kx[2], kx[1], -kx[1], kx[3], -kx[3]};
+    std::vector<std::vector<LD>> w(R::kRules);
+    w[0] = {2};
+    w[1] = {gw[0], gw[1], gw[1]};
+    w[2] = {kw[0], kw[2], kw[2], kw[1], kw[1], kw[3], kw[3]};
+    for (int rule = 3; rule < R::kRules; ++rule) {
+        PattersonExtension(x);
+        HPRAY_CHECK(int(x.size()) == R::Size(rule));
+        w[rule] = InterpolatoryWeights(x);
+    }
+    for (int i = 0; i < R::kMaxNodes; ++i) r.nodes[i] = double(x[i]);
+    for (int rule = 0; rule < R::kRules; ++rule)
+        for (int i = 0; i < R::Size(rule); ++i) {
+            HPRAY_CHECK(w[rule][i] > 0);
+            r.weights[rule][i] = double(w[rule][i]);
+        }
     return r;
 }
 
 }  // namespace
 
-const GaussKronrodPair& GetGaussKronrodPair(int level) {
-    static const std::array<GaussKronrodPair, kGaussKronrodLevels> pairs = {
-        MakeGaussKronrodPair<3>(), MakeGaussKronrodPair<7>(), MakeGaussKronrodPair<15>(),
-        MakeGaussKronrodPair<31>(), MakeGaussKronrodPair<61>()};
-    HPRAY_CHECK(level >= 0 && level < kGaussKronrodLevels);
-    return pairs[level];
+const NestedQuadratureRules& GetNestedQuadratureRules() {
+    static const NestedQuadratureRules rules = MakeNestedQuadratureRules();
+    return rules;
 }
 
 }  // namespace hpray

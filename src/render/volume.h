@@ -195,17 +195,26 @@ struct KronrodRule {
 };
 const KronrodRule& GetKronrodRule();
 
-/// Gauss-Kronrod pairs on [-1, 1] for the integrals of volume pieces: level L holds the
-/// Kronrod rule of 2n + 1 nodes (ascending) extending the n-point Gauss rule, n = 1, 3, 7,
-/// 15, 30 for L = 0..4 (the 3-point Kronrod extension of the midpoint rule is the 3-point
-/// Gauss rule). gaussWeights is 0 at the Kronrod-only nodes. Built once (thread-safe),
-/// in long double.
-struct GaussKronrodPair {
-    int gaussPoints = 0;
-    int size = 0;  ///< 2 gaussPoints + 1
-    std::vector<double> nodes, kronrodWeights, gaussWeights;
+/// A ladder of nested quadrature rules on [-1, 1] for the integrals of volume pieces:
+/// rule r has Size(r) = 2^(r+1) - 1 nodes, the first Size(r) of `nodes`, and extends rule
+/// r - 1 (its nodes are those of r - 1 and Size(r - 1) + 1 more): the midpoint (Gauss 1),
+/// Gauss 3, its Kronrod extension of 7 nodes, and Patterson's extensions of 15 and 31
+/// nodes (exact for polynomials of degree 1, 5, 11, 23 and 47). Rung L of the ladder
+/// integrates by rule L and estimates its error by rule L + 1, so climbing a rung
+/// evaluates only the new nodes. Built once (thread-safe), in long double.
+struct NestedQuadratureRules {
+    static constexpr int kRules = 5;
+    static constexpr int kMaxNodes = 31;
+    static constexpr int Size(int r) { return (2 << r) - 1; }
+    /// Degree of polynomials rule r integrates exactly.
+    static constexpr int Degree(int r) {
+        constexpr int kDegree[kRules] = {1, 5, 11, 23, 47};
+        return kDegree[r];
+    }
+    std::array<double, kMaxNodes> nodes{};
+    /// weights[r][i] for i < Size(r); 0 beyond.
+    std::array<std::array<double, kMaxNodes>, kRules> weights{};
 };
-inline constexpr int kGaussKronrodLevels = 5;
-const GaussKronrodPair& GetGaussKronrodPair(int level);
+const NestedQuadratureRules& GetNestedQuadratureRules();
 
 }  // namespace hpray

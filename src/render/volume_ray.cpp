@@ -12,6 +12,7 @@
 #include <limits>
 
 #include "render/hex_line_sampler.h"
+#include "render/series_eval_kernel.h"
 #include "trace/ray_frame.h"
 #include "util/check.h"
 #include "util/dense_inverse.h"
@@ -27,14 +28,20 @@ constexpr int kMaxKronrodDepth = 40;
 /// (their error estimates still go into vol.error): a cap on the work of integrands whose
 /// estimated error does not shrink with the interval (noise at the tolerance's level).
 constexpr int kMaxKronrodEvaluations = 4096;
-/// Series mode: the highest Gauss-Kronrod level raised to before an interval is bisected,
-/// and the level each ray starts with.
+/// Series mode: the highest rung of the nested ladder (GetNestedQuadratureRules: rung L
+/// integrates by rule L, estimated by rule L + 1) climbed to before an interval is
+/// bisected, and the rung every piece starts on. Climbing evaluates only the nodes the
+/// higher rule adds, so a piece costs the nodes of the rung that suffices, wherever it
+/// starts at or below it. Rung 1 for all: rung 0's estimate (the midpoint against Gauss
+/// 3) can vanish by accident where the integrand is far from a polynomial (the claimed
+/// error then fails to bound the true one on test scenes).
 constexpr int kTopLevel = 3;
 constexpr int kStartLevel = 1;
-/// Series mode: an interval's result is its Gauss rule, whose error is estimated by the
-/// Kronrod rule's difference s (truth - Gauss = s + the Kronrod rule's own error). The
-/// Kronrod rule's error is taken as at most this fraction of |s| (it converges at
-/// 3n + 2 against the Gauss rule's 2n), and goes into the error as an absolute term.
+/// An interval's result is its lower rule (Gauss; in series mode rule L of the nested
+/// ladder), whose error is estimated by the difference s from the higher rule that
+/// extends it (Kronrod; rule L + 1, of about twice the degree): truth - lower = s + the
+/// higher rule's own error. That error is taken as at most this fraction of |s|, and goes
+/// into the error as an absolute term.
 constexpr double kKronrodMargin = 0.25;
 /// A bound of the rounding error of a Legendre series evaluated by its recurrence (and
 /// of the sampled field it interpolates), in units of eps times the sum of |c_k|.
@@ -159,6 +166,7 @@ PiecewiseLinearTf ExtinctionTf(const std::vector<ExtinctionControlPoint>& points
 double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi, double fLo,
                     double fHi, double guess, double tol, double noise) {
     double t = guess > lo && guess < hi ? guess : lo + (hi - lo) * (fLo / (fLo - fHi));
+    bool probed = false;
     for (int it = 0; it < 100; ++it) {
         double v, dv;
         p.Eval(t, v, dv);
@@ -172,8 +180,22 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
             hi = t;
         }
         double next = dv != 0 ? t - f / dv : 0.5 * (lo + hi);
-        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-        if (std::abs(next - t) <= tol || hi - lo <= tol) return next;
+        bool probe = false;
+        if (!(next > lo && next < hi)) {
+            // Newton points past an end of the bracket: mostly a root within rounding of
+            // that end (a crossing at a critical point or at the segment's end), which
+            // bisection would take some 40 halvings to reach. Probe once just inside that
+            // end (a bracket of width tol then ends the search), else bisect.
+            const double inside = std::min(tol, 0.25 * (hi - lo));
+            if (!probed && dv != 0 && inside > 0) {
+                next = next <= lo ? lo + inside : hi - inside;
+                probed = probe = true;
+            } else {
+                next = 0.5 * (lo + hi);
+            }
+        }
+        // A probe's step says nothing of convergence; only the bracket's width does.
+        if (hi - lo <= tol || (!probe && std::abs(next - t) <= tol)) return next;
         t = next;
     }
     return t;
@@ -181,7 +203,8 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
 
 /// out[i] = exp(-x[i]) for x[i] >= 0 (0 beyond 708), to about 2 ulps: x = k ln 2 - r with
 /// |r| <= ln 2 / 2, e^-r by its Taylor polynomial of degree 13 (error below 1e-17), times
-/// 2^-k built in the exponent bits; four lanes at a time where AVX2 is available.
+/// 2^-k built in the exponent bits; four lanes at a time where AVX2 is available (all of
+/// them, the last partly filled: out[i] depends on x[i] alone, not on n or i).
 void ExpNegative(const double* x, int n, double* out) {
     constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
                      kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
@@ -199,10 +222,9 @@ void ExpNegative(const double* x, int n, double* out) {
                                   1.0 / 39916800,
                                   1.0 / 479001600,
                                   1.0 / 6227020800.0};
-    int i = 0;
 #if defined(__AVX2__) && defined(__FMA__)
-    for (; i + 4 <= n; i += 4) {
-        const __m256d xv = _mm256_loadu_pd(x + i);
+    auto lanes = [&](const double* in, double* result4) {
+        const __m256d xv = _mm256_loadu_pd(in);
         const __m256d big = _mm256_cmp_pd(xv, _mm256_set1_pd(708.0), _CMP_GT_OQ);
         const __m256d y = _mm256_sub_pd(_mm256_setzero_pd(), _mm256_min_pd(xv, _mm256_set1_pd(708.0)));
         // k = round(y / ln 2) in the low bits of kd.
@@ -211,16 +233,27 @@ void ExpNegative(const double* x, int n, double* out) {
         __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Hi), y);
         r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Lo), r);
         __m256d poly = _mm256_set1_pd(kCoef[13]);
-        for (int c = 12; c >= 0; --c) poly = _mm256_fmadd_pd(poly, r, _mm256_set1_pd(kCoef[c]));
+        for (int c = 12; c >= 0; --c)
+            poly = _mm256_fmadd_pd(poly, r, _mm256_set1_pd(kCoef[c]));
         // 2^k: (k + 1023) << 52, with k the integer in kd's low bits.
         const __m256i ki = _mm256_sub_epi64(_mm256_castpd_si256(kd),
                                             _mm256_castpd_si256(_mm256_set1_pd(kShifter)));
         const __m256i bits = _mm256_slli_epi64(_mm256_add_epi64(ki, _mm256_set1_epi64x(1023)), 52);
         const __m256d result = _mm256_mul_pd(poly, _mm256_castsi256_pd(bits));
-        _mm256_storeu_pd(out + i, _mm256_andnot_pd(big, result));
+        _mm256_storeu_pd(result4, _mm256_andnot_pd(big, result));
+    };
+    int i = 0;
+    for (; i + 4 <= n; i += 4) lanes(x + i, out + i);
+    if (i < n) {
+        // The last n % 4 through the same lanes: each value independent of its position.
+        alignas(32) double in4[4] = {0, 0, 0, 0}, out4[4];
+        for (int k = i; k < n; ++k) in4[k - i] = x[k];
+        lanes(in4, out4);
+        for (int k = i; k < n; ++k) out[k] = out4[k - i];
     }
+#else
+    for (int i = 0; i < n; ++i) out[i] = x[i] > 708.0 ? 0.0 : std::exp(-x[i]);
 #endif
-    for (; i < n; ++i) out[i] = x[i] > 708.0 ? 0.0 : std::exp(-x[i]);
 }
 
 }  // namespace
@@ -485,7 +518,6 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     kronrodIntervals_ = 0;
     // Each ray starts from the same state: its pixel must not depend on the rays the
     // thread integrated before (tiles and threads may take any rays).
-    levelHint_ = kStartLevel;
     for (FacePointSums& sums : faceSums_)
         sums.t = std::numeric_limits<double>::quiet_NaN();
     startTau_ = 0;
@@ -623,6 +655,10 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         SegmentField& sf = field_[f];
         truncated_[f] = unresolved_[f] = 0;
         sampleV_[f].clear();
+        // The exact series' coefficients keep their storage for the next segment's.
+        if (!pieces_[f].empty() &&
+            pieces_[f][0].p.c.capacity() > spareCoefficients_[f].capacity())
+            std::swap(pieces_[f][0].p.c, spareCoefficients_[f]);
         pieces_[f].clear();
         if (ends && ends->enter.Valid() && ends->exit.Valid() && s.pointValues[f] &&
             geometry.IsDerived(seg.cell) && LinearFromFacePoints(f, *ends)) {
@@ -636,7 +672,6 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         } else {
             sf.Begin(mesh, geometry, sel, seg.cell, ray_, s.inversion);
         }
-        pieces_[f].clear();
         // Rounding of a nodal sum; in curved cells also the inversion tolerance
         // (reference units) times the field's variation over the cell (affine cells map
         // back in closed form, also those whose field is not a polynomial, as pyramids').
@@ -766,8 +801,15 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
             // degree that fails with it fails (most segments at tight tolerances, one
             // lookup).
             const double least = costOver(range.lo, range.hi);
+            // tail[m] falls with m: where the highest candidate's fails, all do (one
+            // load of the cell's tail, not one per candidate).
+            int highest = -1;
+            for (int m : kSampledDegrees)
+                if (m < n - 1) highest = m;
+            const bool any =
+                highest >= 0 && !(kLebesgueBound * tail[highest] * least > allowed);
             for (int m : kSampledDegrees) {
-                if (m >= n - 1) break;
+                if (!any || m >= n - 1) break;
                 const double miss = kLebesgueBound * tail[m];
                 if (miss * least > allowed) continue;
                 if (miss * costOver(range.lo - miss, range.hi + miss) <= allowed) {
@@ -812,6 +854,7 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
     pieces_[f].resize(1);
     ProjectedPiece& piece = pieces_[f][0];
+    std::swap(piece.p.c, spareCoefficients_[f]);
     InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit, piece.p);
     // As ProjectSegment's exact projection: rounding in the samples and the transform.
     piece.eps = 64 * (n + 1) * kEps * scale;
@@ -1156,51 +1199,80 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     if (needQ || needJ) {
         const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
         stack_.clear();
-        stack_.push_back({p0, p1, 0, levelHint_});
+        stack_.push_back({p0, p1, 0, kStartLevel});
         int evaluations = 0;
+        // The integrands at the nodes of the interval last evaluated: the first `cached`
+        // nested nodes of [cachedLo, cachedHi]. A rung climbed on the same interval (the
+        // next work item) evaluates only the nodes its rule adds.
+        const NestedQuadratureRules& rules = GetNestedQuadratureRules();
+        constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;  // padded to 4 lanes
+        alignas(32) double nodeT[kNodes], nodeU[kNodes], nodeE[kNodes], nodeDepth[kNodes],
+            att[kNodes], gq[kNodes];
+        double cachedLo = 0, cachedHi = 0;
+        int cached = 0;
         while (!stack_.empty()) {
             const Work w = stack_.back();
             stack_.pop_back();
             ++evaluations;
-            const GaussKronrodPair& rule = GetGaussKronrodPair(w.level);
-            const int n = rule.size;
+            const int n = NestedQuadratureRules::Size(w.level + 1);
             const double half = 0.5 * (w.hi - w.lo), m = 0.5 * (w.lo + w.hi);
-            nodeT_.resize(n);
-            nodeU_[0].resize(n);
-            nodeU_[1].resize(n);
-            nodeDepth_.resize(n);
-            for (int i = 0; i < n; ++i) nodeT_[i] = m + half * rule.nodes[i];
-            const double* ueAt = nodeU_[0].data();
-            if (be == 0) {
-                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
-            } else if (fe == 0) {
-                EvalPair(uc, depthLine_, nodeT_.data(), n, nodeU_[0].data(), nodeDepth_.data());
-            } else {
-                uc.EvalMany(nodeT_.data(), n, nodeU_[0].data());
-                EvalPair(ue, depthLine_, nodeT_.data(), n, nodeU_[1].data(), nodeDepth_.data());
-                ueAt = nodeU_[1].data();
+            if (cached == 0 || w.lo != cachedLo || w.hi != cachedHi) {
+                cached = 0;
+                cachedLo = w.lo;
+                cachedHi = w.hi;
             }
-            quadratureNodes_ += n;
-            nodeAtt_.resize(n);
-            double* att = nodeAtt_.data();
+            if (cached < n) {
+                const int first = cached, count = n - cached;
+                for (int i = first; i < n; ++i) nodeT[i] = m + half * rules.nodes[i];
+                double* ueAt = fe == 0 ? nodeU : nodeE;
+                // The vectorised evaluations where the build has them (bitwise the same).
+                auto many = [&](const LegendreSeries& p, double* out) {
+                    if (!EvalManyKernel(p, nodeT + first, count, out))
+                        p.EvalMany(nodeT + first, count, out);
+                };
+                auto pair = [&](const LegendreSeries& p, double* outP) {
+                    if (!EvalPairKernel(p, depthLine_, nodeT + first, count, outP,
+                                        nodeDepth + first))
+                        EvalPair(p, depthLine_, nodeT + first, count, outP,
+                                 nodeDepth + first);
+                };
+                if (be == 0) {
+                    many(uc, nodeU + first);
+                } else if (fe == 0) {
+                    pair(uc, nodeU + first);
+                } else {
+                    many(uc, nodeU + first);
+                    pair(ue, nodeE + first);
+                }
+                quadratureNodes_ += count;
+                for (int i = first; i < n; ++i) {
+                    const double dt = nodeT[i] - p0;
+                    att[i] = std::max(
+                        0.0, be != 0 ? tauM * dt + be * (nodeDepth[i] - v0) : tauM * dt);
+                }
+                ExpNegative(att + first, count, att + first);
+                for (int i = first; i < n; ++i) {
+                    const double tau = be != 0 ? ae + be * ueAt[i] : ae;
+                    tauMin = std::min(tauMin, tau);
+                    gq[i] = (nodeU[i] - c0) * (wm ? tau : 1.0) * att[i];
+                }
+                cached = n;
+            }
+            // Rung w.level: the result by rule L, its error estimated by rule L + 1.
+            const double* lower = rules.weights[w.level].data();
+            const double* upper = rules.weights[w.level + 1].data();
+            const int nLower = NestedQuadratureRules::Size(w.level);
+            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0;
+            for (int i = 0; i < nLower; ++i) {
+                qG += lower[i] * gq[i];
+                jG += lower[i] * att[i];
+            }
             for (int i = 0; i < n; ++i) {
-                const double dt = nodeT_[i] - p0;
-                att[i] = std::max(0.0, be != 0 ? tauM * dt + be * (nodeDepth_[i] - v0)
-                                               : tauM * dt);
+                qK += upper[i] * gq[i];
+                qAbs += upper[i] * std::abs(gq[i]);
+                jK += upper[i] * att[i];
             }
-            ExpNegative(att, n, att);
-            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0, jAbs = 0;
-            for (int i = 0; i < n; ++i) {
-                const double tau = be != 0 ? ae + be * ueAt[i] : ae;
-                tauMin = std::min(tauMin, tau);
-                const double gq = (nodeU_[0][i] - c0) * (wm ? tau : 1.0) * att[i];
-                qK += rule.kronrodWeights[i] * gq;
-                qG += rule.gaussWeights[i] * gq;
-                qAbs += rule.kronrodWeights[i] * std::abs(gq);
-                jK += rule.kronrodWeights[i] * att[i];
-                jG += rule.gaussWeights[i] * att[i];
-                jAbs += rule.kronrodWeights[i] * att[i];
-            }
+            const double jAbs = jK;
             const double sQ = half * (qK - qG), sJ = half * (jK - jG);
             const double estimate =
                 T * (1 + kKronrodMargin) * (wQmax * std::abs(sQ) + wJmax * std::abs(sJ));
@@ -1208,7 +1280,7 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             if (estimate > allowed && w.depth < kMaxKronrodDepth &&
                 evaluations < kMaxKronrodEvaluations) {
                 if (w.level < kTopLevel) {
-                    // Far from the budget: skip a level.
+                    // Far from the budget: skip a rung.
                     const int step = estimate > 1e6 * allowed ? 2 : 1;
                     stack_.push_back({w.lo, w.hi, w.depth, std::min(kTopLevel, w.level + step)});
                 } else {
@@ -1226,9 +1298,6 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             absJ += std::abs(sJ);
             magQ += half * qAbs;
             magJ += half * jAbs;
-            if (w.depth == 0)
-                levelHint_ = (estimate < 1e-6 * allowed && w.level > 0) ? w.level - 1
-                                                                        : w.level;
         }
     }
     if (!wm && !needJ) {

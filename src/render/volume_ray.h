@@ -279,12 +279,9 @@ class VolumeRayMarcher {
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
-    /// Gauss-Kronrod level that sufficed last (the start of the next piece's ladder).
-    int levelHint_ = 0;
     double quadratureNodes_ = 0;  ///< integrand samples not yet counted
     double fieldSamples_ = 0;     ///< field samples of the hexahedron kernel, not yet counted
     CellScratch cellScratch_;
-    std::vector<double> nodeT_, nodeU_[2], nodeDepth_, nodeAtt_;
     double constTau_ = 0, constColor_[3] = {0, 0, 0};
     /// The last transfer-function value LinearTetPiece computed at a piece's end: piece
     /// `piece` of the function at field value `value` (piece -2: none).
@@ -312,6 +309,9 @@ class VolumeRayMarcher {
     FieldState state_[2];
     SegmentField field_[2];
     std::vector<ProjectedPiece> pieces_[2];
+    /// Storage of the last exact series' coefficients (ProjectExact), reused without an
+    /// allocation per segment.
+    std::vector<double> spareCoefficients_[2];
     ProjectionStats projectionStats_;
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
@@ -321,7 +321,7 @@ class VolumeRayMarcher {
     struct Work {
         double lo, hi;
         int depth;
-        int level = 0;  ///< series mode: the Gauss-Kronrod level to apply
+        int level = 0;  ///< series mode: the rung of the nested ladder to apply
     };
     std::vector<Work> stack_;
     int kronrodIntervals_ = 0;

@@ -1,0 +1,114 @@
+// Legendre series at many points in AVX2 registers (see series_eval_kernel.h).
+#include "render/series_eval_kernel.h"
+
+#include <algorithm>
+
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#define HPRAY_SERIES_KERNEL 1
+#else
+#define HPRAY_SERIES_KERNEL 0
+#endif
+
+namespace hpray {
+
+#if HPRAY_SERIES_KERNEL
+namespace {
+
+/// LegendreSeries' recurrence P_k = A_k x P_{k-1} - B_k P_{k-2}: A_k = (2k - 1) / k and
+/// B_k = (k - 1) / k, rounded as legendre.cpp rounds them.
+constexpr int kMaxDegree = 2 * kMaxLegendreDegree + 3;
+struct Recurrence {
+    double a[kMaxDegree + 1] = {}, b[kMaxDegree + 1] = {};
+    constexpr Recurrence() {
+        for (int k = 2; k <= kMaxDegree; ++k) {
+            a[k] = double(2 * k - 1) / k;
+            b[k] = double(k - 1) / k;
+        }
+    }
+};
+constexpr Recurrence kRec{};
+
+/// Two vectors of four points: x = t scale - shift and v = c0 + c1 x (each product and
+/// sum rounded, as legendre.cpp's loops compile), then for k >= 2
+/// P_k = fma(A_k x, P_{k-1}, -(B_k P_{k-2})) and v = fma(c_k, P_k, v); w likewise for q
+/// when Pair.
+template <bool Pair>
+void Block(const LegendreSeries& p, const LegendreSeries* q, const double* t, int m,
+           double scale, double shift, double* outP, double* outQ) {
+    alignas(32) double tt[8];
+    for (int s = 0; s < 8; ++s) tt[s] = s < m ? t[s] : t[0];  // padding repeats the first
+    const int np = p.Degree(), nq = Pair ? q->Degree() : 0, n = std::max(np, nq);
+    const __m256d vs = _mm256_set1_pd(scale), vh = _mm256_set1_pd(shift);
+    __m256d x[2], p0[2], p1[2], v[2], w[2];
+    for (int h = 0; h < 2; ++h) {
+        x[h] = _mm256_sub_pd(_mm256_mul_pd(_mm256_load_pd(tt + 4 * h), vs), vh);
+        p0[h] = _mm256_set1_pd(1.0);
+        p1[h] = x[h];
+        v[h] = _mm256_set1_pd(p.c[0]);
+        if (np >= 1)
+            v[h] = _mm256_add_pd(v[h], _mm256_mul_pd(_mm256_set1_pd(p.c[1]), x[h]));
+        if (Pair) {
+            w[h] = _mm256_set1_pd(q->c[0]);
+            if (nq >= 1)
+                w[h] = _mm256_add_pd(w[h], _mm256_mul_pd(_mm256_set1_pd(q->c[1]), x[h]));
+        }
+    }
+    for (int k = 2; k <= n; ++k) {
+        const __m256d ak = _mm256_set1_pd(kRec.a[k]), bk = _mm256_set1_pd(kRec.b[k]);
+        const __m256d ck = _mm256_set1_pd(k <= np ? p.c[k] : 0.0);
+        const __m256d dk = _mm256_set1_pd(Pair && k <= nq ? q->c[k] : 0.0);
+        for (int h = 0; h < 2; ++h) {
+            const __m256d p2 =
+                _mm256_fmsub_pd(_mm256_mul_pd(ak, x[h]), p1[h], _mm256_mul_pd(bk, p0[h]));
+            v[h] = _mm256_fmadd_pd(ck, p2, v[h]);
+            if (Pair) w[h] = _mm256_fmadd_pd(dk, p2, w[h]);
+            p0[h] = p1[h];
+            p1[h] = p2;
+        }
+    }
+    alignas(32) double rv[8], rw[8];
+    for (int h = 0; h < 2; ++h) {
+        _mm256_store_pd(rv + 4 * h, v[h]);
+        if (Pair) _mm256_store_pd(rw + 4 * h, w[h]);
+    }
+    for (int s = 0; s < m; ++s) {
+        outP[s] = rv[s];
+        if (Pair) outQ[s] = rw[s];
+    }
+}
+
+}  // namespace
+
+bool EvalPairKernel(const LegendreSeries& p, const LegendreSeries& q, const double* t,
+                    int count, double* outP, double* outQ) {
+    if (p.a != q.a || p.b != q.b || p.c.empty() || q.c.empty() ||
+        std::max(p.Degree(), q.Degree()) > kMaxDegree)
+        return false;
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    for (int s0 = 0; s0 < count; s0 += 8)
+        Block<true>(p, &q, t + s0, std::min(8, count - s0), scale, shift, outP + s0,
+                    outQ + s0);
+    return true;
+}
+
+bool EvalManyKernel(const LegendreSeries& p, const double* t, int count, double* out) {
+    if (p.c.empty() || p.Degree() > kMaxDegree) return false;
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    for (int s0 = 0; s0 < count; s0 += 8)
+        Block<false>(p, nullptr, t + s0, std::min(8, count - s0), scale, shift, out + s0,
+                     nullptr);
+    return true;
+}
+
+#else
+
+bool EvalPairKernel(const LegendreSeries&, const LegendreSeries&, const double*, int,
+                    double*, double*) {
+    return false;
+}
+bool EvalManyKernel(const LegendreSeries&, const double*, int, double*) { return false; }
+
+#endif
+
+}  // namespace hpray
