@@ -203,7 +203,8 @@ namespace {
 // (sample-fastest, i * padded + s), built from the Silvester factors for all samples at
 // once (vectorised over s): L(i, s) = A_i(s) B_{p-i}(s), B built in place, A in a rolling
 // row `a`.
-void LagrangeRows(int p, const double* x, int padded, double* L, double* a) {
+[[gnu::always_inline]] inline void LagrangeRows(int p, const double* x, int padded,
+                                                double* L, double* a) {
     for (int s = 0; s < padded; ++s) L[s] = 1;
     for (int m = 0; m < p; ++m) {
         const double inv = kInverse[m];
@@ -223,6 +224,33 @@ void LagrangeRows(int p, const double* x, int padded, double* L, double* a) {
             for (int s = 0; s < padded; ++s) a[s] *= (p * x[s] - i) * inv;
         }
     }
+}
+
+// LagrangeRows with the order and the padded count known at compile time (the same
+// operations: bitwise the same rows), for the counts of the adaptive projections.
+template <int P, int S>
+void LagrangeRowsFixed(const double* x, double* L, double* a) {
+    LagrangeRows(P, x, S, L, a);
+}
+using RowsKernel = void (*)(const double*, double*, double*);
+template <int S>
+constexpr RowsKernel kRows[kMaxOrder + 1] = {nullptr,
+                                             &LagrangeRowsFixed<1, S>,
+                                             &LagrangeRowsFixed<2, S>,
+                                             &LagrangeRowsFixed<3, S>,
+                                             &LagrangeRowsFixed<4, S>,
+                                             &LagrangeRowsFixed<5, S>,
+                                             &LagrangeRowsFixed<6, S>,
+                                             &LagrangeRowsFixed<7, S>,
+                                             &LagrangeRowsFixed<8, S>,
+                                             &LagrangeRowsFixed<9, S>,
+                                             &LagrangeRowsFixed<10, S>};
+constexpr RowsKernel SmallRows(int p, int padded) {
+    return padded == 4    ? kRows<4>[p]
+           : padded == 8  ? kRows<8>[p]
+           : padded == 12 ? kRows<12>[p]
+           : padded == 16 ? kRows<16>[p]
+                          : nullptr;
 }
 
 // Compile-time kernels for small padded sample counts (the adaptive projections of curved
@@ -255,7 +283,12 @@ void ContractSamples(int p, const double* u, const double* xs, int count, int pa
     const int n = p + 1;
     double* L[3] = {scratch, scratch + n * padded, scratch + 2 * n * padded};
     double* result = scratch + 3 * n * padded;
-    for (int d = 0; d < 3; ++d) LagrangeRows(p, xs + d * padded, padded, L[d], result);
+    if (const RowsKernel rows = SmallRows(p, padded)) {
+        for (int d = 0; d < 3; ++d) rows(xs + d * padded, L[d], result);
+    } else {
+        for (int d = 0; d < 3; ++d)
+            LagrangeRows(p, xs + d * padded, padded, L[d], result);
+    }
     if (count == 3 * p + 1) {
         kExactKernels[p](u, L[0], L[1], L[2], result);
     } else if (const Kernel k = SmallKernel(p, padded)) {
