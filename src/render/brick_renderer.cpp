@@ -249,6 +249,8 @@ class RayIntegrator {
 
     std::vector<Segment> segments_;
     std::vector<SegmentEnds> ends_;  ///< per segment, when the volume uses them
+    std::vector<SegmentSeed> seeds_;     ///< per segment, when the isosurfaces use them
+    const SegmentSeed* seed_ = nullptr;  ///< the current segment's, if any
     SegmentField field_;
     std::vector<std::vector<ProjectedPiece>> pieces_;  ///< per field
     std::vector<char> fieldUsed_;
@@ -355,10 +357,16 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         costSamples ? CostClock::now() : CostClock::time_point{};
     // Linear tetrahedra take their volume fields from the face points of the walk.
     const bool facePoints = hasVolume && setup.traverser->FacePoints();
+    // Isosurfaces on bilinear or curved faces: the face parameters where the ray enters
+    // and leaves each cell start the inversions of the cell map there.
+    std::vector<SegmentSeed>* seeds =
+        !setup.isos.empty() && setup.traverser->HasSeeds() ? &seeds_ : nullptr;
+    if (!seeds) seeds_.clear();
     if (setup.isoCells)
-        setup.traverser->Trace(ray, tMin, tMax, segments_, *setup.isoCells);
+        setup.traverser->Trace(ray, tMin, tMax, segments_, *setup.isoCells, seeds);
     else
-        setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr);
+        setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr,
+                               seeds);
     counters.segments += static_cast<double>(segments_.size());
     SegmentCostRecorder recorder(
         costSamples, ray, segments_,
@@ -417,6 +425,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         }
         volumeSeen |= volumeHere;
         fieldLoaded_ = -1;
+        seed_ = seeds_.empty() ? nullptr : &seeds_[si];
         const double cutoff =
             isoHere ? IsoSource(setup, ray, seg, span, counters)
                     : std::numeric_limits<double>::infinity();
@@ -528,9 +537,12 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
             if (!any) continue;
             // The second pass over the same field keeps the first's set-up and the points it
             // inverted (Newton's predictor).
-            if (fieldLoaded_ != int(f))
+            if (fieldLoaded_ != int(f)) {
                 field_.Begin(*setup.fieldData[f], *setup.geometry, setup.fields[f], seg.cell,
                              ray, setup.inversion);
+                if (seed_)
+                    field_.Seed(seed_->tEnter, seed_->enter, seed_->tExit, seed_->exit);
+            }
             fieldLoaded_ = int(f);
             if (fieldUsed_[f] == 1) {  // project once per field and segment
                 fieldUsed_[f] = 2;

@@ -336,6 +336,7 @@ void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, con
     affine_ = cell_->affine && cell_->linearInvertible;
     exact_ = affine_ && cell_->basis->polynomial;
     histCount_ = 0;
+    seedCount_ = 0;
     contraction_ = 0;
     if (affine_) {
         // ref(t) = L^-1 (o + t d - origin): linear in t.
@@ -367,6 +368,23 @@ void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
         scalar_.constant = ScalarValue(field, c);
     }
     lineDegree_ = scalar_.nodal ? cell_->basis->lineDegree : 0;
+}
+
+void SegmentField::Seed(double tEnter, const double enter[3], double tExit,
+                        const double exit[3]) {
+    seedCount_ = 0;
+    if (affine_) return;
+    const double* refs[2] = {enter, exit};
+    const double ts[2] = {tEnter, tExit};
+    for (int k = 0; k < 2; ++k) {
+        if (!(std::isfinite(refs[k][0]) && std::isfinite(refs[k][1]) &&
+              std::isfinite(refs[k][2])))
+            continue;
+        seedT_[seedCount_] = ts[k];
+        seedReach_ = 1e-9 * std::abs(tExit - tEnter);
+        for (int d = 0; d < 3; ++d) seedRef_[seedCount_][d] = refs[k][d];
+        ++seedCount_;
+    }
 }
 
 void SegmentField::RefAt(double t, double ref[3]) {
@@ -453,6 +471,11 @@ void SegmentField::RefAt(double t, double ref[3]) {
             start[i] = histRef_[0][i] + (t - histT_[0]) * histSlope_[0][i];
         options.initialGuess = start;
     }
+    // At a seeded end of the segment (within rounding of it), the cell's point on the
+    // face the ray crosses there starts Newton: far closer than an extrapolation or the
+    // affine guess.
+    for (int k = 0; k < seedCount_; ++k)
+        if (std::abs(t - seedT_[k]) <= seedReach_) options.initialGuess = seedRef_[k];
     // Newton's contraction measured in this cell along this ray, with a margin of 4.
     options.contraction = 4 * contraction_;
     // Curved hexahedra and tetrahedra from a predicted start: the common path of
@@ -513,7 +536,14 @@ void SegmentField::SampleBatch(const double* t, int n, double* out) {
             // Invert the points in order along the ray (each warm-starts the next), then
             // evaluate them together.
             double* refs = batchScratch_.data() + HexLineScratchSize(p, n);
-            for (int s = 0; s < n; ++s) RefAt(t[s], refs + 3 * s);
+            if (seedCount_ > 0 && n > 2) {
+                // The seeded ends first: the points between are then interpolated.
+                RefAt(t[0], refs);
+                RefAt(t[n - 1], refs + 3 * (n - 1));
+                for (int s = 1; s < n - 1; ++s) RefAt(t[s], refs + 3 * s);
+            } else {
+                for (int s = 0; s < n; ++s) RefAt(t[s], refs + 3 * s);
+            }
             HexFieldValuesAt(p, scalar_.nodal, refs, n, out, batchScratch_.data());
         }
         evaluations_ += n;

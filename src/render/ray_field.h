@@ -99,6 +99,10 @@ public:
     /// The field at n ray parameters t[s] into out[s] (batched: sum-factorised for affine
     /// Lagrange hexahedra).
     void SampleBatch(const double* t, int n, double* out);
+    /// Reference points of this segment's cell at ray parameters tEnter and tExit (NaN
+    /// where unknown), from the traversal's face crossings: the starting guesses of the
+    /// inversions there. Cleared by Begin.
+    void Seed(double tEnter, const double enter[3], double tExit, const double exit[3]);
     /// Value and world gradient at t; returns false where the Jacobian is singular.
     bool ValueGradient(double t, double& value, double gradient[3]);
 
@@ -147,6 +151,11 @@ private:
     double histRef_[kHistory][3];
     double histSlope_[kHistory][3];
     int histCount_ = 0;
+    // Seed(): up to two guesses (t, ref) for inversions near the segment's ends.
+    double seedT_[2] = {0, 0};
+    double seedRef_[2][3];
+    int seedCount_ = 0;
+    double seedReach_ = 0;    ///< how near t must be to a seed's to use it
     double contraction_ = 0;  ///< largest Newton contraction measured in this segment
     EvalWorkspace ws_;
     std::vector<double> batchScratch_;

@@ -57,7 +57,35 @@ struct FaceRec {
     std::int32_t cell[2] = {-1, -1};
     std::int32_t curved = -1;
     FaceKind kind = FaceKind::Triangle;
+    // For each side s (the cell cell[s]): the local corners at the face parameters
+    // (0, 0), (1, 0) and (0, 1) of its crossings, 3 bits each at bit 9 s, and bit 18 + s
+    // when set (SegmentSeed). In the struct's padding.
+    std::uint8_t seed[3] = {0, 0, 0};
 };
+static_assert(sizeof(FaceRec) == 32);
+
+void SetSeedCorners(FaceRec& rec, int side, int c0, int c1, int c2) {
+    std::uint32_t bits =
+        rec.seed[0] | std::uint32_t(rec.seed[1]) << 8 | std::uint32_t(rec.seed[2]) << 16;
+    bits &= ~(std::uint32_t(0x1ff) << (9 * side));
+    bits |= std::uint32_t(c0 | c1 << 3 | c2 << 6) << (9 * side) | 1u << (18 + side);
+    for (int k = 0; k < 3; ++k) rec.seed[k] = std::uint8_t(bits >> (8 * k));
+}
+
+// Cells whose reference coordinates of a face point are the affine image of the face
+// parameters (pyramids collapse a face onto the apex), and that need them (a linear
+// tetrahedron's map is inverted in closed form).
+bool SeedShape(CellShape shape, int order) {
+    return shape != CellShape::Pyramid && !(shape == CellShape::Tet && order == 1);
+}
+
+bool SeedCorners(const FaceRec& rec, int side, int corner[3]) {
+    const std::uint32_t bits =
+        rec.seed[0] | std::uint32_t(rec.seed[1]) << 8 | std::uint32_t(rec.seed[2]) << 16;
+    if (!(bits >> (18 + side) & 1)) return false;
+    for (int k = 0; k < 3; ++k) corner[k] = bits >> (9 * side + 3 * k) & 7;
+    return true;
+}
 
 struct CurvedRec {
     std::int64_t nodeStart = 0;  // into curvedNodes: the node lattice, j-major
@@ -75,6 +103,10 @@ struct Crossing {
     double t;
     std::int32_t face;
     std::int32_t side;
+    // Face parameters of the crossing (bilinear and curved faces; else NaN): a
+    // SegmentSeed.
+    double u = std::numeric_limits<double>::quiet_NaN();
+    double v = std::numeric_limits<double>::quiet_NaN();
 };
 
 // The crossings of a curved face for one ray, kept for the face's other cell (the walk
@@ -92,6 +124,7 @@ struct Scratch {
     std::vector<Crossing> cell;
     std::vector<std::int64_t> candidates;  // cells whose box holds a located point
     std::vector<trace::FaceCrossing> face;
+    std::vector<std::pair<Segment, SegmentSeed>> seeded;  // sorting filtered segments
     std::uint64_t ray = 0;  // id of the current Trace call on this thread
     CurvedCacheEntry cache[8];
     int cacheNext = 0;
@@ -402,11 +435,28 @@ struct BrickTraverser::Impl {
     // (then ForEachPair returns true).
     template <typename Visit>
     bool ForEachPair(std::int64_t c, const RayFrame& frame, Visit&& visit) const;
+    /// The reference point of cell c at crossing x (SegmentSeed), or NaN.
+    void SeedRef(const Crossing& x, std::int64_t c, double ref[3]) const {
+        ref[0] = ref[1] = ref[2] = std::numeric_limits<double>::quiet_NaN();
+        if (!(x.u == x.u)) return;
+        const FaceRec& rec = faces[x.face];
+        const int side = rec.cell[0] == c ? 0 : rec.cell[1] == c ? 1 : -1;
+        int corner[3];
+        if (side < 0 || !SeedCorners(rec, side, corner)) return;
+        const CellTopology& topo = Topology(brick.mesh->cellShape[c]);
+        const int* a = topo.lattice[corner[0]];
+        const int* b = topo.lattice[corner[1]];
+        const int* d = topo.lattice[corner[2]];
+        for (int k = 0; k < 3; ++k)
+            ref[k] = a[k] + x.u * (b[k] - a[k]) + x.v * (d[k] - a[k]);
+    }
     // Appends to `out` the segments of cell c in [tLo, tHi]: its faces' crossings paired
     // as FindExit pairs them. False when some crossing found no partner (a cell that does
     // not close up: non-conforming neighbours), where the walk would repair its way.
+    // With seeds: one per segment appended.
     bool CellSegments(std::int64_t c, const RayFrame& frame, double tLo, double tHi,
-                      std::vector<Segment>& out) const;
+                      std::vector<Segment>& out,
+                      std::vector<SegmentSeed>* seeds = nullptr) const;
 };
 
 // ---------------------------------------------------------------------------------------
@@ -953,6 +1003,10 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
         }
         return true;
     };
+    // Whether any cell takes seeds (none in a mesh of linear tetrahedra alone).
+    bool seedCells = false;
+    for (std::int64_t c = 0; c < nCells && !seedCells; ++c)
+        seedCells = SeedShape(mesh.cellShape[c], mesh.cellOrder[c]);
     // Merged ids of cell c's nodes on the lattice of one of its faces, row by row from
     // the face corner at local corner canonLocal[0] (-1: a serendipity face centre).
     auto faceLattice = [&](std::int64_t c, const int* canonLocal, int n, int p,
@@ -1035,6 +1089,31 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                 rec.cell[same2 ? 0 : 1] = nb;
             }
             const int p = mesh.cellOrder[c];
+            // Seeds: each side's local corners at the face parameters (0, 0), (1, 0) and
+            // (0, 1) (canonical corners 0, 1 and the last: the lattice of faceLattice,
+            // the net of FaceBernstein and the patch of IntersectBilinearPatch alike).
+            // Nothing for two linear tetrahedra (most faces of a large tetrahedral mesh).
+            const int last = n - 1;
+            if (seedCells && SeedShape(mesh.cellShape[c], p)) {
+                int local0[4];
+                for (int k = 0; k < n; ++k)
+                    for (int q = 0; q < n; ++q)
+                        if (ids[q] == canon[k]) local0[k] = local[q];
+                SetSeedCorners(rec, rec.cell[0] == c ? 0 : 1, local0[0], local0[1],
+                               local0[last]);
+            }
+            if (seedCells && nb >= 0 &&
+                SeedShape(mesh.cellShape[nb], mesh.cellOrder[nb])) {
+                std::int32_t ids2[4];
+                int local2[4], nbLocal[4] = {-1, -1, -1, -1};
+                outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                for (int k = 0; k < n; ++k)
+                    for (int q = 0; q < n; ++q)
+                        if (ids2[q] == canon[k]) nbLocal[k] = local2[q];
+                if (nbLocal[0] >= 0 && nbLocal[1] >= 0 && nbLocal[last] >= 0)
+                    SetSeedCorners(rec, rec.cell[0] == nb ? 0 : 1, nbLocal[0], nbLocal[1],
+                                   nbLocal[last]);
+            }
             if (n == 3 && p == 1) {
                 rec.kind = FaceKind::Triangle;  // a straight triangle: nothing to measure
                 continue;
@@ -1427,7 +1506,9 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
             const ShearedPoint a = frame.Transform(P(rec.v[0]));
             const ShearedPoint b = frame.Transform(P(rec.v[1]));
             const ShearedPoint c = frame.Transform(P(rec.v[2]));
-            if (CrossTriangle(a, b, c, x)) out.push_back({x.t, f, x.side});
+            // (u, v) at corners 0, 1, 2: the barycentric weights of corners 1 and 2.
+            if (CrossTriangle(a, b, c, x))
+                out.push_back({x.t, f, x.side, x.bary[1], x.bary[2]});
             return;
         }
         case FaceKind::PlanarQuad: {
@@ -1435,8 +1516,12 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
             const ShearedPoint b = frame.Transform(P(rec.v[1]));
             const ShearedPoint c = frame.Transform(P(rec.v[2]));
             const ShearedPoint d = frame.Transform(P(rec.v[3]));
-            if (CrossTriangle(a, b, c, x)) out.push_back({x.t, f, x.side});
-            if (CrossTriangle(a, c, d, x)) out.push_back({x.t, f, x.side});
+            // (u, v) of the bilinear parametrisation at the triangles' corners (exact for
+            // a parallelogram), as for the bilinear faces below.
+            if (CrossTriangle(a, b, c, x))
+                out.push_back({x.t, f, x.side, x.bary[1] + x.bary[2], x.bary[2]});
+            if (CrossTriangle(a, c, d, x))
+                out.push_back({x.t, f, x.side, x.bary[1], x.bary[1] + x.bary[2]});
             return;
         }
         case FaceKind::BilinearQuad: {
@@ -1486,12 +1571,16 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
                         best = r;
                     }
                 }
-                const double t = best >= 0 && bestOut <= 1e-6 ? roots[best].t : ht[0];
-                out.push_back({t, f, hs[0]});
+                const bool root = best >= 0 && bestOut <= 1e-6;
+                out.push_back({root ? roots[best].t : ht[0], f, hs[0],
+                               root ? roots[best].u : hu[0],
+                               root ? roots[best].v : hv[0]});
             } else {
                 if (ht[1] < ht[0]) {
                     std::swap(ht[0], ht[1]);
                     std::swap(hs[0], hs[1]);
+                    std::swap(hu[0], hu[1]);
+                    std::swap(hv[0], hv[1]);
                 }
                 // Both tessellation triangles crossed (the ray grazes the fold of the
                 // face): the patch is crossed twice or not at all. Use its roots only if
@@ -1501,11 +1590,15 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
                 };
                 if (nr == 2 && onPatch(roots[0]) && onPatch(roots[1])) {
                     const bool swap = roots[1].t < roots[0].t;
-                    ht[0] = roots[swap ? 1 : 0].t;
-                    ht[1] = roots[swap ? 0 : 1].t;
+                    for (int k = 0; k < 2; ++k) {
+                        const trace::PatchRoot& r = roots[swap ? 1 - k : k];
+                        ht[k] = r.t;
+                        hu[k] = r.u;
+                        hv[k] = r.v;
+                    }
                 }
-                out.push_back({ht[0], f, hs[0]});
-                out.push_back({ht[1], f, hs[1]});
+                out.push_back({ht[0], f, hs[0], hu[0], hv[0]});
+                out.push_back({ht[1], f, hs[1], hu[1], hv[1]});
             }
             return;
         }
@@ -1557,14 +1650,15 @@ void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame&
     xs.clear();
     const int failures = trace::CrossCurvedFace(face, frame, opts, xs);
     if (failures > 0) newtonFailures.fetch_add(failures, std::memory_order_relaxed);
-    for (const auto& x : xs) out.push_back({x.t, f, x.side});
+    for (const auto& x : xs) out.push_back({x.t, f, x.side, x.u, x.v});
     if (xs.size() <= 4) {
         CurvedCacheEntry& e = s.cache[s.cacheNext];
         s.cacheNext = (s.cacheNext + 1) % 8;
         e.ray = s.ray;
         e.face = f;
         e.count = static_cast<std::int32_t>(xs.size());
-        for (std::size_t k = 0; k < xs.size(); ++k) e.x[k] = {xs[k].t, f, xs[k].side};
+        for (std::size_t k = 0; k < xs.size(); ++k)
+            e.x[k] = {xs[k].t, f, xs[k].side, xs[k].u, xs[k].v};
     }
 }
 
@@ -1707,14 +1801,24 @@ bool BrickTraverser::Impl::ForEachPair(std::int64_t c, const RayFrame& frame,
 }
 
 bool BrickTraverser::Impl::CellSegments(std::int64_t c, const RayFrame& frame, double tLo,
-                                        double tHi, std::vector<Segment>& out) const {
+                                        double tHi, std::vector<Segment>& out,
+                                        std::vector<SegmentSeed>* seeds) const {
     std::size_t pairs = 0;
     ForEachPair(c, frame, [&](const Crossing& in, const Crossing& exit) {
         ++pairs;
         // As the walk: the exit no earlier than the entry.
         const double tIn = in.t, tOut = std::max(exit.t, tIn);
         const double a = std::max(tIn, tLo), b = std::min(tOut, tHi);
-        if (a < b) out.push_back({c, a, b});
+        if (a < b) {
+            out.push_back({c, a, b});
+            if (seeds) {
+                SegmentSeed& sd = seeds->emplace_back();
+                sd.tEnter = in.t;
+                sd.tExit = exit.t;
+                SeedRef(in, c, sd.enter);
+                SeedRef(exit, c, sd.exit);
+            }
+        }
         return false;
     });
     return 2 * pairs == tScratch.cell.size();
@@ -1783,7 +1887,7 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
             const ShearedPoint b = frame.Transform(P(rec.v[1]));
             const ShearedPoint d = frame.Transform(P(rec.v[2]));
             if (!CrossTriangle(a, b, d, x)) continue;
-            const Crossing cand{x.t, f, x.side};
+            const Crossing cand{x.t, f, x.side, x.bary[1], x.bary[2]};
             if (Leaves(cand, c)) {
                 exit = cand;
                 if (exitPoint && meshPointIds)
@@ -1892,11 +1996,16 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     Trace(ray, tMin, tMax, out, nullptr);
 }
 
+bool BrickTraverser::HasSeeds() const {
+    return impl_->stats.bilinearFaces + impl_->stats.curvedFaces > 0;
+}
+
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
-                           std::vector<Segment>& out,
-                           std::vector<SegmentEnds>* ends) const {
+                           std::vector<Segment>& out, std::vector<SegmentEnds>* ends,
+                           std::vector<SegmentSeed>* seeds) const {
     out.clear();
     if (ends) ends->clear();
+    if (seeds) seeds->clear();
     const Impl& im = *impl_;
     RaySpan span{tMin, tMax};
     if (!(tMin <= tMax) || !ClipRayToBox(ray, im.brick.box, span)) return;
@@ -1950,6 +2059,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     auto walkOnce = [&](std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
                         const Crossing& entry) {
         int zeroSteps = 0;
+        Crossing in = entry;  // the crossing the walk entered c by
         if (ends) {
             ends->emplace_back();
             im.EntryPoint(entry, frame, ends->back().enter);
@@ -1970,6 +2080,13 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                 g.cell = c;
                 g.tEnter = a;
                 g.tExit = b;
+                if (seeds) {
+                    SegmentSeed& sd = seeds->emplace_back();
+                    sd.tEnter = in.t;
+                    sd.tExit = ex.t;
+                    im.SeedRef(in, c, sd.enter);
+                    im.SeedRef(ex, c, sd.exit);
+                }
                 if (pending) {
                     // The kept segment's ends (an entry is only valid with its exit),
                     // and the next pending one entered where this one leaves.
@@ -1995,6 +2112,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             c = next;
             entryFace = ex.face;
             entryT = ex.t;
+            in = ex;
             tIn = tOut;
         }
     };
@@ -2080,8 +2198,10 @@ std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
 }
 
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
-                           std::vector<Segment>& out, const CellFilter& filter) const {
+                           std::vector<Segment>& out, const CellFilter& filter,
+                           std::vector<SegmentSeed>* seeds) const {
     out.clear();
+    if (seeds) seeds->clear();
     const Impl& im = *impl_;
     HPRAY_CHECK(filter.owner == &im);
     RaySpan span{tMin, tMax};
@@ -2094,22 +2214,41 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
     bool closed = true;
     for (std::int64_t i : cand)
-        closed = im.CellSegments(filter.cells[i], frame, tLo, tHi, out) && closed;
+        closed = im.CellSegments(filter.cells[i], frame, tLo, tHi, out, seeds) && closed;
     if (!closed) {
         // A kept cell whose crossings do not pair up: the walk (with its repairs) decides
         // this ray, and its segments of the kept cells are the answer.
         im.unpairedRays.fetch_add(1, std::memory_order_relaxed);
         std::vector<Segment> all;
-        Trace(ray, tMin, tMax, all);
+        std::vector<SegmentSeed> allSeeds;
+        Trace(ray, tMin, tMax, all, nullptr, seeds ? &allSeeds : nullptr);
         out.clear();
-        for (const Segment& g : all)
-            if (filter.keep[g.cell]) out.push_back(g);
+        if (seeds) seeds->clear();
+        for (std::size_t k = 0; k < all.size(); ++k)
+            if (filter.keep[all[k].cell]) {
+                out.push_back(all[k]);
+                if (seeds) seeds->push_back(allSeeds[k]);
+            }
         return;
     }
-    std::sort(out.begin(), out.end(), [](const Segment& a, const Segment& b) {
+    auto before = [](const Segment& a, const Segment& b) {
         if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
         return a.cell < b.cell;
-    });
+    };
+    if (!seeds) {
+        std::sort(out.begin(), out.end(), before);
+        return;
+    }
+    // The seeds in the segments' order.
+    std::vector<std::pair<Segment, SegmentSeed>>& both = tScratch.seeded;
+    both.clear();
+    for (std::size_t k = 0; k < out.size(); ++k) both.push_back({out[k], (*seeds)[k]});
+    std::sort(both.begin(), both.end(),
+              [&](const auto& a, const auto& b) { return before(a.first, b.first); });
+    for (std::size_t k = 0; k < out.size(); ++k) {
+        out[k] = both[k].first;
+        (*seeds)[k] = both[k].second;
+    }
 }
 
 }  // namespace hpray

@@ -115,6 +115,17 @@ struct SegmentEnds {
     FacePoint enter, exit;
 };
 
+/// Where a segment's ray enters and leaves its cell (at ray parameters tEnter and tExit,
+/// those of the face crossings: a clipped segment starts or ends elsewhere), in the
+/// cell's reference coordinates from the face parameters of the crossings (faces of
+/// hexahedra, tetrahedra and wedges other than the straight triangles of linear cells);
+/// NaN where unknown. A starting guess for inverting the cell map there: exact for the
+/// face the crossing was computed on, and within the face's own tolerance for curved
+/// faces (for planar quadrilaterals other than parallelograms, an approximation).
+struct SegmentSeed {
+    double tEnter, enter[3], tExit, exit[3];
+};
+
 /// Ray caster of one brick. Built once (adjacency over faces matched by merged corner
 /// positions, and an Embree scene over the boundary faces), then queried from any number
 /// of threads.
@@ -179,13 +190,18 @@ class BrickTraverser {
     /// where a planar tetrahedron was walked from face to face and the brick's points
     /// are its mesh's (FacePoints() is true); the segments are those of the plain Trace.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
-               std::vector<SegmentEnds>* ends) const;
+               std::vector<SegmentEnds>* ends,
+               std::vector<SegmentSeed>* seeds = nullptr) const;
     /// The segments of the cells of `filter` only (built by this traverser), in [tMin,
     /// tMax] sorted by t: for each cell whose box the ray meets, its faces' crossings
     /// paired as the walk pairs them, so a segment is the walk's segment of that cell
     /// (without walking the cells in between). Thread-safe.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
-               const CellFilter& filter) const;
+               const CellFilter& filter, std::vector<SegmentSeed>* seeds = nullptr) const;
+    /// Whether the brick has faces whose crossings give SegmentSeeds (bilinear or
+    /// curved faces): the `seeds` of the Trace calls above (one per segment) are then
+    /// worth asking for.
+    bool HasSeeds() const;
     /// A filter of the cells c with keep[c] != 0 (keep has one entry per cell).
     std::shared_ptr<const CellFilter> MakeCellFilter(
         const std::vector<std::uint8_t>& keep) const;

@@ -12,6 +12,8 @@
 #include <random>
 #include <string>
 
+#include "elements/geometry.h"
+#include "elements/mesh_geometry.h"
 #include "mesh/builtin.h"
 #include "trace/brick_traverser.h"
 #include "trace_test_meshes.h"
@@ -1261,6 +1263,81 @@ TEST(BrickTraverser, FilteredTraceGivesTheWalksSegmentsOfTheKeptCells) {
             total += segs.size();
         }
         EXPECT_GT(total, 2000u) << name;
+    }
+}
+
+}  // namespace
+}  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// A segment's seeds are its cell's reference points where the ray crosses the faces: the
+// cell's own map (not the face nets or patches the crossings were computed on) takes
+// them to the ray's points at the crossings, to rounding, on bilinear and curved faces
+// and triangles; on the jittered mixed mesh's planar quadrilaterals, which are not
+// parallelograms, the triangles' parameters are an approximation (within 2% of the mesh
+// size, where a wrong corner would be a cell size, 1/6, off). The filter's seeds are the
+// walk's.
+TEST(BrickTraverser, SegmentSeedsMapToTheRaysCrossingPoints) {
+    std::vector<std::pair<std::string, Mesh>> meshes = StartMeshes();
+    meshes.emplace_back("curved q4 hexes", testing::CurvedHexesWithFieldX(0.05, 4));
+    for (const auto& [name, mesh] : meshes) {
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        const MeshGeometry geometry = MeshGeometry::Build(mesh);
+        const Box box = Brick::WholeMesh(mesh).box;
+        const double size = box.Diagonal();
+        const auto filter =
+            tr.MakeCellFilter(std::vector<std::uint8_t>(mesh.CellCount(), 1));
+        std::mt19937_64 rng(47);
+        std::vector<Segment> segs, filtered;
+        std::vector<SegmentSeed> seeds, filteredSeeds;
+        CellScratch scratch;
+        EvalWorkspace ws;
+        double worst = 0;
+        std::size_t ends = 0, seeded = 0;
+        for (int i = 0; i < 1500; ++i) {
+            const Ray ray = RayIntoBox(box, i, rng);
+            tr.Trace(ray, -INFINITY, INFINITY, segs, nullptr, &seeds);
+            tr.Trace(ray, -INFINITY, INFINITY, filtered, *filter, &filteredSeeds);
+            ASSERT_EQ(seeds.size(), segs.size()) << name;
+            ASSERT_EQ(filtered.size(), segs.size()) << name;
+            ASSERT_EQ(filteredSeeds.size(), segs.size()) << name;
+            for (std::size_t k = 0; k < segs.size(); ++k) {
+                const SegmentSeed& sd = seeds[k];
+                const CellShape shape = mesh.cellShape[segs[k].cell];
+                const bool linearTet =
+                    shape == CellShape::Tet && mesh.cellOrder[segs[k].cell] == 1;
+                for (int e = 0; e < 2; ++e) {
+                    const double* ref = e == 0 ? sd.enter : sd.exit;
+                    const double t = e == 0 ? sd.tEnter : sd.tExit;
+                    const double* other =
+                        e == 0 ? filteredSeeds[k].enter : filteredSeeds[k].exit;
+                    if (shape != CellShape::Pyramid && !linearTet) ends += 1;
+                    if (!std::isfinite(ref[0])) {
+                        EXPECT_FALSE(std::isfinite(other[0])) << name;
+                        continue;
+                    }
+                    seeded += 1;
+                    for (int d = 0; d < 3; ++d) EXPECT_EQ(ref[d], other[d]) << name;
+                    double world[3];
+                    WorldFromRef(geometry.Cell(segs[k].cell, scratch), ref, ws, world,
+                                 nullptr);
+                    double dist = 0;
+                    for (int d = 0; d < 3; ++d)
+                        dist = std::max(
+                            dist, std::abs(world[d] - (ray.origin[d] + t * ray.dir[d])));
+                    worst = std::max(worst, dist / size);
+                }
+            }
+        }
+        SCOPED_TRACE(name);
+        EXPECT_LE(worst, name == "mixed" ? 2e-2 : 1e-9);
+        // Seeds wherever a cell needs them: every end in a hexahedron, a wedge or a
+        // curved tetrahedron (not in pyramids, nor linear tetrahedra, whose maps are
+        // inverted in closed form).
+        EXPECT_GT(ends, 1000u);
+        EXPECT_GE(seeded, ends * 95 / 100);
     }
 }
 
