@@ -354,35 +354,33 @@ LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
     return s;
 }
 
-void InterpolateLgl(const double* values, int n, double a, double b, LegendreSeries& s) {
-    const LglRule& rule = LglNodes(n);
+namespace {
+// The series of degree n on [a, b] whose coefficients are the transform applied to the
+// values: c += value_i * row i of transformByNode (vectorised over k, the sums in a local
+// array the compiler keeps in registers; rows padded to whole vectors).
+void ApplyTransform(const std::vector<double>& transformByNode, int stride,
+                    const double* values, int n, double a, double b, LegendreSeries& s) {
     s.a = a;
     s.b = b;
-    // c += value_i * column i of the transform (vectorised over k, the sums in a local
-    // array the compiler keeps in registers; rows padded to whole vectors).
-    const int stride = rule.transformStride;
     double c[kMaxLegendreDegree + 4] = {};
-    const double* m = rule.transformByNode.data();
+    const double* m = transformByNode.data();
     for (int i = 0; i <= n; ++i, m += stride) {
         const double v = values[i];
         for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);
     }
     s.c.assign(c, c + n + 1);
 }
+}  // namespace
+
+void InterpolateLgl(const double* values, int n, double a, double b, LegendreSeries& s) {
+    const LglRule& rule = LglNodes(n);
+    ApplyTransform(rule.transformByNode, rule.transformStride, values, n, a, b, s);
+}
 
 void InterpolateChebyshevLobatto(const double* values, int n, double a, double b,
                                  LegendreSeries& s) {
     const ChebyshevLobattoRule& rule = ChebyshevLobattoNodes(n);
-    s.a = a;
-    s.b = b;
-    const int stride = rule.transformStride;
-    double c[kMaxLegendreDegree + 4] = {};
-    const double* m = rule.transformByNode.data();
-    for (int i = 0; i <= n; ++i, m += stride) {
-        const double v = values[i];
-        for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);
-    }
-    s.c.assign(c, c + n + 1);
+    ApplyTransform(rule.transformByNode, rule.transformStride, values, n, a, b, s);
 }
 
 LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,

@@ -202,6 +202,22 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                            ? ChebyshevLobattoNodes(N).nodes[j]
                            : std::sin(M_PI * double(2 * j - N) / double(2 * N));
             };
+            // The largest |f - p| (p: piece.p, of degree n) at about four nodes of level
+            // 2n, each halfway in angle between two of level n's.
+            auto measure = [&](int n) {
+                const int checks = std::min(n, 4);
+                for (int k = 0; k < checks; ++k) {
+                    const int i = (2 * k + 1) * n / (2 * checks);
+                    ts[k] = mid + half * node(2 * i + 1, 2 * n);
+                }
+                detail::SampleMany(f, ts, checks, fresh);
+                stats.evaluations += checks;
+                double discrepancy = 0;
+                for (int k = 0; k < checks; ++k)
+                    discrepancy =
+                        std::max(discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
+                return discrepancy;
+            };
             sampleLevel(n);
             LegendreSeries previous;
             bool interpolated = false;  // piece.p already holds this level's interpolant
@@ -216,19 +232,7 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
                 const bool converged = tail <= options.tolerance * scale;
                 if (converged || n >= options.maxDegree) {
-                    // Measure: f against p at about four nodes of the next level (each
-                    // halfway in angle between two of this level's).
-                    const int checks = std::min(n, 4);
-                    for (int k = 0; k < checks; ++k) {
-                        const int i = (2 * k + 1) * n / (2 * checks);
-                        ts[k] = mid + half * node(2 * i + 1, 2 * n);
-                    }
-                    detail::SampleMany(f, ts, checks, fresh);
-                    stats.evaluations += checks;
-                    double discrepancy = 0;
-                    for (int k = 0; k < checks; ++k)
-                        discrepancy =
-                            std::max(discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
+                    const double discrepancy = measure(n);
                     piece.eps = 2 * std::max({tail, discrepancy, floor});
                     piece.converged = converged;
                     break;
@@ -268,18 +272,7 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                             // Measured as a converged piece is: f against p at about four
                             // nodes of the next level.
                             n *= 2;
-                            const int checks = std::min(n, 4);
-                            for (int k = 0; k < checks; ++k) {
-                                const int i = (2 * k + 1) * n / (2 * checks);
-                                ts[k] = mid + half * node(2 * i + 1, 2 * n);
-                            }
-                            detail::SampleMany(f, ts, checks, fresh);
-                            stats.evaluations += checks;
-                            double discrepancy = 0;
-                            for (int k = 0; k < checks; ++k)
-                                discrepancy = std::max(
-                                    discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
-                            const double measured = std::max(eps, 2 * discrepancy);
+                            const double measured = std::max(eps, 2 * measure(n));
                             if (far(measured)) {
                                 piece.eps = measured;
                                 piece.converged = true;
