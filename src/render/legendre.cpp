@@ -7,6 +7,7 @@
 #include <mutex>
 
 #include "util/check.h"
+#include "util/dense_inverse.h"
 
 namespace hpray {
 namespace {
@@ -100,6 +101,15 @@ const LglRule& LglNodes(int n) {
     return *rules[n];
 }
 
+namespace {}  // namespace
+
+void LegendreValuesLong(long double x, int n, long double* p) {
+    p[0] = 1;
+    if (n >= 1) p[1] = x;
+    for (int k = 1; k < n; ++k)
+        p[k + 1] = ((2 * k + 1) * x * p[k] - k * p[k - 1]) / (k + 1);
+}
+
 namespace {
 
 ChebyshevLobattoRule BuildChebyshevLobatto(int n) {
@@ -112,46 +122,19 @@ ChebyshevLobattoRule BuildChebyshevLobatto(int n) {
     r.nodes[0] = -1;
     r.nodes[n] = 1;
     if (n % 2 == 0) r.nodes[n / 2] = 0;
-    // The inverse of V[i][k] = P_k(x_i) by Gauss–Jordan elimination with partial pivoting
-    // in long double (V is well conditioned at these nodes: the rounding left is far
-    // below a double's).
+    // The inverse of V[i][k] = P_k(x_i) in long double (V is well conditioned at these
+    // nodes: the rounding left is far below a double's).
     const int m = n + 1;
-    std::vector<long double> a(std::size_t(m) * 2 * m, 0.0L);
-    auto at = [&](int i, int j) -> long double& { return a[std::size_t(i) * 2 * m + j]; };
-    for (int i = 0; i < m; ++i) {
-        const long double x = r.nodes[i];
-        long double p0 = 1, p1 = x;
-        at(i, 0) = 1;
-        if (n >= 1) at(i, 1) = x;
-        for (int k = 2; k <= n; ++k) {
-            const long double p2 = ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
-            at(i, k) = p2;
-            p0 = p1;
-            p1 = p2;
-        }
-        at(i, m + i) = 1;
-    }
-    for (int col = 0; col < m; ++col) {
-        int pivot = col;
-        for (int i = col + 1; i < m; ++i)
-            if (std::abs(at(i, col)) > std::abs(at(pivot, col))) pivot = i;
-        if (pivot != col)
-            for (int j = 0; j < 2 * m; ++j) std::swap(at(pivot, j), at(col, j));
-        const long double inv = 1 / at(col, col);
-        for (int j = 0; j < 2 * m; ++j) at(col, j) *= inv;
-        for (int i = 0; i < m; ++i) {
-            if (i == col || at(i, col) == 0) continue;
-            const long double f = at(i, col);
-            for (int j = 0; j < 2 * m; ++j) at(i, j) -= f * at(col, j);
-        }
-    }
+    std::vector<long double> v(std::size_t(m) * m);
+    for (int i = 0; i < m; ++i) LegendreValuesLong(r.nodes[i], n, &v[std::size_t(i) * m]);
+    const std::vector<long double> inv = InvertDense(m, std::move(v));
     // Row k of the inverse maps the values to coefficient k.
     r.transformStride = (m + 3) / 4 * 4;
     r.transformByNode.assign(std::size_t(m) * r.transformStride, 0.0);
     for (int k = 0; k < m; ++k)
         for (int i = 0; i < m; ++i)
             r.transformByNode[std::size_t(i) * r.transformStride + k] =
-                static_cast<double>(at(k, m + i));
+                static_cast<double>(inv[std::size_t(k) * m + i]);
     return r;
 }
 
@@ -169,19 +152,8 @@ const ChebyshevLobattoRule& ChebyshevLobattoNodes(int n) {
 
 namespace {
 
-/// The three-term recurrence P_k = A_k x P_{k-1} - B_k P_{k-2} with A_k = (2k - 1) / k and
-/// B_k = (k - 1) / k as products (no division per term).
-constexpr int kRecurrenceSize = 2 * kMaxLegendreDegree + 4;
-struct Recurrence {
-    double a[kRecurrenceSize] = {}, b[kRecurrenceSize] = {};
-    constexpr Recurrence() {
-        for (int k = 2; k < kRecurrenceSize; ++k) {
-            a[k] = double(2 * k - 1) / k;
-            b[k] = double(k - 1) / k;
-        }
-    }
-};
-constexpr Recurrence kRec{};
+constexpr int kRecurrenceSize = LegendreRecurrence::kSize;
+constexpr const LegendreRecurrence& kRec = kLegendreRecurrence;
 
 }  // namespace
 

@@ -23,6 +23,24 @@ struct LglRule {
 inline constexpr int kMaxLegendreDegree = 64;
 const LglRule& LglNodes(int n);
 
+/// The three-term recurrence P_k = a[k] x P_{k-1} - b[k] P_{k-2} with a[k] = (2k - 1) / k
+/// and b[k] = (k - 1) / k as products (no division per term): the one table of every
+/// evaluation of Legendre series, so that all of them round alike.
+struct LegendreRecurrence {
+    static constexpr int kSize = 2 * kMaxLegendreDegree + 4;
+    double a[kSize] = {}, b[kSize] = {};
+    constexpr LegendreRecurrence() {
+        for (int k = 2; k < kSize; ++k) {
+            a[k] = double(2 * k - 1) / k;
+            b[k] = double(k - 1) / k;
+        }
+    }
+};
+inline constexpr LegendreRecurrence kLegendreRecurrence{};
+
+/// P_0(x) .. P_n(x) into p[0..n] in long double, for tables built once.
+void LegendreValuesLong(long double x, int n, long double* p);
+
 /// The n + 1 Chebyshev–Lobatto nodes x_j = sin(pi (2j - n) / (2n)) = -cos(j pi / n) on
 /// [-1, 1] (ascending, endpoints exact, exactly antisymmetric), with the transform from
 /// values at them to the Legendre coefficients of their interpolant. The nodes nest:

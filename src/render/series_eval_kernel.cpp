@@ -15,19 +15,9 @@ namespace hpray {
 #if HPRAY_SERIES_KERNEL
 namespace {
 
-/// LegendreSeries' recurrence P_k = A_k x P_{k-1} - B_k P_{k-2}: A_k = (2k - 1) / k and
-/// B_k = (k - 1) / k, rounded as legendre.cpp rounds them.
-constexpr int kMaxDegree = 2 * kMaxLegendreDegree + 3;
-struct Recurrence {
-    double a[kMaxDegree + 1] = {}, b[kMaxDegree + 1] = {};
-    constexpr Recurrence() {
-        for (int k = 2; k <= kMaxDegree; ++k) {
-            a[k] = double(2 * k - 1) / k;
-            b[k] = double(k - 1) / k;
-        }
-    }
-};
-constexpr Recurrence kRec{};
+/// LegendreSeries' recurrence (the same table).
+constexpr int kMaxDegree = LegendreRecurrence::kSize - 1;
+constexpr const LegendreRecurrence& kRec = kLegendreRecurrence;
 
 /// Two vectors of four points: x = t scale - shift and v = c0 + c1 x (each product and
 /// sum rounded, as legendre.cpp's loops compile), then for k >= 2

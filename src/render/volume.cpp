@@ -14,7 +14,9 @@
 #include <cmath>
 #include <limits>
 
+#include "render/legendre.h"
 #include "util/check.h"
+#include "util/dense_inverse.h"
 
 namespace hpray {
 
@@ -386,35 +388,13 @@ namespace {
 
 using LD = long double;
 
-/// P_0(x) .. P_n(x) into p[0..n].
-void LegendreValues(LD x, int n, LD* p) {
-    p[0] = 1;
-    if (n >= 1) p[1] = x;
-    for (int k = 1; k < n; ++k)
-        p[k + 1] = ((2 * k + 1) * x * p[k] - k * p[k - 1]) / (k + 1);
-}
-
-/// Solves a x = b (n x n, row-major) by Gauss-Jordan with partial pivoting.
-std::vector<LD> SolveDense(int n, std::vector<LD> a, std::vector<LD> b) {
-    for (int c = 0; c < n; ++c) {
-        int pivot = c;
-        for (int i = c + 1; i < n; ++i)
-            if (std::abs(a[i * n + c]) > std::abs(a[pivot * n + c])) pivot = i;
-        for (int j = 0; j < n; ++j) std::swap(a[c * n + j], a[pivot * n + j]);
-        std::swap(b[c], b[pivot]);
-        const LD d = a[c * n + c];
-        HPRAY_CHECK(d != 0);
-        for (int j = 0; j < n; ++j) a[c * n + j] /= d;
-        b[c] /= d;
-        for (int i = 0; i < n; ++i) {
-            if (i == c) continue;
-            const LD f = a[i * n + c];
-            if (f == 0) continue;
-            for (int j = 0; j < n; ++j) a[i * n + j] -= f * a[c * n + j];
-            b[i] -= f * b[c];
-        }
-    }
-    return b;
+/// Solves a x = b (n x n, row-major) through a's inverse.
+std::vector<LD> SolveDense(int n, std::vector<LD> a, const std::vector<LD>& b) {
+    const std::vector<LD> inv = InvertDense(n, std::move(a));
+    std::vector<LD> x(n, 0);
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) x[i] += inv[std::size_t(i) * n + j] * b[j];
+    return x;
 }
 
 /// Patterson's extension of the symmetric rule with the m nodes `x` (m odd, holding 0):
@@ -445,7 +425,7 @@ void PattersonExtension(std::vector<LD>& x) {
     std::vector<LD> a(std::size_t(half) * half, 0), b(half, 0);
     std::vector<LD> p(deg + 1);
     for (std::size_t g = 0; g < gx.size(); ++g) {
-        LegendreValues(gx[g], deg, p.data());
+        LegendreValuesLong(gx[g], deg, p.data());
         const LD wo = gw[g] * omega(gx[g]);
         for (int r = 0; r < half; ++r) {
             const LD pk = p[2 * r + 1] * wo;
@@ -455,7 +435,7 @@ void PattersonExtension(std::vector<LD>& x) {
     }
     const std::vector<LD> c = SolveDense(half, a, b);
     auto pi = [&](LD t) {
-        LegendreValues(t, deg, p.data());
+        LegendreValuesLong(t, deg, p.data());
         LD v = p[deg];
         for (int j = 0; j < half; ++j) v += c[j] * p[2 * j];
         return v;
@@ -496,7 +476,7 @@ std::vector<LD> InterpolatoryWeights(const std::vector<LD>& x) {
     const int n = static_cast<int>(x.size());
     std::vector<LD> a(std::size_t(n) * n), b(n, 0), p(n);
     for (int i = 0; i < n; ++i) {
-        LegendreValues(x[i], n - 1, p.data());
+        LegendreValuesLong(x[i], n - 1, p.data());
         for (int k = 0; k < n; ++k) a[std::size_t(k) * n + i] = p[k];
     }
     b[0] = 2;
