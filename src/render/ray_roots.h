@@ -44,9 +44,10 @@ struct ProjectionOptions {
     /// Levels the caller needs only to know are not crossed (isovalues): once a raised
     /// degree's interpolant keeps farther from every one of them than twice its change
     /// since the previous level (the sum of the coefficients' differences, a bound of
-    /// |p_2n - p_n| on the piece) plus the rounding floor, the piece stops there, with
-    /// that as its error: the previous level's error bounds the new one's wherever the
-    /// expansion converges. Not used below degree 6.
+    /// |p_2n - p_n| on the piece) plus the rounding floor, and than twice its measured
+    /// miss at the four checks a converged piece takes, the piece stops there with the
+    /// larger as its error (the previous level's error bounds the new one's wherever the
+    /// expansion converges). Not used below degree 6.
     const double* exclude = nullptr;
     int excludeCount = 0;
     /// The scale the tolerance is relative to is at least this (e.g. the magnitude of the
@@ -218,15 +219,40 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                         std::max(discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
                 return discrepancy;
             };
-            sampleLevel(n);
+            // A piece far from every level to exclude ends early (see
+            // ProjectionOptions::exclude), right after a raise to a degree of 6 or more:
+            // `previous` then holds the level before's interpolant.
             LegendreSeries previous;
-            bool interpolated = false;  // piece.p already holds this level's interpolant
+            auto stopsFar = [&](int n, double scale) {
+                double change = 0;
+                for (int k = 0; k <= n; ++k)
+                    change += std::abs(piece.p.c[k] - (2 * k <= n ? previous.c[k] : 0.0));
+                const double eps =
+                    2 * change +
+                    2 * 64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
+                auto far = [&](double e) {
+                    for (int k = 0; k < options.excludeCount; ++k)
+                        if (!(detail::TailExcluded(piece.p, options.exclude[k]) > e))
+                            return false;
+                    return true;
+                };
+                if (!far(eps)) return false;
+                // Measured as a converged piece is (the checks are not kept where they
+                // disagree: they are few, and this is rare).
+                const double measured = std::max(eps, 2 * measure(n));
+                if (!far(measured)) return false;
+                piece.eps = measured;
+                piece.converged = true;
+                stats.excluded += 1;
+                return true;
+            };
+            sampleLevel(n);
+            bool raised = false;
             for (;;) {
-                if (!interpolated)
-                    InterpolateChebyshevLobatto(values, n, w.lo, w.hi, piece.p);
-                interpolated = false;
+                InterpolateChebyshevLobatto(values, n, w.lo, w.hi, piece.p);
                 double scale = options.scaleFloor;
                 for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(values[i]));
+                if (raised && stopsFar(n, scale)) break;
                 const double tail = std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]);
                 const double floor =
                     64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
@@ -245,50 +271,13 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     stats.evaluations += n;
                     for (int i = n; i >= 0; --i) values[2 * i] = values[i];
                     for (int i = 0; i < n; ++i) values[2 * i + 1] = fresh[i];
-                    if (options.excludeCount > 0 && 2 * n >= 6) {
-                        // Far from every level at this degree already?
-                        previous.c.swap(piece.p.c);
-                        InterpolateChebyshevLobatto(values, 2 * n, w.lo, w.hi, piece.p);
-                        interpolated = true;
-                        double change = 0;
-                        for (int k = 0; k <= 2 * n; ++k)
-                            change +=
-                                std::abs(piece.p.c[k] - (k <= n ? previous.c[k] : 0.0));
-                        double scale2 = options.scaleFloor;
-                        for (int i = 0; i <= 2 * n; ++i)
-                            scale2 = std::max(scale2, std::abs(values[i]));
-                        const double eps =
-                            2 * change + 2 * 64 * (2 * n + 1) *
-                                             std::numeric_limits<double>::epsilon() *
-                                             scale2;
-                        auto far = [&](double e) {
-                            for (int k = 0; k < options.excludeCount; ++k)
-                                if (!(detail::TailExcluded(piece.p, options.exclude[k]) >
-                                      e))
-                                    return false;
-                            return true;
-                        };
-                        if (far(eps)) {
-                            // Measured as a converged piece is: f against p at about four
-                            // nodes of the next level.
-                            n *= 2;
-                            const double measured = std::max(eps, 2 * measure(n));
-                            if (far(measured)) {
-                                piece.eps = measured;
-                                piece.converged = true;
-                                stats.excluded += 1;
-                                break;
-                            }
-                            // The checks disagree: go on from this level (its
-                            // interpolant is piece.p; the checks are not kept: they are
-                            // few, and this is rare).
-                            continue;
-                        }
-                    }
                     n *= 2;
+                    raised = options.excludeCount > 0 && n >= 6;
+                    if (raised) previous.c.swap(piece.p.c);
                 } else {
                     n = options.maxDegree;
                     sampleLevel(n);
+                    raised = false;
                 }
             }
             if (!piece.converged && w.depth < options.maxSplits && top + 2 <= 64) {
