@@ -374,6 +374,7 @@ void SegmentField::Seed(double tEnter, const double enter[3], double tExit,
                         const double exit[3]) {
     seedCount_ = 0;
     if (affine_) return;
+    seedReach_ = 1e-9 * std::abs(tExit - tEnter);
     const double* refs[2] = {enter, exit};
     const double ts[2] = {tEnter, tExit};
     for (int k = 0; k < 2; ++k) {
@@ -381,7 +382,6 @@ void SegmentField::Seed(double tEnter, const double enter[3], double tExit,
               std::isfinite(refs[k][2])))
             continue;
         seedT_[seedCount_] = ts[k];
-        seedReach_ = 1e-9 * std::abs(tExit - tEnter);
         for (int d = 0; d < 3; ++d) seedRef_[seedCount_][d] = refs[k][d];
         ++seedCount_;
     }

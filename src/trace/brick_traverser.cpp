@@ -64,9 +64,13 @@ struct FaceRec {
 };
 static_assert(sizeof(FaceRec) == 32);
 
+std::uint32_t SeedBits(const FaceRec& rec) {
+    return rec.seed[0] | std::uint32_t(rec.seed[1]) << 8 |
+           std::uint32_t(rec.seed[2]) << 16;
+}
+
 void SetSeedCorners(FaceRec& rec, int side, int c0, int c1, int c2) {
-    std::uint32_t bits =
-        rec.seed[0] | std::uint32_t(rec.seed[1]) << 8 | std::uint32_t(rec.seed[2]) << 16;
+    std::uint32_t bits = SeedBits(rec);
     bits &= ~(std::uint32_t(0x1ff) << (9 * side));
     bits |= std::uint32_t(c0 | c1 << 3 | c2 << 6) << (9 * side) | 1u << (18 + side);
     for (int k = 0; k < 3; ++k) rec.seed[k] = std::uint8_t(bits >> (8 * k));
@@ -80,8 +84,7 @@ bool SeedShape(CellShape shape, int order) {
 }
 
 bool SeedCorners(const FaceRec& rec, int side, int corner[3]) {
-    const std::uint32_t bits =
-        rec.seed[0] | std::uint32_t(rec.seed[1]) << 8 | std::uint32_t(rec.seed[2]) << 16;
+    const std::uint32_t bits = SeedBits(rec);
     if (!(bits >> (18 + side) & 1)) return false;
     for (int k = 0; k < 3; ++k) corner[k] = bits >> (9 * side + 3 * k) & 7;
     return true;
@@ -103,8 +106,8 @@ struct Crossing {
     double t;
     std::int32_t face;
     std::int32_t side;
-    // Face parameters of the crossing (bilinear and curved faces; else NaN): a
-    // SegmentSeed.
+    // Face parameters of the crossing (NaN where none were computed): the SegmentSeed of
+    // the cell it enters or leaves.
     double u = std::numeric_limits<double>::quiet_NaN();
     double v = std::numeric_limits<double>::quiet_NaN();
 };
@@ -1089,40 +1092,48 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                 rec.cell[same2 ? 0 : 1] = nb;
             }
             const int p = mesh.cellOrder[c];
+            // The local corner of each canonical corner, in c and (once asked for) in nb
+            // (-1 where the neighbour lacks one).
+            int canonLocal[4], nbLocal[4];
+            bool nbKnown = false;
+            auto localOfCanonical = [&](const std::int32_t* cycle, const int* cycleLocal,
+                                        int* out) {
+                for (int k = 0; k < n; ++k) {
+                    out[k] = -1;
+                    for (int q = 0; q < n; ++q)
+                        if (cycle[q] == canon[k]) out[k] = cycleLocal[q];
+                }
+            };
+            auto neighbourLocal = [&]() -> const int* {
+                if (!nbKnown) {
+                    std::int32_t ids2[4];
+                    int local2[4];
+                    outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
+                    localOfCanonical(ids2, local2, nbLocal);
+                    nbKnown = true;
+                }
+                return nbLocal;
+            };
+            const bool linearTriangle = n == 3 && p == 1;
+            if (seedCells || !linearTriangle) localOfCanonical(ids, local, canonLocal);
             // Seeds: each side's local corners at the face parameters (0, 0), (1, 0) and
             // (0, 1) (canonical corners 0, 1 and the last: the lattice of faceLattice,
             // the net of FaceBernstein and the patch of IntersectBilinearPatch alike).
             // Nothing for two linear tetrahedra (most faces of a large tetrahedral mesh).
             const int last = n - 1;
-            if (seedCells && SeedShape(mesh.cellShape[c], p)) {
-                int local0[4];
-                for (int k = 0; k < n; ++k)
-                    for (int q = 0; q < n; ++q)
-                        if (ids[q] == canon[k]) local0[k] = local[q];
-                SetSeedCorners(rec, rec.cell[0] == c ? 0 : 1, local0[0], local0[1],
-                               local0[last]);
-            }
+            if (seedCells && SeedShape(mesh.cellShape[c], p))
+                SetSeedCorners(rec, rec.cell[0] == c ? 0 : 1, canonLocal[0],
+                               canonLocal[1], canonLocal[last]);
             if (seedCells && nb >= 0 &&
                 SeedShape(mesh.cellShape[nb], mesh.cellOrder[nb])) {
-                std::int32_t ids2[4];
-                int local2[4], nbLocal[4] = {-1, -1, -1, -1};
-                outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
-                for (int k = 0; k < n; ++k)
-                    for (int q = 0; q < n; ++q)
-                        if (ids2[q] == canon[k]) nbLocal[k] = local2[q];
-                if (nbLocal[0] >= 0 && nbLocal[1] >= 0 && nbLocal[last] >= 0)
-                    SetSeedCorners(rec, rec.cell[0] == nb ? 0 : 1, nbLocal[0], nbLocal[1],
-                                   nbLocal[last]);
+                const int* l = neighbourLocal();
+                if (l[0] >= 0 && l[1] >= 0 && l[last] >= 0)
+                    SetSeedCorners(rec, rec.cell[0] == nb ? 0 : 1, l[0], l[1], l[last]);
             }
-            if (n == 3 && p == 1) {
+            if (linearTriangle) {
                 rec.kind = FaceKind::Triangle;  // a straight triangle: nothing to measure
                 continue;
             }
-            // Local corner of each canonical corner.
-            int canonLocal[4];
-            for (int k = 0; k < n; ++k)
-                for (int q = 0; q < n; ++q)
-                    if (ids[q] == canon[k]) canonLocal[k] = local[q];
             const double* A = P(canon[0]);
             const double* B = P(canon[1]);
             const double* C = P(canon[2]);
@@ -1148,13 +1159,7 @@ void BrickTraverser::Impl::BuildFaceRecords(TopologyBuild& t) {
                 faceLattice(c, canonLocal, n, p, lattice);
                 if (nb >= 0 && mesh.cellOrder[nb] == p && mesh.cellFamily[nb] == family) {
                     // The neighbour's own nodes of the same face, in the same order.
-                    std::int32_t ids2[4];
-                    int local2[4], canonLocal2[4];
-                    outwardCycle(nb, nbFace[6 * c + f], ids2, local2);
-                    for (int k = 0; k < n; ++k)
-                        for (int q = 0; q < n; ++q)
-                            if (ids2[q] == canon[k]) canonLocal2[k] = local2[q];
-                    faceLattice(nb, canonLocal2, n, p, neighbourLattice);
+                    faceLattice(nb, neighbourLocal(), n, p, neighbourLattice);
                     double worst = 0;
                     for (std::size_t k = 0; k < lattice.size(); ++k)
                         if (lattice[k] != neighbourLattice[k] && lattice[k] >= 0 &&
