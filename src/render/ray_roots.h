@@ -113,6 +113,18 @@ void SampleMany(F& f, const double* t, int n, double* out) {
     }
 }
 
+/// The largest |f - p| at the `count` points t (f's values into `out`), the samples
+/// counted in `evaluations`: a projection's measured miss.
+template <typename F>
+double MeasuredMiss(F& f, const LegendreSeries& p, const double* t, int count,
+                    double* out, std::int64_t& evaluations) {
+    SampleMany(f, t, count, out);
+    evaluations += count;
+    double miss = 0;
+    for (int k = 0; k < count; ++k) miss = std::max(miss, std::abs(out[k] - p(t[k])));
+    return miss;
+}
+
 /// Candidate windows of p - C on [p.a, p.b], in increasing t. `visit(lo, hi, kind, tStar)`
 /// returns true to stop. Kinds: 1 a proven sign change (|p - C| > eps at both ends,
 /// opposite signs, p monotone); 2 a tangency within eps at the extremum tStar; 3 a monotone
@@ -211,13 +223,8 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     const int i = (2 * k + 1) * n / (2 * checks);
                     ts[k] = mid + half * node(2 * i + 1, 2 * n);
                 }
-                detail::SampleMany(f, ts, checks, fresh);
-                stats.evaluations += checks;
-                double discrepancy = 0;
-                for (int k = 0; k < checks; ++k)
-                    discrepancy =
-                        std::max(discrepancy, std::abs(fresh[k] - piece.p(ts[k])));
-                return discrepancy;
+                return detail::MeasuredMiss(f, piece.p, ts, checks, fresh,
+                                            stats.evaluations);
             };
             // A piece far from every level to exclude ends early (see
             // ProjectionOptions::exclude), right after a raise to a degree of 6 or more:
@@ -300,12 +307,8 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
             int checks = 0;
             for (int i = 0; i < n; i += std::max(1, n / 4))
                 checkT[checks++] = mid + half * 0.5 * (rule.nodes[i] + rule.nodes[i + 1]);
-            detail::SampleMany(f, checkT, checks, checkF);
-            stats.evaluations += checks;
-            double discrepancy = 0;
-            for (int i = 0; i < checks; ++i)
-                discrepancy =
-                    std::max(discrepancy, std::abs(checkF[i] - piece.p(checkT[i])));
+            const double discrepancy = detail::MeasuredMiss(f, piece.p, checkT, checks,
+                                                            checkF, stats.evaluations);
             piece.eps = 2 * std::max(discrepancy, floor);
             piece.converged = tail <= options.tolerance * scale;
         }
