@@ -132,6 +132,43 @@ void MapImpl(const double* xyz, const double ref[3], double world[3], double* ja
     }
 }
 
+// MapImpl<1, true> written out: the trilinear map of most reduced curved cells, where the
+// loops above (two rows of six coordinates in s and t, then two nodes in r) do not unroll
+// well. The same operations in the same order: l = (1 - x, x), dl = (-1, 1) exactly as
+// Lagrange1D<1, true> gives them, each sum started from zero by an fma as in MapImpl.
+template <>
+void MapImpl<1, true>(const double* xyz, const double ref[3], double world[3],
+                      double* jacobian) {
+    const double l0[2] = {1.0 - ref[0], ref[0]}, l1[2] = {1.0 - ref[1], ref[1]},
+                 l2[2] = {1.0 - ref[2], ref[2]};
+    // d l / dx = (-1, 1): dl[0] = 0 * (1 - x) - 1 and dl[1] = 1 - x * 0 in Lagrange1D.
+    double r[6], rs[6], rt[6];
+    for (int q = 0; q < 6; ++q) {
+        const double a = xyz[q], b = xyz[6 + q], c = xyz[12 + q], d = xyz[18 + q];
+        // Rows (j, k) = (0, 0), (1, 0), (0, 1), (1, 1) with weights l1[j] l2[k],
+        // ds: dl1[j] l2[k] = -l2[k], +l2[k], dt: l1[j] dl2[k] = -l1[j] for k = 0, +l1[j]
+        // for k = 1 (products with -1 and 1 are exact).
+        double v = std::fma(l1[0] * l2[0], a, 0.0);
+        v = std::fma(l1[1] * l2[0], b, v);
+        v = std::fma(l1[0] * l2[1], c, v);
+        r[q] = std::fma(l1[1] * l2[1], d, v);
+        double vs = std::fma(-l2[0], a, 0.0);
+        vs = std::fma(l2[0], b, vs);
+        vs = std::fma(-l2[1], c, vs);
+        rs[q] = std::fma(l2[1], d, vs);
+        double vt = std::fma(-l1[0], a, 0.0);
+        vt = std::fma(-l1[1], b, vt);
+        vt = std::fma(l1[0], c, vt);
+        rt[q] = std::fma(l1[1], d, vt);
+    }
+    for (int c = 0; c < 3; ++c) {
+        world[c] = std::fma(r[3 + c], l0[1], std::fma(r[c], l0[0], 0.0));
+        jacobian[3 * c] = std::fma(r[3 + c], 1.0, std::fma(r[c], -1.0, 0.0));
+        jacobian[3 * c + 1] = std::fma(rs[3 + c], l0[1], std::fma(rs[c], l0[0], 0.0));
+        jacobian[3 * c + 2] = std::fma(rt[3 + c], l0[1], std::fma(rt[c], l0[0], 0.0));
+    }
+}
+
 template <int P>
 void Map(const double* xyz, const double ref[3], double world[3], double* jacobian) {
     if (jacobian)

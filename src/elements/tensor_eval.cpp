@@ -229,8 +229,19 @@ namespace {
 // LagrangeRows with the order and the padded count known at compile time (the same
 // operations: bitwise the same rows), for the counts of the adaptive projections.
 template <int P, int S>
-void LagrangeRowsFixed(const double* x, double* L, double* a) {
-    LagrangeRows(P, x, S, L, a);
+void LagrangeRowsFixed(const double* __restrict x, double* __restrict L, double* /*a*/) {
+    // The B factors kept in registers instead of built in L and reversed in place; every
+    // product is the one LagrangeRows forms.
+    double b[P + 1][S], a[S];
+    for (int s = 0; s < S; ++s) b[0][s] = a[s] = 1;
+    for (int m = 0; m < P; ++m)
+        for (int s = 0; s < S; ++s)
+            b[m + 1][s] = b[m][s] * ((P * (1 - x[s]) - m) * kInverse[m]);
+    for (int i = 0; i <= P; ++i) {
+        for (int s = 0; s < S; ++s) L[i * S + s] = b[P - i][s] * a[s];
+        if (i < P)
+            for (int s = 0; s < S; ++s) a[s] *= (P * x[s] - i) * kInverse[i];
+    }
 }
 using RowsKernel = void (*)(const double*, double*, double*);
 template <int S>
