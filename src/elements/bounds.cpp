@@ -2,6 +2,7 @@
 #include "elements/bounds.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -10,6 +11,7 @@
 #include <memory>
 #include <mutex>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "util/check.h"
@@ -516,6 +518,186 @@ Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
 }
 
 }  // namespace
+
+namespace {
+// HexSubBounds' 1-D matrices for order p and n pieces: row (k (p + 1) + a) gives
+// Bernstein coefficient a, on [k / n, (k + 1) / n], of the interpolant of the p + 1
+// equispaced nodal values on [0, 1] (the line transform applied to the Lagrange basis at
+// the piece's own equispaced nodes, in extended precision), and the largest absolute row
+// sum.
+struct SubdivisionTable {
+    std::vector<double> m;
+    double rowSum = 0;
+};
+
+const SubdivisionTable& GetSubdivisionTable(int p, int n) {
+    // Tables live as long as the process; each thread remembers those it has seen.
+    thread_local std::array<const SubdivisionTable*,
+                            (kMaxOrder + 1) * (kMaxSubdivision + 1)>
+        seen{};
+    const SubdivisionTable*& mine = seen[p * (kMaxSubdivision + 1) + n];
+    if (mine) return *mine;
+    static std::mutex mutex;
+    static std::map<std::pair<int, int>, std::unique_ptr<SubdivisionTable>> cache;
+    std::lock_guard<std::mutex> lock(mutex);
+    const auto key = std::make_pair(p, n);
+    auto it = cache.find(key);
+    if (it != cache.end()) return *(mine = it->second.get());
+    auto t = std::make_unique<SubdivisionTable>();
+    const int q = p + 1;
+    const std::vector<LD> line = LineTransform(p);  // bern_a = sum_i line[a][i] f(i / p)
+    t->m.resize(static_cast<std::size_t>(n) * q * q);
+    for (int k = 0; k < n; ++k) {
+        // e[i][j] = l_j(y_i), y_i = (k + i / p) / n: the piece's nodal values from the
+        // cell's.
+        std::vector<LD> e(static_cast<std::size_t>(q) * q);
+        for (int i = 0; i < q; ++i) {
+            const LD y = (static_cast<LD>(k) + static_cast<LD>(i) / p) / n;
+            for (int j = 0; j < q; ++j) {
+                LD l = 1;
+                for (int m = 0; m < q; ++m)
+                    if (m != j)
+                        l *= (y - static_cast<LD>(m) / p) /
+                             (static_cast<LD>(j) / p - static_cast<LD>(m) / p);
+                e[static_cast<std::size_t>(i) * q + j] = l;
+            }
+        }
+        for (int a = 0; a < q; ++a) {
+            double sum = 0;
+            for (int j = 0; j < q; ++j) {
+                LD v = 0;
+                for (int i = 0; i < q; ++i)
+                    v += line[static_cast<std::size_t>(a) * q + i] *
+                         e[static_cast<std::size_t>(i) * q + j];
+                const double d = static_cast<double>(v);
+                t->m[(static_cast<std::size_t>(k) * q + a) * q + j] = d;
+                sum += std::abs(d);
+            }
+            t->rowSum = std::max(t->rowSum, sum);
+        }
+    }
+    return *(mine = cache.emplace(key, std::move(t)).first->second.get());
+}
+}  // namespace
+
+namespace {
+// HexSubBounds for Q = p + 1 nodes per direction, known at compile time so that the sums
+// over the nodes unroll and the passes over whole rows vectorise.
+template <int Q>
+void HexSubBoundsFixed(const SubdivisionTable& t, int n, const double* coeffs, int comps,
+                       Interval* out) {
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    const int w = n * Q;
+    const double* m = t.m.data();  // (n Q) x Q
+    thread_local std::vector<double> a, b;
+    a.resize(static_cast<std::size_t>(w) * Q * Q);
+    b.resize(static_cast<std::size_t>(w) * w * Q);
+    // Three sums of Q terms, the tables' own rounding, and a factor 4 of slack: every
+    // computed coefficient is within gamma (|M| x |M| x |M|) |u| <= gamma R^3 max |u| of
+    // the exact one.
+    const double gamma = 4.0 * (3.0 * Q + 16.0) * kUnit;
+    const double r3 = t.rowSum * t.rowSum * t.rowSum;
+    for (int comp = 0; comp < comps; ++comp) {
+        double maxAbs = 0, u[Q * Q * Q];
+        bool finite = true;
+        for (int v = 0; v < Q * Q * Q; ++v) {
+            u[v] = coeffs[static_cast<std::size_t>(v) * comps + comp];
+            finite = finite && std::isfinite(u[v]);
+            maxAbs = std::max(maxAbs, std::abs(u[v]));
+        }
+        if (!finite) {
+            for (int box = 0; box < n * n * n; ++box)
+                out[static_cast<std::size_t>(box) * comps + comp] = {-inf, inf};
+            continue;
+        }
+        // Along r: a[X + w (j + Q l)], then s: b[X + w (Y + w l)], then t.
+        for (int jl = 0; jl < Q * Q; ++jl) {
+            const double* row = u + Q * jl;
+            double* dst = &a[static_cast<std::size_t>(w) * jl];
+            for (int x = 0; x < w; ++x) {
+                double sum = 0;
+                for (int i = 0; i < Q; ++i) sum = std::fma(m[x * Q + i], row[i], sum);
+                dst[x] = sum;
+            }
+        }
+        for (int l = 0; l < Q; ++l)
+            for (int y = 0; y < w; ++y) {
+                double f[Q];
+                for (int j = 0; j < Q; ++j) f[j] = m[y * Q + j];
+                double* dst = &b[static_cast<std::size_t>(w) * (y + w * l)];
+                const double* src = &a[static_cast<std::size_t>(w) * Q * l];
+                for (int x = 0; x < w; ++x) {
+                    double sum = 0;
+                    for (int j = 0; j < Q; ++j) sum = std::fma(f[j], src[w * j + x], sum);
+                    dst[x] = sum;
+                }
+            }
+        // Along t, each coefficient straight into its box's range (no third array).
+        const int plane = w * w;
+        double lo[kMaxSubdivision * kMaxSubdivision],
+            hi[kMaxSubdivision * kMaxSubdivision];
+        const double widen = gamma * r3 * maxAbs;
+        for (int k2 = 0; k2 < n; ++k2) {
+            for (int k = 0; k < n * n; ++k) lo[k] = inf, hi[k] = -inf;
+            for (int z = k2 * Q; z < k2 * Q + Q; ++z) {
+                double f[Q];
+                for (int l = 0; l < Q; ++l) f[l] = m[z * Q + l];
+                for (int y = 0; y < w; ++y) {
+                    const double* src = &b[static_cast<std::size_t>(w) * y];
+                    double* boxLo = lo + n * (y / Q);
+                    double* boxHi = hi + n * (y / Q);
+                    for (int k0 = 0; k0 < n; ++k0) {
+                        // The box's Q coefficients of this row together (one vector).
+                        double sum[Q] = {};
+                        for (int l = 0; l < Q; ++l) {
+                            const double* row = src + plane * l + k0 * Q;
+                            for (int x = 0; x < Q; ++x)
+                                sum[x] = std::fma(f[l], row[x], sum[x]);
+                        }
+                        double bl = boxLo[k0], bh = boxHi[k0];
+                        for (int x = 0; x < Q; ++x) {
+                            bl = std::min(bl, sum[x]);
+                            bh = std::max(bh, sum[x]);
+                        }
+                        boxLo[k0] = bl;
+                        boxHi[k0] = bh;
+                    }
+                }
+            }
+            for (int k1 = 0; k1 < n; ++k1)
+                for (int k0 = 0; k0 < n; ++k0) {
+                    const double l0 = lo[k0 + n * k1], h0 = hi[k0 + n * k1];
+                    Interval& o =
+                        out[static_cast<std::size_t>(k0 + n * (k1 + n * k2)) * comps +
+                            comp];
+                    // Outward by the margin, and by a few ulps more for the rounding of
+                    // that.
+                    o.lo = l0 - (widen + 4 * kUnit * std::abs(l0));
+                    o.hi = h0 + (widen + 4 * kUnit * std::abs(h0));
+                    if (!(std::isfinite(o.lo) && std::isfinite(o.hi))) {
+                        o.lo = -inf;
+                        o.hi = inf;
+                    }
+                }
+        }
+    }
+}
+
+using SubBoundsKernel = void (*)(const SubdivisionTable&, int, const double*, int,
+                                 Interval*);
+template <int... Qs>
+constexpr std::array<SubBoundsKernel, kMaxOrder + 2> SubBoundsKernels(
+    std::integer_sequence<int, Qs...>) {
+    return {nullptr, nullptr, &HexSubBoundsFixed<Qs + 2>...};
+}
+constexpr auto kSubBoundsKernels =
+    SubBoundsKernels(std::make_integer_sequence<int, kMaxOrder>{});
+}  // namespace
+
+void HexSubBounds(int p, int n, const double* coeffs, int comps, Interval* out) {
+    HPRAY_CHECK(p >= 1 && p <= kMaxOrder && n >= 1 && n <= kMaxSubdivision);
+    kSubBoundsKernels[p + 1](GetSubdivisionTable(p, n), n, coeffs, comps, out);
+}
 
 Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride) {
     return Bounds(basis, coeffs, stride);

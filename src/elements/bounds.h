@@ -47,4 +47,16 @@ Box GeometryBox(const BasisTable& basis, const double* nodeXyz);
 /// tetrahedra of up to 35 nodes; an infinite box for other bases.
 Box GeometryBoxEnclosure(const BasisTable& basis, const double* nodeXyz);
 
+/// The largest number of pieces per direction of HexSubBounds.
+inline constexpr int kMaxSubdivision = 4;
+
+/// Bounds of a Lagrange hexahedron's interpolant over the n^3 equal boxes of its
+/// reference cube (1 <= n <= kMaxSubdivision): the Bernstein coefficients of the
+/// interpolant restricted to each box (the 1-D subdivision matrices applied along each
+/// axis, sum-factorised), their range widened by a bound of their rounding. `coeffs`: the
+/// (p + 1)^3 nodal values in internal order, `comps` interleaved components (3 for node
+/// coordinates). out[box * comps + c] for box = k0 + n (k1 + n k2), k0 along the first
+/// reference axis. A component with a non-finite value gets infinite intervals.
+void HexSubBounds(int p, int n, const double* coeffs, int comps, Interval* out);
+
 }  // namespace hpray

@@ -552,8 +552,17 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 for (std::size_t k = 0; k < nIso; ++k)
                     if (relevant_[k] && setup.isos[k].field == int(f))
                         isoValues_.push_back(setup.isos[k].value);
-                if (!field_.MayReach(isoValues_.data(), int(isoValues_.size()), seg.tEnter,
-                                     seg.tExit)) {
+                // The part of the segment where the sub-cell bounds allow an isovalue.
+                double t0 = seg.tEnter, t1 = seg.tExit;
+                const bool culled =
+                    setup.subCellBounds &&
+                    !setup.fieldData[f]->ClipToValues(seg.cell, ray, isoValues_.data(),
+                                                      int(isoValues_.size()), t0, t1);
+                if (setup.subCellBounds && (t0 != seg.tEnter || t1 != seg.tExit))
+                    counters.isoSubcellClipped += 1;
+                if (culled) counters.isoSubcellCulled += 1;
+                if (culled ||
+                    !field_.MayReach(isoValues_.data(), int(isoValues_.size()), t0, t1)) {
                     for (std::size_t k = 0; k < nIso; ++k)
                         if (setup.isos[k].field == int(f)) relevant_[k] = 0;
                     fieldUsed_[f] = 0;
@@ -569,8 +578,8 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 if (field_.ExactAlongLine())
                     projection.exactDegree = std::max(1, field_.LineDegree());
                 projectionStats_ = ProjectionStats{};
-                ProjectSegment(field_, seg.tEnter, seg.tExit, projection, pieces_[f],
-                               projectionStats_, scratch_);
+                ProjectSegment(field_, t0, t1, projection, pieces_[f], projectionStats_,
+                               scratch_);
                 counters.projections += projectionStats_.pieces;
                 counters.projectionOrderSum += projectionStats_.degreeSum;
                 counters.projectionOrderMax =

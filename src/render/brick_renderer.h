@@ -57,6 +57,10 @@ struct BrickSetup {
     SceneLighting lighting;
 
     ProjectionOptions projection;
+    /// Isosurfaces project a segment only where the field's sub-cell bounds allow an
+    /// isovalue (FieldCellData::ClipToValues). Always on in rendering; tests turn it off
+    /// to compare.
+    bool subCellBounds = true;
     RootOptions roots;
     InversionOptions inversion;
     /// Two hits of one isosurface closer than this (world units) are one hit: the same

@@ -155,6 +155,111 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 }
 }  // namespace
 
+namespace {
+// FieldCellData's sub-cell bounds: subN per direction (64 boxes per cell).
+constexpr int kSubdivision = 4;
+
+// The nearest float below (above) x: bounds kept in floats stay bounds.
+float FloatDown(double x) {
+    const float f = static_cast<float>(x);
+    return f > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+float FloatUp(double x) {
+    const float f = static_cast<float>(x);
+    return f < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+
+void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellData& d) {
+    const std::int64_t cells = mesh.CellCount();
+    std::vector<std::int64_t> start(cells, -1);
+    std::int64_t count = 0;
+    for (std::int64_t c = 0; c < cells; ++c)
+        if (mesh.cellShape[c] == CellShape::Hex &&
+            mesh.cellFamily[c] == CellFamily::Lagrange && !geometry.IsDerived(c)) {
+            start[c] = count;
+            count += kSubdivision * kSubdivision * kSubdivision;
+        }
+    if (count == 0) return;
+    d.subN = kSubdivision;
+    d.subStart = std::move(start);
+    d.subBoxes.resize(count);
+    constexpr int boxes = kSubdivision * kSubdivision * kSubdivision;
+    tbb::enumerable_thread_specific<std::int64_t> kept(0);
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, cells, 64),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            CellScratch scratch;
+            std::vector<double> nodal;
+            Interval geo[3 * boxes], field[boxes];
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                if (d.subStart[c] < 0) continue;
+                const CellGeometry& g = geometry.Cell(c, scratch);
+                FieldCellData::SubBox* out = &d.subBoxes[d.subStart[c]];
+                const bool reduced = !d.reducedOrder.empty() && d.reducedOrder[c] > 0;
+                const int fieldOrder = reduced ? d.reducedOrder[c] : g.basis->order;
+                const double* values =
+                    reduced ? d.reducedValues[c].data() : d.CellValues(c, nodal);
+                // Affine trilinear cells with a linear field gain nothing: marked
+                // unbounded.
+                if (!g.hexMap || (g.affine && g.basis->order == 1)) {
+                    d.subStart[c] = -1;
+                    continue;
+                }
+                HexSubBounds(g.mapOrder, kSubdivision, g.mapNodes, 3, geo);
+                HexSubBounds(fieldOrder, kSubdivision, values, 1, field);
+                const double pad = 1e-9 * g.size;
+                for (int b = 0; b < boxes; ++b) {
+                    for (int k = 0; k < 3; ++k) {
+                        out[b].lo[k] = FloatDown(geo[3 * b + k].lo - pad);
+                        out[b].hi[k] = FloatUp(geo[3 * b + k].hi + pad);
+                    }
+                    out[b].fieldLo = FloatDown(field[b].lo);
+                    out[b].fieldHi = FloatUp(field[b].hi);
+                }
+                kept.local() += 1;
+            }
+        });
+    for (std::int64_t k : kept) d.subCells += k;
+}
+}  // namespace
+
+bool FieldCellData::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
+                                 int count, double& t0, double& t1) const {
+    if (subStart.empty() || subStart[c] < 0) return true;
+    const SubBox* box = &subBoxes[subStart[c]];
+    const int boxes = subN * subN * subN;
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int b = 0; b < boxes; ++b) {
+        const SubBox& x = box[b];
+        bool holds = false;
+        for (int k = 0; k < count && !holds; ++k)
+            holds = values[k] >= x.fieldLo && values[k] <= x.fieldHi;
+        if (!holds) continue;
+        // The ray's parameter interval inside the world box (slabs); the box's padding is
+        // far above the rounding of these quotients.
+        double a = t0, e = t1;
+        for (int k = 0; k < 3 && a <= e; ++k) {
+            const double o = ray.origin[k], dir = ray.dir[k];
+            if (dir == 0) {
+                if (o < x.lo[k] || o > x.hi[k])
+                    e = -std::numeric_limits<double>::infinity();
+                continue;
+            }
+            double u = (x.lo[k] - o) / dir, v = (x.hi[k] - o) / dir;
+            if (u > v) std::swap(u, v);
+            a = std::max(a, u);
+            e = std::min(e, v);
+        }
+        if (a > e) continue;
+        lo = std::min(lo, a);
+        hi = std::max(hi, e);
+    }
+    if (!(lo <= hi)) return false;
+    t0 = std::max(t0, lo);
+    t1 = std::min(t1, hi);
+    return true;
+}
+
 const double* FieldCellData::CellValues(std::int64_t c,
                                         std::vector<double>& scratch) const {
     const double* points = PointValues();
@@ -231,6 +336,7 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
             }
         });
     ReduceHexOrders(mesh, field, d);
+    BuildSubBounds(mesh, geometry, d);
     return d;
 }
 

@@ -48,6 +48,30 @@ struct FieldCellData {
     std::vector<std::int64_t> fallbackCells;
     std::vector<std::array<double, 3>> fallbackBounds;
 
+    /// Sub-cell bounds of the Lagrange hexahedra (all but the affine trilinear ones):
+    /// each cell's reference cube cut into subN^3 equal boxes, and for each box a world
+    /// box that holds its image under the cell's map and an interval that holds the field
+    /// over it (elements/bounds.h: HexSubBounds, on the map and the values the rays
+    /// evaluate, the reduced ones where a cell has them). subStart[c]: the index of cell
+    /// c's first box in subBoxes, or -1. Empty when no cell has any.
+    struct SubBox {
+        float lo[3], hi[3];      ///< world box, padded by 1e-9 of the cell's size
+        float fieldLo, fieldHi;  ///< rounded outwards to float
+    };
+    int subN = 0;
+    std::vector<std::int64_t> subStart;
+    std::vector<SubBox> subBoxes;
+    std::int64_t subCells = 0;
+
+    /// Narrows [t0, t1], the segment of `ray` in cell c, to the part where the field may
+    /// take one of the `count` values: a point of the segment lies in one of the cell's
+    /// sub-boxes, so it lies in that box's world box, and if the box's field interval
+    /// holds none of the values the field differs from each of them there. False when no
+    /// part remains (the segment holds none of the values); true, with [t0, t1]
+    /// unchanged, for a cell without sub-cell bounds.
+    bool ClipToValues(std::int64_t c, const Ray& ray, const double* values, int count,
+                      double& t0, double& t1) const;
+
     /// Cell c's nodal values: in `values`, or gathered from PointValues() into `scratch`
     /// (then valid until `scratch` changes).
     const double* CellValues(std::int64_t c, std::vector<double>& scratch) const;

@@ -36,7 +36,9 @@ std::array<double, RenderCounters::kSize> RenderCounters::ToArray() const {
             volumeErrorSqSum,
             volumePixels,
             volumeErrorMax,
-            volumeNodes};
+            volumeNodes,
+            isoSubcellCulled,
+            isoSubcellClipped};
 }
 
 RenderCounters RenderCounters::FromArray(const std::array<double, kSize>& a) {
@@ -61,6 +63,8 @@ RenderCounters RenderCounters::FromArray(const std::array<double, kSize>& a) {
     c.volumePixels = a[17];
     c.volumeErrorMax = a[18];
     c.volumeNodes = a[19];
+    c.isoSubcellCulled = a[20];
+    c.isoSubcellClipped = a[21];
     return c;
 }
 
@@ -118,7 +122,9 @@ std::string StatsToJson(const RenderStats& s) {
                 {"max_projection_order", c.projectionOrderMax},
                 {"projection_unconverged", c.projectionUnconverged},
                 {"root_failures", c.rootFailures},
-                {"field_evaluations", c.fieldEvaluations}};
+                {"field_evaluations", c.fieldEvaluations},
+                {"subcell_culled", c.isoSubcellCulled},
+                {"subcell_clipped", c.isoSubcellClipped}};
     j["mapping"] = {{"inversions", c.inversions},
                     {"mean_iterations", safeDiv(c.inversionIterations, c.inversions)},
                     {"failures", c.inversionFailures}};

@@ -43,8 +43,12 @@ struct RenderCounters {
     double volumeErrorMax = 0;          ///< reduced with max
     double volumePixels = 0;
     double volumeNodes = 0;  ///< integrand samples of the volume quadratures
+    // Isosurfaces again: segments whose projection the sub-cell bounds ruled out, and
+    // those they shortened (FieldCellData::ClipToValues).
+    double isoSubcellCulled = 0;
+    double isoSubcellClipped = 0;
 
-    static constexpr int kSize = 20;
+    static constexpr int kSize = 22;
     /// Indices of the fields reduced with max rather than sum.
     static bool IsMax(int index);
     std::array<double, kSize> ToArray() const;
