@@ -16,6 +16,10 @@
 
 #include "util/check.h"
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 namespace hpray {
 namespace {
 
@@ -697,6 +701,202 @@ constexpr auto kSubBoundsKernels =
 void HexSubBounds(int p, int n, const double* coeffs, int comps, Interval* out) {
     HPRAY_CHECK(p >= 1 && p <= kMaxOrder && n >= 1 && n <= kMaxSubdivision);
     kSubBoundsKernels[p + 1](GetSubdivisionTable(p, n), n, coeffs, comps, out);
+}
+
+namespace {
+// TetSubBounds' tables for one order and depth: the corners of the 8^levels
+// sub-tetrahedra (uniform refinement of each child into its 4 corner tetrahedra and the 4
+// of its inner octahedron, cut along one diagonal), and for each sub-tetrahedron s the
+// matrix M_s (n x n, row-major) that takes a Lagrange tetrahedron's nodal values,
+// internal order, to the Bernstein coefficients of its interpolant restricted to s: the
+// simplex transform applied to the Lagrange basis at s's own lattice points, in extended
+// precision.
+struct TetSubdivisionTable {
+    int count = 0, n = 0;
+    std::vector<double> m;
+    double rowSum = 0;
+};
+
+using Corner = std::array<LD, 3>;
+using SubTet = std::array<Corner, 4>;
+
+std::vector<SubTet> RefineTets(const std::vector<SubTet>& in) {
+    std::vector<SubTet> out;
+    for (const SubTet& t : in) {
+        auto mid = [&](int a, int b) {
+            Corner c;
+            for (int d = 0; d < 3; ++d) c[d] = (t[a][d] + t[b][d]) / 2;
+            return c;
+        };
+        const Corner x01 = mid(0, 1), x02 = mid(0, 2), x03 = mid(0, 3), x12 = mid(1, 2),
+                     x13 = mid(1, 3), x23 = mid(2, 3);
+        out.push_back({t[0], x01, x02, x03});
+        out.push_back({x01, t[1], x12, x13});
+        out.push_back({x02, x12, t[2], x23});
+        out.push_back({x03, x13, x23, t[3]});
+        // The octahedron x01 x02 x03 x12 x13 x23, cut along the diagonal x02 - x13.
+        out.push_back({x01, x02, x03, x13});
+        out.push_back({x01, x02, x12, x13});
+        out.push_back({x02, x03, x13, x23});
+        out.push_back({x02, x12, x13, x23});
+    }
+    return out;
+}
+
+const TetSubdivisionTable& GetTetSubdivisionTable(const BasisTable& basis, int levels) {
+    const int p = basis.order;
+    thread_local std::array<const TetSubdivisionTable*, (kMaxOrder + 1) * 3> seen{};
+    const TetSubdivisionTable*& mine = seen[p * 3 + levels];
+    if (mine) return *mine;
+    static std::mutex mutex;
+    static std::map<std::pair<int, int>, std::unique_ptr<TetSubdivisionTable>> cache;
+    std::lock_guard<std::mutex> lock(mutex);
+    const auto key = std::make_pair(p, levels);
+    auto it = cache.find(key);
+    if (it != cache.end()) return *(mine = it->second.get());
+    auto t = std::make_unique<TetSubdivisionTable>();
+    const int n = basis.nodeCount;
+    const std::vector<LD> simplex = SimplexTransform(p, 3);  // lattice order -> Bernstein
+    std::vector<SubTet> tets = {
+        SubTet{Corner{0, 0, 0}, Corner{1, 0, 0}, Corner{0, 1, 0}, Corner{0, 0, 1}}};
+    for (int l = 0; l < levels; ++l) tets = RefineTets(tets);
+    t->count = static_cast<int>(tets.size());
+    t->n = n;
+    t->m.resize(static_cast<std::size_t>(t->count) * n * n);
+    // Silvester's form of the equispaced Lagrange basis: node (i, j, k) of order p with
+    // barycentric indices a = (p - i - j - k, i, j, k) is prod_m prod_{q < a_m}
+    // (p lambda_m - q) / (q + 1).
+    auto basisAt = [&](const Corner& y, std::vector<LD>& phi) {
+        const LD lambda[4] = {1 - y[0] - y[1] - y[2], y[0], y[1], y[2]};
+        for (int m = 0; m < n; ++m) {
+            const auto& ijk = basis.lattice[m];
+            const int a[4] = {p - ijk[0] - ijk[1] - ijk[2], ijk[0], ijk[1], ijk[2]};
+            LD v = 1;
+            for (int b = 0; b < 4; ++b)
+                for (int q = 0; q < a[b]; ++q) v *= (p * lambda[b] - q) / (q + 1);
+            phi[m] = v;
+        }
+    };
+    std::vector<LD> e(static_cast<std::size_t>(n) * n), phi(n);
+    for (int s = 0; s < t->count; ++s) {
+        const SubTet& st = tets[s];
+        // Rows: the sub-tetrahedron's lattice points in lattice order (k, then j, then
+        // i).
+        int r = 0;
+        for (int k = 0; k <= p; ++k)
+            for (int j = 0; j + k <= p; ++j)
+                for (int i = 0; i + j + k <= p; ++i, ++r) {
+                    Corner y;
+                    for (int d = 0; d < 3; ++d)
+                        y[d] = st[0][d] + (st[1][d] - st[0][d]) * i / p +
+                               (st[2][d] - st[0][d]) * j / p +
+                               (st[3][d] - st[0][d]) * k / p;
+                    basisAt(y, phi);
+                    for (int m = 0; m < n; ++m)
+                        e[static_cast<std::size_t>(r) * n + m] = phi[m];
+                }
+        for (int a = 0; a < n; ++a) {
+            double sum = 0;
+            for (int m = 0; m < n; ++m) {
+                LD v = 0;
+                for (int q = 0; q < n; ++q)
+                    v += simplex[static_cast<std::size_t>(a) * n + q] *
+                         e[static_cast<std::size_t>(q) * n + m];
+                const double d = static_cast<double>(v);
+                t->m[(static_cast<std::size_t>(s) * n + a) * n + m] = d;
+                sum += std::abs(d);
+            }
+            t->rowSum = std::max(t->rowSum, sum);
+        }
+    }
+    return *(mine = cache.emplace(key, std::move(t)).first->second.get());
+}
+}  // namespace
+
+int TetSubCount(int levels) { return levels == 0 ? 1 : 8 * TetSubCount(levels - 1); }
+
+void TetSubBounds(const BasisTable& basis, int levels, const double* coeffs, int comps,
+                  Interval* out) {
+    HPRAY_CHECK(basis.kind == BasisKind::TetLagrange && levels >= 0 && levels <= 2);
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    const TetSubdivisionTable& t = GetTetSubdivisionTable(basis, levels);
+    const int n = t.n;
+    // One sum of n terms, the table's own rounding, and a factor 4 of slack: each
+    // computed coefficient is within gamma |M| |u| <= gamma R max |u| of the exact one.
+    const double gamma = 4.0 * (n + 16.0) * kUnit;
+    // Four components at a time, one per vector lane (node coordinates and a field
+    // together), and four rows at a time: independent sums that keep the units busy.
+    for (int c0 = 0; c0 < comps; c0 += 4) {
+        const int cn = std::min(4, comps - c0);
+        alignas(32) double u[kMaxBasisNodes][4] = {};
+        double maxAbs[4] = {0, 0, 0, 0};
+        bool finite[4] = {true, true, true, true};
+        for (int m = 0; m < n; ++m)
+            for (int c = 0; c < cn; ++c) {
+                const double v = coeffs[static_cast<std::size_t>(m) * comps + c0 + c];
+                u[m][c] = v;
+                finite[c] = finite[c] && std::isfinite(v);
+                maxAbs[c] = std::max(maxAbs[c], std::abs(v));
+            }
+        for (int s = 0; s < t.count; ++s) {
+            const double* m = t.m.data() + static_cast<std::size_t>(s) * n * n;
+            double lo[4] = {inf, inf, inf, inf}, hi[4] = {-inf, -inf, -inf, -inf};
+            int a = 0;
+#if defined(__AVX2__) && defined(__FMA__)
+            __m256d vlo = _mm256_set1_pd(inf), vhi = _mm256_set1_pd(-inf);
+            for (; a + 4 <= n; a += 4) {
+                const double* m0 = m + a * n;
+                __m256d s0 = _mm256_setzero_pd(), s1 = s0, s2 = s0, s3 = s0;
+                for (int q = 0; q < n; ++q) {
+                    const __m256d uq = _mm256_load_pd(u[q]);
+                    s0 = _mm256_fmadd_pd(_mm256_set1_pd(m0[q]), uq, s0);
+                    s1 = _mm256_fmadd_pd(_mm256_set1_pd(m0[n + q]), uq, s1);
+                    s2 = _mm256_fmadd_pd(_mm256_set1_pd(m0[2 * n + q]), uq, s2);
+                    s3 = _mm256_fmadd_pd(_mm256_set1_pd(m0[3 * n + q]), uq, s3);
+                }
+                vlo = _mm256_min_pd(
+                    vlo, _mm256_min_pd(_mm256_min_pd(s0, s1), _mm256_min_pd(s2, s3)));
+                vhi = _mm256_max_pd(
+                    vhi, _mm256_max_pd(_mm256_max_pd(s0, s1), _mm256_max_pd(s2, s3)));
+            }
+            _mm256_storeu_pd(lo, vlo);
+            _mm256_storeu_pd(hi, vhi);
+#else
+            for (; a + 4 <= n; a += 4) {
+                double sum[4][4] = {};
+                for (int q = 0; q < n; ++q)
+                    for (int r = 0; r < 4; ++r)
+                        for (int c = 0; c < 4; ++c)
+                            sum[r][c] = std::fma(m[(a + r) * n + q], u[q][c], sum[r][c]);
+                for (int r = 0; r < 4; ++r)
+                    for (int c = 0; c < 4; ++c) {
+                        lo[c] = std::min(lo[c], sum[r][c]);
+                        hi[c] = std::max(hi[c], sum[r][c]);
+                    }
+            }
+#endif
+            for (; a < n; ++a) {
+                double sum[4] = {};
+                for (int q = 0; q < n; ++q)
+                    for (int c = 0; c < 4; ++c)
+                        sum[c] = std::fma(m[a * n + q], u[q][c], sum[c]);
+                for (int c = 0; c < 4; ++c) {
+                    lo[c] = std::min(lo[c], sum[c]);
+                    hi[c] = std::max(hi[c], sum[c]);
+                }
+            }
+            for (int c = 0; c < cn; ++c) {
+                Interval& o = out[static_cast<std::size_t>(s) * comps + c0 + c];
+                if (!finite[c]) {
+                    o = {-inf, inf};
+                    continue;
+                }
+                const double widen = gamma * t.rowSum * maxAbs[c];
+                o.lo = lo[c] - (widen + 4 * kUnit * std::abs(lo[c]));
+                o.hi = hi[c] + (widen + 4 * kUnit * std::abs(hi[c]));
+            }
+        }
+    }
 }
 
 Interval FieldBounds(const BasisTable& basis, const double* coeffs, int stride) {

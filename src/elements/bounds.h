@@ -59,4 +59,22 @@ inline constexpr int kMaxSubdivision = 4;
 /// reference axis. A component with a non-finite value gets infinite intervals.
 void HexSubBounds(int p, int n, const double* coeffs, int comps, Interval* out);
 
+/// The number of sub-tetrahedra of TetSubBounds at `levels` refinements: 8^levels.
+int TetSubCount(int levels);
+
+/// The refinements used for order-p tetrahedra: 2 (64 sub-tetrahedra) up to p = 4, 1 up
+/// to p = 7, 0 above (each table holds 8^levels dense transforms of the cell's node
+/// count, and each cell costs as many products).
+inline int TetSubLevels(int p) { return p <= 4 ? 2 : p <= 7 ? 1 : 0; }
+
+/// Bounds of a Lagrange tetrahedron's interpolant over the sub-tetrahedra of `levels`
+/// (0 to 2) uniform refinements of its reference cell (each tetrahedron into its 4 corner
+/// ones and the 4 of its inner octahedron): the Bernstein coefficients of the interpolant
+/// restricted to each (one dense transform per sub-tetrahedron, built once per order),
+/// their range widened by a bound of their rounding. `coeffs`: basis.nodeCount nodal
+/// values in internal order, `comps` interleaved components; out[sub * comps + c]. A
+/// component with a non-finite value gets infinite intervals.
+void TetSubBounds(const BasisTable& basis, int levels, const double* coeffs, int comps,
+                  Interval* out);
+
 }  // namespace hpray

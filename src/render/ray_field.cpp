@@ -1,16 +1,17 @@
 // SegmentField: the true field along a ray inside one cell.
 #include "render/ray_field.h"
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-
 #include "elements/bounds.h"
 #include "elements/tensor_eval.h"
 #include "mesh/cell.h"
+#include "util/check.h"
 
 namespace hpray {
 
@@ -156,57 +157,83 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 }  // namespace
 
 namespace {
-// FieldCellData's sub-cell bounds: subN per direction (64 boxes per cell).
+// FieldCellData's sub-cell bounds: hexahedra in kSubdivision^3 boxes, tetrahedra in the
+// sub-tetrahedra of TetSubLevels(p) uniform refinements.
 constexpr int kSubdivision = 4;
 
-// The nearest float below (above) x: bounds kept in floats stay bounds.
+// A float at most x (at least x): bounds kept in floats stay bounds. Where the rounded
+// value lies on the wrong side it steps out by |f| 2^-23 + 1e-38, at least one unit in
+// the last place of f (and past zero), and at most three.
 float FloatDown(double x) {
     const float f = static_cast<float>(x);
-    return f > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+    return f > x ? f - (std::abs(f) * 0x1p-23f + 1e-38f) : f;
 }
 float FloatUp(double x) {
     const float f = static_cast<float>(x);
-    return f < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+    return f < x ? f + (std::abs(f) * 0x1p-23f + 1e-38f) : f;
 }
 
 void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellData& d) {
     const std::int64_t cells = mesh.CellCount();
-    std::vector<std::int64_t> start(cells, -1);
-    std::int64_t count = 0;
-    for (std::int64_t c = 0; c < cells; ++c)
-        if (mesh.cellShape[c] == CellShape::Hex &&
-            mesh.cellFamily[c] == CellFamily::Lagrange && !geometry.IsDerived(c)) {
-            start[c] = count;
-            count += kSubdivision * kSubdivision * kSubdivision;
-        }
-    if (count == 0) return;
+    // Which cells get boxes: Lagrange hexahedra and tetrahedra above the linear ones.
+    constexpr int hexBoxes = kSubdivision * kSubdivision * kSubdivision;
+    auto boxesOf = [&](std::int64_t c) {
+        const int p = mesh.cellOrder[c];
+        if (mesh.cellFamily[c] != CellFamily::Lagrange || p < 2 || geometry.IsDerived(c))
+            return 0;
+        if (mesh.cellShape[c] == CellShape::Hex) return hexBoxes;
+        if (mesh.cellShape[c] == CellShape::Tet && TetSubLevels(p) > 0)
+            return TetSubCount(TetSubLevels(p));
+        return 0;
+    };
+    std::vector<std::int64_t> start(cells + 1, 0);
+    for (std::int64_t c = 0; c < cells; ++c) start[c + 1] = start[c] + boxesOf(c);
+    if (start[cells] == 0) return;
     d.subN = kSubdivision;
     d.subStart = std::move(start);
-    d.subBoxes.resize(count);
-    constexpr int boxes = kSubdivision * kSubdivision * kSubdivision;
+    d.subBoxes.resize(d.subStart[cells]);
     tbb::enumerable_thread_specific<std::int64_t> kept(0);
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, cells, 64),
         [&](const tbb::blocked_range<std::int64_t>& range) {
             CellScratch scratch;
             std::vector<double> nodal;
-            Interval geo[3 * boxes], field[boxes];
+            std::vector<Interval> geo, field, both;
+            std::vector<double> packed;
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
-                if (d.subStart[c] < 0) continue;
+                const int boxes = static_cast<int>(d.subStart[c + 1] - d.subStart[c]);
+                if (boxes == 0) continue;
                 const CellGeometry& g = geometry.Cell(c, scratch);
-                FieldCellData::SubBox* out = &d.subBoxes[d.subStart[c]];
-                const bool reduced = !d.reducedOrder.empty() && d.reducedOrder[c] > 0;
-                const int fieldOrder = reduced ? d.reducedOrder[c] : g.basis->order;
-                const double* values =
-                    reduced ? d.reducedValues[c].data() : d.CellValues(c, nodal);
-                // Affine trilinear cells with a linear field gain nothing: marked
-                // unbounded.
-                if (!g.hexMap || (g.affine && g.basis->order == 1)) {
-                    d.subStart[c] = -1;
-                    continue;
+                geo.resize(3 * boxes);
+                field.resize(boxes);
+                if (mesh.cellShape[c] == CellShape::Hex) {
+                    HPRAY_CHECK(g.hexMap != nullptr);
+                    // The map and the values the rays evaluate: the reduced ones if any.
+                    const bool reduced = !d.reducedOrder.empty() && d.reducedOrder[c] > 0;
+                    HexSubBounds(g.mapOrder, kSubdivision, g.mapNodes, 3, geo.data());
+                    HexSubBounds(
+                        reduced ? d.reducedOrder[c] : g.basis->order, kSubdivision,
+                        reduced ? d.reducedValues[c].data() : d.CellValues(c, nodal), 1,
+                        field.data());
+                } else {
+                    // The node coordinates and the field in one pass (four lanes).
+                    const int n = g.basis->nodeCount;
+                    const double* values = d.CellValues(c, nodal);
+                    packed.resize(4 * n);
+                    for (int m = 0; m < n; ++m) {
+                        for (int k = 0; k < 3; ++k)
+                            packed[4 * m + k] = g.nodes[3 * m + k];
+                        packed[4 * m + 3] = values[m];
+                    }
+                    both.resize(4 * boxes);
+                    TetSubBounds(*g.basis, TetSubLevels(g.basis->order), packed.data(), 4,
+                                 both.data());
+                    for (int b = 0; b < boxes; ++b) {
+                        for (int k = 0; k < 3; ++k) geo[3 * b + k] = both[4 * b + k];
+                        field[b] = both[4 * b + 3];
+                    }
                 }
-                HexSubBounds(g.mapOrder, kSubdivision, g.mapNodes, 3, geo);
-                HexSubBounds(fieldOrder, kSubdivision, values, 1, field);
+                FieldCellData::SubBox* out = &d.subBoxes[d.subStart[c]];
                 const double pad = 1e-9 * g.size;
                 for (int b = 0; b < boxes; ++b) {
                     for (int k = 0; k < 3; ++k) {
@@ -225,9 +252,9 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
 
 bool FieldCellData::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
                                  int count, double& t0, double& t1) const {
-    if (subStart.empty() || subStart[c] < 0) return true;
+    if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
     const SubBox* box = &subBoxes[subStart[c]];
-    const int boxes = subN * subN * subN;
+    const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
     for (int b = 0; b < boxes; ++b) {
         const SubBox& x = box[b];

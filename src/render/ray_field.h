@@ -48,12 +48,14 @@ struct FieldCellData {
     std::vector<std::int64_t> fallbackCells;
     std::vector<std::array<double, 3>> fallbackBounds;
 
-    /// Sub-cell bounds of the Lagrange hexahedra (all but the affine trilinear ones):
-    /// each cell's reference cube cut into subN^3 equal boxes, and for each box a world
-    /// box that holds its image under the cell's map and an interval that holds the field
-    /// over it (elements/bounds.h: HexSubBounds, on the map and the values the rays
-    /// evaluate, the reduced ones where a cell has them). subStart[c]: the index of cell
-    /// c's first box in subBoxes, or -1. Empty when no cell has any.
+    /// Sub-cell bounds of the Lagrange hexahedra and tetrahedra of order 2 and more: each
+    /// cell's reference domain cut into boxes (hexahedra: subN^3 equal boxes; tetrahedra:
+    /// the sub-tetrahedra of two uniform refinements), and for each a world box that
+    /// holds its image under the cell's map and an interval that holds the field over it
+    /// (elements/bounds.h: HexSubBounds, TetSubBounds, on the map and the values the rays
+    /// evaluate, the reduced ones where a cell has them). Cell c's boxes are
+    /// subBoxes[subStart[c] .. subStart[c + 1]) (none for other cells). Empty when no
+    /// cell has any.
     struct SubBox {
         float lo[3], hi[3];      ///< world box, padded by 1e-9 of the cell's size
         float fieldLo, fieldHi;  ///< rounded outwards to float

@@ -775,3 +775,43 @@ isosurfaces:
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// The same on quadratic tetrahedra (sub-tetrahedra): ball-p2's sphere, with and without
+// the bounds, the same hits, both on the analytic sphere (ExpectSphereImage's scene).
+TEST(IsoRender, SubTetrahedronBoundsCullSegmentsAndKeepEveryHit) {
+    const Mesh mesh = MakeBuiltin("builtin:ball-p2");
+    Scene scene = MakeScene(kBallScene);
+    scene.isosurfaces[0].value = 0.25;  // R = 0.5
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    const Camera camera(scene.camera);
+    Image with, without;
+    RenderCounters cWith, cWithout;
+    RenderBrick(setup, camera, 1, with, cWith);
+    setup.subCellBounds = false;
+    RenderBrick(setup, camera, 1, without, cWithout);
+    EXPECT_GT(cWith.isoSubcellCulled, 0.1 * cWith.segments);
+    EXPECT_LT(cWith.fieldEvaluations, cWithout.fieldEvaluations);
+    EXPECT_EQ(cWith.isoHits, cWithout.isoHits);
+    int hits = 0;
+    for (int j = 0; j < with.height; ++j)
+        for (int i = 0; i < with.width; ++i) {
+            const std::size_t p = std::size_t(j) * with.width + i;
+            ASSERT_EQ(std::isfinite(with.z[p]), std::isfinite(without.z[p]))
+                << i << "," << j;
+            if (!std::isfinite(with.z[p])) continue;
+            ++hits;
+            EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
+            bool grazing = false;
+            const auto expect = RaySphere(camera.PixelRay(i, j), 0.5, grazing);
+            if (!grazing && expect) EXPECT_NEAR(with.z[p], expect->t, 1e-9);
+        }
+    EXPECT_GT(hits, 300);
+}
+
+}  // namespace
+}  // namespace hpray
