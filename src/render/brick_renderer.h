@@ -58,8 +58,9 @@ struct BrickSetup {
 
     ProjectionOptions projection;
     /// Isosurfaces project a segment only where the field's sub-cell bounds allow an
-    /// isovalue (FieldCellData::ClipToValues). Always on in rendering; tests turn it off
-    /// to compare.
+    /// isovalue (FieldCellData::ClipToValues), and the cell filter finds a cell only
+    /// through its sub-boxes that may hold an isovalue (MakeBrickSetup's last argument).
+    /// Always on in rendering; tests turn it off to compare.
     bool subCellBounds = true;
     RootOptions roots;
     InversionOptions inversion;
@@ -107,7 +108,7 @@ struct BrickSetup {
 /// changes only values, transfer functions or the camera recomputes no per-cell data.
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                           const BrickTraverser& traverser, const Scene& scene,
-                          FieldCache* cache = nullptr);
+                          FieldCache* cache = nullptr, bool subCellBounds = true);
 
 /// The measured cost of one ray segment: where its work was done and how long it took.
 /// Sampled on request (a steady-clock read per segment) to calibrate the partitioner's

@@ -2176,27 +2176,49 @@ class CellFilter {
     }
     const void* owner = nullptr;      // the traverser's Impl
     std::vector<std::uint8_t> keep;   // per cell of the brick
-    std::vector<std::int64_t> cells;  // primitive index -> cell
+    std::vector<std::int64_t> cells;  // primitive index -> cell (a cell's consecutive)
     std::vector<float> boxes;         // 6 per primitive
     RTCScene scene = nullptr;
 };
 
 std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
-    const std::vector<std::uint8_t>& keep) const {
+    const std::vector<std::uint8_t>& keep, const std::vector<std::int64_t>* boxStart,
+    const std::vector<float>* boxes) const {
     const Impl& im = *impl_;
     auto filter = std::make_shared<CellFilter>();
     filter->owner = &im;
     const std::int64_t cells = static_cast<std::int64_t>(im.cellFaceOffset.size()) - 1;
     HPRAY_CHECK(static_cast<std::int64_t>(keep.size()) == cells);
+    HPRAY_CHECK(!boxStart ||
+                (boxes && static_cast<std::int64_t>(boxStart->size()) == cells + 1));
     filter->keep = keep;
-    for (std::int64_t c = 0; c < cells; ++c)
-        if (keep[c]) filter->cells.push_back(c);
+    // One primitive per given box of a kept cell, or its own box where it has none; a
+    // cell's primitives are consecutive.
+    std::vector<std::int64_t> own;  // primitive -> index of its own box, or -1
+    for (std::int64_t c = 0; c < cells; ++c) {
+        if (!keep[c]) continue;
+        const std::int64_t b0 = boxStart ? (*boxStart)[c] : 0,
+                           b1 = boxStart ? (*boxStart)[c + 1] : 0;
+        if (b1 == b0) {
+            filter->cells.push_back(c);
+            own.push_back(-1);
+        }
+        for (std::int64_t b = b0; b < b1; ++b) {
+            filter->cells.push_back(c);
+            own.push_back(b);
+        }
+    }
     filter->boxes.resize(6 * filter->cells.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filter->cells.size(), 1024),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                           std::vector<std::array<std::int32_t, 3>> tris;
-                          for (std::size_t i = range.begin(); i < range.end(); ++i)
-                              im.CellBox(filter->cells[i], tris, &filter->boxes[6 * i]);
+                          for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                              float* out = &filter->boxes[6 * i];
+                              if (own[i] < 0)
+                                  im.CellBox(filter->cells[i], tris, out);
+                              else
+                                  std::copy_n(&(*boxes)[6 * own[i]], 6, out);
+                          }
                       });
     filter->scene = im.MakeBoxScene(filter->boxes.data(), filter->cells.size());
     return filter;
@@ -2218,8 +2240,14 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     std::vector<std::int64_t>& cand = tScratch.candidates;
     im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
     bool closed = true;
-    for (std::int64_t i : cand)
-        closed = im.CellSegments(filter.cells[i], frame, tLo, tHi, out, seeds) && closed;
+    std::int64_t last = -1;
+    for (std::int64_t i : cand) {
+        // A cell's primitives are consecutive, so its repeats are adjacent here.
+        const std::int64_t c = filter.cells[i];
+        if (c == last) continue;
+        last = c;
+        closed = im.CellSegments(c, frame, tLo, tHi, out, seeds) && closed;
+    }
     if (!closed) {
         // A kept cell whose crossings do not pair up: the walk (with its repairs) decides
         // this ray, and its segments of the kept cells are the answer.

@@ -193,7 +193,8 @@ class BrickTraverser {
                std::vector<SegmentEnds>* ends,
                std::vector<SegmentSeed>* seeds = nullptr) const;
     /// The segments of the cells of `filter` only (built by this traverser), in [tMin,
-    /// tMax] sorted by t: for each cell whose box the ray meets, its faces' crossings
+    /// tMax] sorted by t: for each cell whose box (or one of whose given boxes) the ray
+    /// meets, its faces' crossings
     /// paired as the walk pairs them, so a segment is the walk's segment of that cell
     /// (without walking the cells in between). Thread-safe.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
@@ -202,9 +203,16 @@ class BrickTraverser {
     /// curved faces): the `seeds` of the Trace calls above (one per segment) are then
     /// worth asking for.
     bool HasSeeds() const;
-    /// A filter of the cells c with keep[c] != 0 (keep has one entry per cell).
+    /// A filter of the cells c with keep[c] != 0 (keep has one entry per cell). With
+    /// `boxStart` (one entry per cell and one more) and `boxes` (lo x y z, hi x y z per
+    /// box), a kept cell c is found through its boxes boxes[6 boxStart[c] ..
+    /// 6 boxStart[c + 1]) instead of its own box: a ray that meets none of them does not
+    /// get the cell's segment (the boxes of the parts of the cell that matter, say). A
+    /// kept cell without boxes is found through its own box.
     std::shared_ptr<const CellFilter> MakeCellFilter(
-        const std::vector<std::uint8_t>& keep) const;
+        const std::vector<std::uint8_t>& keep,
+        const std::vector<std::int64_t>* boxStart = nullptr,
+        const std::vector<float>* boxes = nullptr) const;
     /// True when the face points' corners are point indices of the brick's mesh (no two
     /// of its points were merged into one).
     bool FacePoints() const;
