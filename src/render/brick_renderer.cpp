@@ -154,8 +154,8 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                             all = false;
                             break;
                         }
-                        for (std::int64_t b = d.subStart[c]; b < d.subStart[c + 1]; ++b) {
-                            const FieldCellData::SubBox& x = d.subBoxes[b];
+                        for (int b = 0; b < int(d.subStart[c + 1] - d.subStart[c]); ++b) {
+                            const FieldCellData::SubBox x = d.SubBoxOf(c, b);
                             bool holds = false;
                             for (const BrickSetup::Iso& iso : s.isos)
                                 holds |= iso.field == int(f) && iso.value >= x.fieldLo &&

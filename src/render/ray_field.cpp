@@ -1,6 +1,10 @@
 // SegmentField: the true field along a ray inside one cell.
 #include "render/ray_field.h"
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
@@ -191,7 +195,7 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
     if (start[cells] == 0) return;
     d.subN = kSubdivision;
     d.subStart = std::move(start);
-    d.subBoxes.resize(d.subStart[cells]);
+    d.subData.resize(8 * d.subStart[cells]);
     tbb::enumerable_thread_specific<std::int64_t> kept(0);
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, cells, 64),
@@ -233,15 +237,15 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
                         field[b] = both[4 * b + 3];
                     }
                 }
-                FieldCellData::SubBox* out = &d.subBoxes[d.subStart[c]];
+                float* out = d.subData.data() + 8 * d.subStart[c];
                 const double pad = 1e-9 * g.size;
                 for (int b = 0; b < boxes; ++b) {
                     for (int k = 0; k < 3; ++k) {
-                        out[b].lo[k] = FloatDown(geo[3 * b + k].lo - pad);
-                        out[b].hi[k] = FloatUp(geo[3 * b + k].hi + pad);
+                        out[k * boxes + b] = FloatDown(geo[3 * b + k].lo - pad);
+                        out[(3 + k) * boxes + b] = FloatUp(geo[3 * b + k].hi + pad);
                     }
-                    out[b].fieldLo = FloatDown(field[b].lo);
-                    out[b].fieldHi = FloatUp(field[b].hi);
+                    out[6 * boxes + b] = FloatDown(field[b].lo);
+                    out[7 * boxes + b] = FloatUp(field[b].hi);
                 }
                 kept.local() += 1;
             }
@@ -253,33 +257,90 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
 bool FieldCellData::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
                                  int count, double& t0, double& t1) const {
     if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
-    const SubBox* box = &subBoxes[subStart[c]];
     const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
+    const float* data = subData.data() + 8 * subStart[c];
+    const float* fieldLo = data + 6 * boxes;
+    const float* fieldHi = data + 7 * boxes;
+    // The boxes whose interval holds a value (at most 64 per cell), compared in float
+    // against the value rounded up (lower bounds) and down (upper bounds), so a box that
+    // holds it in exact arithmetic is never left out.
+    std::uint64_t holding = 0;
+    for (int k = 0; k < count; ++k) {
+        const float up = FloatUp(values[k]), down = FloatDown(values[k]);
+#if defined(__AVX2__)
+        const __m256 vu = _mm256_set1_ps(up), vd = _mm256_set1_ps(down);
+        for (int b = 0; b < boxes; b += 8) {
+            const __m256 in = _mm256_and_ps(
+                _mm256_cmp_ps(_mm256_loadu_ps(fieldLo + b), vu, _CMP_LE_OQ),
+                _mm256_cmp_ps(vd, _mm256_loadu_ps(fieldHi + b), _CMP_LE_OQ));
+            holding |= std::uint64_t(unsigned(_mm256_movemask_ps(in))) << b;
+        }
+#else
+        for (int b = 0; b < boxes; ++b)
+            holding |= std::uint64_t(fieldLo[b] <= up && down <= fieldHi[b]) << b;
+#endif
+    }
+    // If all hold, their world boxes cover the whole segment: nothing to narrow.
+    if (holding == (boxes == 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << boxes) - 1))
+        return true;
+    if (holding == 0) return false;
+    // The hull of the ray's parameter intervals in the world boxes of those (slabs, in
+    // double, four boxes at a time; the boxes' padding is far above the rounding of
+    // these products).
+    double inv[3];
+    for (int k = 0; k < 3; ++k) inv[k] = 1.0 / ray.dir[k];
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (int b = 0; b < boxes; ++b) {
-        const SubBox& x = box[b];
-        bool holds = false;
-        for (int k = 0; k < count && !holds; ++k)
-            holds = values[k] >= x.fieldLo && values[k] <= x.fieldHi;
-        if (!holds) continue;
-        // The ray's parameter interval inside the world box (slabs); the box's padding is
-        // far above the rounding of these quotients.
-        double a = t0, e = t1;
-        for (int k = 0; k < 3 && a <= e; ++k) {
-            const double o = ray.origin[k], dir = ray.dir[k];
-            if (dir == 0) {
-                if (o < x.lo[k] || o > x.hi[k])
-                    e = -std::numeric_limits<double>::infinity();
+    for (int b0 = 0; b0 < boxes; b0 += 4) {
+        const unsigned lanes = unsigned(holding >> b0) & 0xfu;
+        if (lanes == 0) continue;
+        alignas(32) double a[4], e[4];
+#if defined(__AVX2__)
+        __m256d va = _mm256_set1_pd(t0), ve = _mm256_set1_pd(t1);
+        for (int k = 0; k < 3; ++k) {
+            const __m256d bl = _mm256_cvtps_pd(_mm_loadu_ps(data + k * boxes + b0));
+            const __m256d bh = _mm256_cvtps_pd(_mm_loadu_ps(data + (3 + k) * boxes + b0));
+            const __m256d o = _mm256_set1_pd(ray.origin[k]);
+            if (ray.dir[k] == 0) {  // inside the slab: no limit; outside: nothing
+                const __m256d in = _mm256_and_pd(_mm256_cmp_pd(o, bl, _CMP_GE_OQ),
+                                                 _mm256_cmp_pd(o, bh, _CMP_LE_OQ));
+                ve = _mm256_blendv_pd(
+                    _mm256_set1_pd(-std::numeric_limits<double>::infinity()), ve, in);
                 continue;
             }
-            double u = (x.lo[k] - o) / dir, v = (x.hi[k] - o) / dir;
-            if (u > v) std::swap(u, v);
-            a = std::max(a, u);
-            e = std::min(e, v);
+            const __m256d s = _mm256_set1_pd(inv[k]);
+            const __m256d u = _mm256_mul_pd(_mm256_sub_pd(bl, o), s);
+            const __m256d v = _mm256_mul_pd(_mm256_sub_pd(bh, o), s);
+            va = _mm256_max_pd(va, _mm256_min_pd(u, v));
+            ve = _mm256_min_pd(ve, _mm256_max_pd(u, v));
         }
-        if (a > e) continue;
-        lo = std::min(lo, a);
-        hi = std::max(hi, e);
+        _mm256_store_pd(a, va);
+        _mm256_store_pd(e, ve);
+#else
+        for (int j = 0; j < 4; ++j) a[j] = t0, e[j] = t1;
+        for (int k = 0; k < 3; ++k) {
+            const double o = ray.origin[k];
+            const float* bl = data + k * boxes + b0;
+            const float* bh = data + (3 + k) * boxes + b0;
+            if (ray.dir[k] == 0) {  // inside the slab: no limit; outside: nothing
+                for (int j = 0; j < 4; ++j)
+                    if (!(o >= bl[j] && o <= bh[j]))
+                        e[j] = -std::numeric_limits<double>::infinity();
+                continue;
+            }
+            for (int j = 0; j < 4; ++j) {
+                const double u = (double(bl[j]) - o) * inv[k],
+                             v = (double(bh[j]) - o) * inv[k];
+                a[j] = std::max(a[j], std::min(u, v));
+                e[j] = std::min(e[j], std::max(u, v));
+            }
+        }
+#endif
+        for (int j = 0; j < 4; ++j)
+            if ((lanes >> j & 1u) && a[j] <= e[j]) {
+                lo = std::min(lo, a[j]);
+                hi = std::max(hi, e[j]);
+            }
+        if (lo <= t0 && hi >= t1) return true;  // already the whole segment
     }
     if (!(lo <= hi)) return false;
     t0 = std::max(t0, lo);

@@ -50,20 +50,32 @@ struct FieldCellData {
 
     /// Sub-cell bounds of the Lagrange hexahedra and tetrahedra of order 2 and more: each
     /// cell's reference domain cut into boxes (hexahedra: subN^3 equal boxes; tetrahedra:
-    /// the sub-tetrahedra of two uniform refinements), and for each a world box that
-    /// holds its image under the cell's map and an interval that holds the field over it
+    /// the sub-tetrahedra of uniform refinements), and for each a world box that holds
+    /// its image under the cell's map and an interval that holds the field over it
     /// (elements/bounds.h: HexSubBounds, TetSubBounds, on the map and the values the rays
-    /// evaluate, the reduced ones where a cell has them). Cell c's boxes are
-    /// subBoxes[subStart[c] .. subStart[c + 1]) (none for other cells). Empty when no
-    /// cell has any.
+    /// evaluate, the reduced ones where a cell has them). Cell c has the boxes
+    /// subStart[c]
+    /// .. subStart[c + 1] (a multiple of 8, at most 64; none for other cells), stored as
+    /// 8 rows of floats from subData[8 subStart[c]], one entry per box: lower x, y, z,
+    /// upper x, y, z (padded by 1e-9 of the cell's size), lower and upper field bound
+    /// (all rounded outwards). Empty when no cell has any.
     struct SubBox {
-        float lo[3], hi[3];      ///< world box, padded by 1e-9 of the cell's size
-        float fieldLo, fieldHi;  ///< rounded outwards to float
+        float lo[3], hi[3];
+        float fieldLo, fieldHi;
     };
     int subN = 0;
     std::vector<std::int64_t> subStart;
-    std::vector<SubBox> subBoxes;
+    std::vector<float> subData;
     std::int64_t subCells = 0;
+    /// Box b of cell c.
+    SubBox SubBoxOf(std::int64_t c, int b) const {
+        const std::int64_t n = subStart[c + 1] - subStart[c];
+        const float* row = subData.data() + 8 * subStart[c] + b;
+        return {{row[0], row[n], row[2 * n]},
+                {row[3 * n], row[4 * n], row[5 * n]},
+                row[6 * n],
+                row[7 * n]};
+    }
 
     /// Narrows [t0, t1], the segment of `ray` in cell c, to the part where the field may
     /// take one of the `count` values: a point of the segment lies in one of the cell's

@@ -821,3 +821,51 @@ TEST(IsoRender, SubTetrahedronBoundsCullSegmentsAndKeepEveryHit) {
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Rays parallel to two axes (an orthographic camera looking down -x): the sub-cell
+// bounds' slab test takes its zero-direction branch for y and z. Every ray inside the
+// domain meets the plane x = 0.81 at t = 3 - 0.81, with and without the bounds.
+TEST(IsoRender, SubCellBoundsWithRaysAlongAnAxis) {
+    const Mesh mesh = testing::CurvedHexesWithFieldX(0.08, 4);
+    const Scene scene = MakeScene(R"(
+data: {mesh: "builtin:nk-sinc"}
+camera: {position: [3, 0.52, 0.47], look_at: [0.5, 0.52, 0.47], up: [0, 1, 0],
+         ortho_height: 1.2, width: 40, height: 40}
+isosurfaces:
+  - {field: u, value: 0.81}
+)");
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    const BrickSetup on = MakeBrickSetup(mesh, geometry, traverser, scene);
+    const BrickSetup off =
+        MakeBrickSetup(mesh, geometry, traverser, scene, nullptr, false);
+    const Camera camera(scene.camera);
+    Image with, without;
+    RenderCounters cWith, cWithout;
+    RenderBrick(on, camera, 1, with, cWith);
+    RenderBrick(off, camera, 1, without, cWithout);
+    EXPECT_LT(cWith.fieldEvaluations, cWithout.fieldEvaluations);
+    int hits = 0;
+    for (int j = 0; j < 40; ++j)
+        for (int i = 0; i < 40; ++i) {
+            const std::size_t p = std::size_t(j) * 40 + i;
+            const CameraRay r = camera.PixelRay(i, j);
+            ASSERT_EQ(r.direction[1], 0.0);
+            ASSERT_EQ(r.direction[2], 0.0);
+            const double y = r.origin[1], z = r.origin[2];
+            if (std::min({y, z, 1 - y, 1 - z}) < 1e-9)
+                continue;  // outside or on the edge
+            ASSERT_TRUE(std::isfinite(with.z[p])) << i << "," << j;
+            ASSERT_TRUE(std::isfinite(without.z[p])) << i << "," << j;
+            ++hits;
+            EXPECT_NEAR(with.z[p], 3 - 0.81, 1e-10);
+            EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
+        }
+    EXPECT_GT(hits, 600);
+}
+
+}  // namespace
+}  // namespace hpray
