@@ -66,6 +66,8 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     for (const ScalarSelector& f : s.fields) {
         s.fieldData.push_back(cache->Data(f));
         s.cellRanges.push_back(cache->Ranges(f));
+        // (Every field here has an isosurface: s.fields holds the isosurfaces' fields.)
+        s.subBounds.push_back(subCellBounds ? cache->SubBounds(f) : nullptr);
     }
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
@@ -143,7 +145,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                     const std::size_t before = boxes.size();
                     bool all = true;  // every field with an isovalue here has sub-boxes
                     for (std::size_t f = 0; f < s.fields.size() && all; ++f) {
-                        const FieldCellData& d = *s.fieldData[f];
+                        const SubCellBounds& d = *s.subBounds[f];
                         const Interval& r = (*s.cellRanges[f])[c];
                         bool here = false;
                         for (const BrickSetup::Iso& iso : s.isos)
@@ -155,7 +157,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                             break;
                         }
                         for (int b = 0; b < int(d.subStart[c + 1] - d.subStart[c]); ++b) {
-                            const FieldCellData::SubBox x = d.SubBoxOf(c, b);
+                            const SubCellBounds::SubBox x = d.SubBoxOf(c, b);
                             bool holds = false;
                             for (const BrickSetup::Iso& iso : s.isos)
                                 holds |= iso.field == int(f) && iso.value >= x.fieldLo &&
@@ -600,11 +602,14 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                         isoValues_.push_back(setup.isos[k].value);
                 // The part of the segment where the sub-cell bounds allow an isovalue.
                 double t0 = seg.tEnter, t1 = seg.tExit;
+                const SubCellBounds* sub =
+                    setup.subCellBounds && f < setup.subBounds.size()
+                        ? setup.subBounds[f].get()
+                        : nullptr;
                 const bool culled =
-                    setup.subCellBounds &&
-                    !setup.fieldData[f]->ClipToValues(seg.cell, ray, isoValues_.data(),
-                                                      int(isoValues_.size()), t0, t1);
-                if (setup.subCellBounds && (t0 != seg.tEnter || t1 != seg.tExit))
+                    sub && !sub->ClipToValues(seg.cell, ray, isoValues_.data(),
+                                              int(isoValues_.size()), t0, t1);
+                if (sub && (t0 != seg.tEnter || t1 != seg.tExit))
                     counters.isoSubcellClipped += 1;
                 if (culled) counters.isoSubcellCulled += 1;
                 if (culled ||

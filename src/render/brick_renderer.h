@@ -40,6 +40,8 @@ struct BrickSetup {
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
     /// Per field: nodal values gathered per cell and derivative bounds (ray_field.h).
     std::vector<std::shared_ptr<const FieldCellData>> fieldData;
+    /// Per field, its sub-cell bounds where an isosurface uses it (null otherwise).
+    std::vector<std::shared_ptr<const SubCellBounds>> subBounds;
 
     struct Iso {
         int field = 0;
@@ -58,7 +60,7 @@ struct BrickSetup {
 
     ProjectionOptions projection;
     /// Isosurfaces project a segment only where the field's sub-cell bounds allow an
-    /// isovalue (FieldCellData::ClipToValues), and the cell filter finds a cell only
+    /// isovalue (SubCellBounds::ClipToValues), and the cell filter finds a cell only
     /// through its sub-boxes that may hold an isovalue (MakeBrickSetup's last argument).
     /// Always on in rendering; tests turn it off to compare.
     bool subCellBounds = true;

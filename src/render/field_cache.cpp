@@ -43,6 +43,15 @@ std::shared_ptr<const FieldCellData> FieldCache::Data(const ScalarSelector& sel)
     return data;
 }
 
+std::shared_ptr<const SubCellBounds> FieldCache::SubBounds(const ScalarSelector& sel) {
+    const Key key{sel.field, sel.component};
+    if (const auto it = subBounds_.find(key); it != subBounds_.end()) return it->second;
+    auto bounds = std::make_shared<const SubCellBounds>(
+        SubCellBounds::Build(*mesh_, *geometry_, *Data(sel)));
+    subBounds_[key] = bounds;
+    return bounds;
+}
+
 std::shared_ptr<const std::vector<float>> FieldCache::GradientBounds(
     const ScalarSelector& sel) {
     const Key key{sel.field, sel.component};

@@ -28,6 +28,8 @@ class FieldCache {
     std::shared_ptr<const std::vector<Interval>> Ranges(const ScalarSelector& field);
     /// The field's nodal values gathered per cell and its derivative bounds (ray_field.h).
     std::shared_ptr<const FieldCellData> Data(const ScalarSelector& field);
+    /// The field's sub-cell bounds (ray_field.h), for the fields isosurfaces use.
+    std::shared_ptr<const SubCellBounds> SubBounds(const ScalarSelector& field);
 
     /// Per cell, for the linear tetrahedra (derived geometry) of a point field with
     /// per-point values (FieldCellData::PointValues), a bound of the field's gradient
@@ -46,6 +48,7 @@ class FieldCache {
     const MeshGeometry* geometry_;
     std::map<Key, std::shared_ptr<const std::vector<Interval>>> ranges_;
     std::map<Key, std::shared_ptr<const FieldCellData>> data_;
+    std::map<Key, std::shared_ptr<const SubCellBounds>> subBounds_;
     std::map<Key, std::shared_ptr<const std::vector<float>>> gradientBounds_;
     int rangesBuilt_ = 0, dataBuilt_ = 0, gradientBoundsBuilt_ = 0;
 };

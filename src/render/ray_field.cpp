@@ -161,7 +161,7 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 }  // namespace
 
 namespace {
-// FieldCellData's sub-cell bounds: hexahedra in kSubdivision^3 boxes, tetrahedra in the
+// SubCellBounds: hexahedra in kSubdivision^3 boxes, tetrahedra in the
 // sub-tetrahedra of TetSubLevels(p) uniform refinements.
 constexpr int kSubdivision = 4;
 
@@ -177,7 +177,11 @@ float FloatUp(double x) {
     return f < x ? f + (std::abs(f) * 0x1p-23f + 1e-38f) : f;
 }
 
-void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellData& d) {
+}  // namespace
+
+SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometry,
+                                   const FieldCellData& data) {
+    SubCellBounds d;
     const std::int64_t cells = mesh.CellCount();
     // Which cells get boxes: Lagrange hexahedra and tetrahedra above the linear ones.
     constexpr int hexBoxes = kSubdivision * kSubdivision * kSubdivision;
@@ -192,7 +196,7 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
     };
     std::vector<std::int64_t> start(cells + 1, 0);
     for (std::int64_t c = 0; c < cells; ++c) start[c + 1] = start[c] + boxesOf(c);
-    if (start[cells] == 0) return;
+    if (start[cells] == 0) return d;
     d.subN = kSubdivision;
     d.subStart = std::move(start);
     d.subData.resize(8 * d.subStart[cells]);
@@ -213,16 +217,18 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
                 if (mesh.cellShape[c] == CellShape::Hex) {
                     HPRAY_CHECK(g.hexMap != nullptr);
                     // The map and the values the rays evaluate: the reduced ones if any.
-                    const bool reduced = !d.reducedOrder.empty() && d.reducedOrder[c] > 0;
+                    const bool reduced =
+                        !data.reducedOrder.empty() && data.reducedOrder[c] > 0;
                     HexSubBounds(g.mapOrder, kSubdivision, g.mapNodes, 3, geo.data());
-                    HexSubBounds(
-                        reduced ? d.reducedOrder[c] : g.basis->order, kSubdivision,
-                        reduced ? d.reducedValues[c].data() : d.CellValues(c, nodal), 1,
-                        field.data());
+                    HexSubBounds(reduced ? data.reducedOrder[c] : g.basis->order,
+                                 kSubdivision,
+                                 reduced ? data.reducedValues[c].data()
+                                         : data.CellValues(c, nodal),
+                                 1, field.data());
                 } else {
                     // The node coordinates and the field in one pass (four lanes).
                     const int n = g.basis->nodeCount;
-                    const double* values = d.CellValues(c, nodal);
+                    const double* values = data.CellValues(c, nodal);
                     packed.resize(4 * n);
                     for (int m = 0; m < n; ++m) {
                         for (int k = 0; k < 3; ++k)
@@ -251,10 +257,10 @@ void BuildSubBounds(const Mesh& mesh, const MeshGeometry& geometry, FieldCellDat
             }
         });
     for (std::int64_t k : kept) d.subCells += k;
+    return d;
 }
-}  // namespace
 
-bool FieldCellData::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
+bool SubCellBounds::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
                                  int count, double& t0, double& t1) const {
     if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
     const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
@@ -424,7 +430,6 @@ FieldCellData FieldCellData::Build(const Mesh& mesh, const MeshGeometry& geometr
             }
         });
     ReduceHexOrders(mesh, field, d);
-    BuildSubBounds(mesh, geometry, d);
     return d;
 }
 

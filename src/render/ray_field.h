@@ -48,17 +48,28 @@ struct FieldCellData {
     std::vector<std::int64_t> fallbackCells;
     std::vector<std::array<double, 3>> fallbackBounds;
 
-    /// Sub-cell bounds of the Lagrange hexahedra and tetrahedra of order 2 and more: each
-    /// cell's reference domain cut into boxes (hexahedra: subN^3 equal boxes; tetrahedra:
-    /// the sub-tetrahedra of uniform refinements), and for each a world box that holds
-    /// its image under the cell's map and an interval that holds the field over it
-    /// (elements/bounds.h: HexSubBounds, TetSubBounds, on the map and the values the rays
-    /// evaluate, the reduced ones where a cell has them). Cell c has the boxes
-    /// subStart[c]
-    /// .. subStart[c + 1] (a multiple of 8, at most 64; none for other cells), stored as
-    /// 8 rows of floats from subData[8 subStart[c]], one entry per box: lower x, y, z,
-    /// upper x, y, z (padded by 1e-9 of the cell's size), lower and upper field bound
-    /// (all rounded outwards). Empty when no cell has any.
+    /// Cell c's nodal values: in `values`, or gathered from PointValues() into `scratch`
+    /// (then valid until `scratch` changes).
+    const double* CellValues(std::int64_t c, std::vector<double>& scratch) const;
+    /// Cell c's derivative bound; nullptr where none is kept.
+    const std::array<double, 3>* RefGradBound(std::int64_t c) const;
+
+    static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
+                               const ScalarSelector& field);
+};
+
+/// Sub-cell bounds of one field over the Lagrange hexahedra and tetrahedra of order 2 and
+/// more, built once per field that isosurfaces use (FieldCache::SubBounds): each
+/// cell's reference domain cut into boxes (hexahedra: subN^3 equal boxes; tetrahedra:
+/// the sub-tetrahedra of uniform refinements), and for each a world box that holds
+/// its image under the cell's map and an interval that holds the field over it
+/// (elements/bounds.h: HexSubBounds, TetSubBounds, on the map and the values the rays
+/// evaluate, the reduced ones where a cell has them). Cell c has the boxes subStart[c]
+/// .. subStart[c + 1] (a multiple of 8, at most 64; none for other cells), stored as 8
+/// rows of floats from subData[8 subStart[c]], one entry per box: lower x, y, z, upper x,
+/// y, z (padded by 1e-9 of the cell's size), lower and upper field bound (all rounded
+/// outwards). Empty when no cell has any.
+struct SubCellBounds {
     struct SubBox {
         float lo[3], hi[3];
         float fieldLo, fieldHi;
@@ -86,14 +97,9 @@ struct FieldCellData {
     bool ClipToValues(std::int64_t c, const Ray& ray, const double* values, int count,
                       double& t0, double& t1) const;
 
-    /// Cell c's nodal values: in `values`, or gathered from PointValues() into `scratch`
-    /// (then valid until `scratch` changes).
-    const double* CellValues(std::int64_t c, std::vector<double>& scratch) const;
-    /// Cell c's derivative bound; nullptr where none is kept.
-    const std::array<double, 3>* RefGradBound(std::int64_t c) const;
-
-    static FieldCellData Build(const Mesh& mesh, const MeshGeometry& geometry,
-                               const ScalarSelector& field);
+    /// The bounds of `data`'s field (the map and values its rays evaluate).
+    static SubCellBounds Build(const Mesh& mesh, const MeshGeometry& geometry,
+                               const FieldCellData& data);
 };
 
 /// The cofactors of the 3x3 matrix E (rows e[0..2]) as the columns of its adjugate:

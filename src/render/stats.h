@@ -44,7 +44,7 @@ struct RenderCounters {
     double volumePixels = 0;
     double volumeNodes = 0;  ///< integrand samples of the volume quadratures
     // Isosurfaces again: segments whose projection the sub-cell bounds ruled out, and
-    // those they shortened (FieldCellData::ClipToValues).
+    // those they shortened (SubCellBounds::ClipToValues).
     double isoSubcellCulled = 0;
     double isoSubcellClipped = 0;
 

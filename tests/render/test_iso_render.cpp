@@ -556,6 +556,10 @@ TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
     ASSERT_EQ(second.cellRanges.size(), 1u);
     EXPECT_EQ(first.cellRanges[0].get(), second.cellRanges[0].get());
     EXPECT_EQ(first.fieldData[0].get(), second.fieldData[0].get());
+    // The sub-cell bounds too (ball-p2's quadratic tetrahedra have them).
+    ASSERT_TRUE(first.subBounds[0]);
+    EXPECT_GT(first.subBounds[0]->subCells, 0);
+    EXPECT_EQ(first.subBounds[0].get(), second.subBounds[0].get());
     ASSERT_TRUE(second.volume);
     EXPECT_EQ(second.volume->ranges[0].get(), second.cellRanges[0].get());
     // Gradient bounds (for linear tetrahedra; this mesh has none, so they are empty) are
