@@ -162,7 +162,7 @@ std::array<double, 3> CellRefGradBound(const MeshGeometry& geometry, std::int64_
 
 namespace {
 // SubCellBounds: hexahedra in kSubdivision^3 boxes, tetrahedra in the
-// sub-tetrahedra of TetSubLevels(p) uniform refinements.
+// sub-tetrahedra of TetSubLevels(p) uniform refinements, fewer on large meshes.
 constexpr int kSubdivision = 4;
 
 // A float at most x (at least x): bounds kept in floats stay bounds. Where the rounded
@@ -180,24 +180,37 @@ float FloatUp(double x) {
 }  // namespace
 
 SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometry,
-                                   const FieldCellData& data) {
+                                   const FieldCellData& data, std::int64_t budget) {
     SubCellBounds d;
     const std::int64_t cells = mesh.CellCount();
     // Which cells get boxes: Lagrange hexahedra and tetrahedra above the linear ones.
-    constexpr int hexBoxes = kSubdivision * kSubdivision * kSubdivision;
-    auto boxesOf = [&](std::int64_t c) {
+    auto eligible = [&](std::int64_t c) {
         const int p = mesh.cellOrder[c];
-        if (mesh.cellFamily[c] != CellFamily::Lagrange || p < 2 || geometry.IsDerived(c))
-            return 0;
+        return mesh.cellFamily[c] == CellFamily::Lagrange && p >= 2 &&
+               !geometry.IsDerived(c) &&
+               (mesh.cellShape[c] == CellShape::Hex ||
+                (mesh.cellShape[c] == CellShape::Tet && TetSubLevels(p) > 0));
+    };
+    std::int64_t count = 0;
+    for (std::int64_t c = 0; c < cells; ++c) count += eligible(c);
+    // At most `budget` bytes (32 per box): 64 boxes per cell where that fits (up to
+    // 131072 cells by default), else 8, else none.
+    const int perCell = count * 64 * 32 <= budget ? 64 : count * 8 * 32 <= budget ? 8 : 0;
+    if (perCell == 0) return d;
+    const int hexN = perCell == 64 ? kSubdivision : 2;
+    const int hexBoxes = hexN * hexN * hexN;
+    auto tetLevels = [&](int p) {
+        return std::min(TetSubLevels(p), perCell == 64 ? 2 : 1);
+    };
+    auto boxesOf = [&](std::int64_t c) {
+        if (!eligible(c)) return 0;
         if (mesh.cellShape[c] == CellShape::Hex) return hexBoxes;
-        if (mesh.cellShape[c] == CellShape::Tet && TetSubLevels(p) > 0)
-            return TetSubCount(TetSubLevels(p));
-        return 0;
+        return TetSubCount(tetLevels(mesh.cellOrder[c]));
     };
     std::vector<std::int64_t> start(cells + 1, 0);
     for (std::int64_t c = 0; c < cells; ++c) start[c + 1] = start[c] + boxesOf(c);
     if (start[cells] == 0) return d;
-    d.subN = kSubdivision;
+    d.subN = hexN;
     d.subStart = std::move(start);
     d.subData.resize(8 * d.subStart[cells]);
     tbb::enumerable_thread_specific<std::int64_t> kept(0);
@@ -219,9 +232,8 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
                     // The map and the values the rays evaluate: the reduced ones if any.
                     const bool reduced =
                         !data.reducedOrder.empty() && data.reducedOrder[c] > 0;
-                    HexSubBounds(g.mapOrder, kSubdivision, g.mapNodes, 3, geo.data());
-                    HexSubBounds(reduced ? data.reducedOrder[c] : g.basis->order,
-                                 kSubdivision,
+                    HexSubBounds(g.mapOrder, hexN, g.mapNodes, 3, geo.data());
+                    HexSubBounds(reduced ? data.reducedOrder[c] : g.basis->order, hexN,
                                  reduced ? data.reducedValues[c].data()
                                          : data.CellValues(c, nodal),
                                  1, field.data());
@@ -236,7 +248,7 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
                         packed[4 * m + 3] = values[m];
                     }
                     both.resize(4 * boxes);
-                    TetSubBounds(*g.basis, TetSubLevels(g.basis->order), packed.data(), 4,
+                    TetSubBounds(*g.basis, tetLevels(g.basis->order), packed.data(), 4,
                                  both.data());
                     for (int b = 0; b < boxes; ++b) {
                         for (int k = 0; k < 3; ++k) geo[3 * b + k] = both[4 * b + k];

@@ -97,9 +97,12 @@ struct SubCellBounds {
     bool ClipToValues(std::int64_t c, const Ray& ray, const double* values, int count,
                       double& t0, double& t1) const;
 
-    /// The bounds of `data`'s field (the map and values its rays evaluate).
+    /// The bounds of `data`'s field (the map and values its rays evaluate), in at most
+    /// `budget` bytes: 64 boxes per cell where they fit, else 8 (hexahedra in 2 x 2 x 2,
+    /// tetrahedra refined once), else none.
     static SubCellBounds Build(const Mesh& mesh, const MeshGeometry& geometry,
-                               const FieldCellData& data);
+                               const FieldCellData& data,
+                               std::int64_t budget = std::int64_t(256) << 20);
 };
 
 /// The cofactors of the 3x3 matrix E (rows e[0..2]) as the columns of its adjugate:

@@ -873,3 +873,56 @@ isosurfaces:
 
 }  // namespace
 }  // namespace hpray
+
+namespace hpray {
+namespace {
+
+// Every sub-box's world box holds the map's image of points spread over the box, and its
+// interval the field there (the values the rays evaluate): on the curved hexahedra, with
+// the default budget (4 x 4 x 4 boxes) and with one that only fits 2 x 2 x 2.
+TEST(SubCellBounds, BoxesHoldTheMappedPointsAndTheirValues) {
+    const Mesh mesh = testing::CurvedHexesWithFieldX(0.08, 4);
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const auto sel = SelectScalar(mesh, "u");
+    ASSERT_TRUE(sel);
+    const FieldCellData data = FieldCellData::Build(mesh, geometry, *sel);
+    const std::int64_t cells = mesh.CellCount();
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> unit(0, 1);
+    for (const std::int64_t budget : {std::int64_t(256) << 20, cells * 8 * 32}) {
+        const SubCellBounds b = SubCellBounds::Build(mesh, geometry, data, budget);
+        const int n = budget == cells * 8 * 32 ? 2 : 4;
+        ASSERT_EQ(b.subN, n);
+        ASSERT_EQ(b.subCells, cells);
+        CellScratch scratch;
+        EvalWorkspace ws;
+        std::vector<double> nodal;
+        for (std::int64_t c = 0; c < cells; ++c) {
+            ASSERT_EQ(b.subStart[c + 1] - b.subStart[c], n * n * n);
+            const CellGeometry& g = geometry.Cell(c, scratch);
+            CellScalar field;
+            field.nodal = data.CellValues(c, nodal);
+            for (int box = 0; box < n * n * n; ++box) {
+                const SubCellBounds::SubBox x = b.SubBoxOf(c, box);
+                const int k[3] = {box % n, (box / n) % n, box / (n * n)};
+                for (int s = 0; s < 20; ++s) {
+                    double ref[3], world[3], jac[9];
+                    for (int d = 0; d < 3; ++d) ref[d] = (k[d] + unit(rng)) / n;
+                    WorldFromRef(g, ref, ws, world, jac);
+                    for (int d = 0; d < 3; ++d) {
+                        EXPECT_LE(x.lo[d], world[d]) << c << " " << box;
+                        EXPECT_GE(x.hi[d], world[d]) << c << " " << box;
+                    }
+                    const double v = FieldValue(g, field, ref, ws);
+                    EXPECT_LE(x.fieldLo, v) << c << " " << box;
+                    EXPECT_GE(x.fieldHi, v) << c << " " << box;
+                }
+            }
+        }
+    }
+    // Nothing fits a budget below 8 boxes per cell.
+    EXPECT_EQ(SubCellBounds::Build(mesh, geometry, data, cells * 8 * 32 - 1).subCells, 0);
+}
+
+}  // namespace
+}  // namespace hpray
