@@ -73,6 +73,14 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         const auto r = f.field->Range(f.component);
         s.fieldScale.push_back(std::max(std::abs(r[0]), std::abs(r[1])));
     }
+    for (std::size_t f = 0; f < s.fields.size(); ++f) {
+        std::vector<double> values;
+        for (const BrickSetup::Iso& iso : s.isos)
+            if (iso.field == int(f)) values.push_back(iso.value);
+        s.subHolding.push_back(s.subBounds[f] ? s.subBounds[f]->HoldingMasks(
+                                                    values.data(), int(values.size()))
+                                              : std::vector<std::uint64_t>{});
+    }
     const SceneAccuracy& acc = scene.accuracy;
     for (BrickSetup::Iso& iso : s.isos) {
         const auto r = s.fields[iso.field].field->Range(s.fields[iso.field].component);
@@ -135,7 +143,7 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         if (2 * kept <= cells) {
             // A kept cell with sub-cell bounds is found through the world boxes of its
             // sub-boxes whose interval holds an isovalue of their field (a ray that
-            // misses them all would have its segment there ruled out by ClipToValues).
+            // misses them all would have its segment there ruled out by Clip).
             std::vector<std::int64_t> boxStart(cells + 1, 0);
             std::vector<float> boxes;
             if (subCellBounds) {
@@ -156,16 +164,12 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                             all = false;
                             break;
                         }
+                        const std::uint64_t holding = s.subHolding[f][c];
                         for (int b = 0; b < int(d.subStart[c + 1] - d.subStart[c]); ++b) {
+                            if (!(holding >> b & 1u)) continue;
                             const SubCellBounds::SubBox x = d.SubBoxOf(c, b);
-                            bool holds = false;
-                            for (const BrickSetup::Iso& iso : s.isos)
-                                holds |= iso.field == int(f) && iso.value >= x.fieldLo &&
-                                         iso.value <= x.fieldHi;
-                            if (holds) {
-                                boxes.insert(boxes.end(), x.lo, x.lo + 3);
-                                boxes.insert(boxes.end(), x.hi, x.hi + 3);
-                            }
+                            boxes.insert(boxes.end(), x.lo, x.lo + 3);
+                            boxes.insert(boxes.end(), x.hi, x.hi + 3);
                         }
                     }
                     if (!all) boxes.resize(before);  // found through its own box
@@ -602,13 +606,15 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                         isoValues_.push_back(setup.isos[k].value);
                 // The part of the segment where the sub-cell bounds allow an isovalue.
                 double t0 = seg.tEnter, t1 = seg.tExit;
-                const SubCellBounds* sub =
-                    setup.subCellBounds && f < setup.subBounds.size()
-                        ? setup.subBounds[f].get()
-                        : nullptr;
+                const SubCellBounds* sub = setup.subCellBounds &&
+                                                   f < setup.subHolding.size() &&
+                                                   !setup.subHolding[f].empty()
+                                               ? setup.subBounds[f].get()
+                                               : nullptr;
+                // (The masks hold every isovalue of the field: a superset of these.)
                 const bool culled =
-                    sub && !sub->ClipToValues(seg.cell, ray, isoValues_.data(),
-                                              int(isoValues_.size()), t0, t1);
+                    sub &&
+                    !sub->Clip(seg.cell, ray, setup.subHolding[f][seg.cell], t0, t1);
                 if (sub && (t0 != seg.tEnter || t1 != seg.tExit))
                     counters.isoSubcellClipped += 1;
                 if (culled) counters.isoSubcellCulled += 1;

@@ -40,8 +40,11 @@ struct BrickSetup {
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
     /// Per field: nodal values gathered per cell and derivative bounds (ray_field.h).
     std::vector<std::shared_ptr<const FieldCellData>> fieldData;
-    /// Per field, its sub-cell bounds where an isosurface uses it (null otherwise).
+    /// Per field, its sub-cell bounds where an isosurface uses it (null otherwise), and
+    /// per cell the boxes that may hold one of the field's isovalues
+    /// (SubCellBounds::HoldingMasks).
     std::vector<std::shared_ptr<const SubCellBounds>> subBounds;
+    std::vector<std::vector<std::uint64_t>> subHolding;
 
     struct Iso {
         int field = 0;
@@ -60,7 +63,7 @@ struct BrickSetup {
 
     ProjectionOptions projection;
     /// Isosurfaces project a segment only where the field's sub-cell bounds allow an
-    /// isovalue (SubCellBounds::ClipToValues), and the cell filter finds a cell only
+    /// isovalue (SubCellBounds::Clip), and the cell filter finds a cell only
     /// through its sub-boxes that may hold an isovalue (MakeBrickSetup's last argument).
     /// Always on in rendering; tests turn it off to compare.
     bool subCellBounds = true;

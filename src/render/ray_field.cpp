@@ -272,9 +272,9 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
     return d;
 }
 
-bool SubCellBounds::ClipToValues(std::int64_t c, const Ray& ray, const double* values,
-                                 int count, double& t0, double& t1) const {
-    if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
+std::uint64_t SubCellBounds::Holding(std::int64_t c, const double* values,
+                                     int count) const {
+    if (subStart.empty() || subStart[c + 1] == subStart[c]) return 0;
     const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
     const float* data = subData.data() + 8 * subStart[c];
     const float* fieldLo = data + 6 * boxes;
@@ -298,10 +298,31 @@ bool SubCellBounds::ClipToValues(std::int64_t c, const Ray& ray, const double* v
             holding |= std::uint64_t(fieldLo[b] <= up && down <= fieldHi[b]) << b;
 #endif
     }
-    // If all hold, their world boxes cover the whole segment: nothing to narrow.
-    if (holding == (boxes == 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << boxes) - 1))
-        return true;
+    return holding;
+}
+
+std::vector<std::uint64_t> SubCellBounds::HoldingMasks(const double* values,
+                                                       int count) const {
+    const std::int64_t cells =
+        subStart.empty() ? 0 : static_cast<std::int64_t>(subStart.size()) - 1;
+    std::vector<std::uint64_t> masks(cells);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cells, 4096),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                          for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                              masks[c] = Holding(c, values, count);
+                      });
+    return masks;
+}
+
+bool SubCellBounds::Clip(std::int64_t c, const Ray& ray, std::uint64_t holding,
+                         double& t0, double& t1) const {
+    if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
+    const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
+    const float* data = subData.data() + 8 * subStart[c];
     if (holding == 0) return false;
+    // Where three boxes in four or more hold a value, their world boxes nearly always
+    // cover the segment (all of them do): not worth the slabs.
+    if (4 * __builtin_popcountll(holding) >= 3 * boxes) return true;
     // The hull of the ray's parameter intervals in the world boxes of those (slabs, in
     // double, four boxes at a time; the boxes' padding is far above the rounding of
     // these products).

@@ -88,14 +88,20 @@ struct SubCellBounds {
                 row[7 * n]};
     }
 
+    /// Bit b set where box b of cell c may hold one of the `count` values (0 for a cell
+    /// without boxes), and that for every cell.
+    std::uint64_t Holding(std::int64_t c, const double* values, int count) const;
+    std::vector<std::uint64_t> HoldingMasks(const double* values, int count) const;
     /// Narrows [t0, t1], the segment of `ray` in cell c, to the part where the field may
-    /// take one of the `count` values: a point of the segment lies in one of the cell's
-    /// sub-boxes, so it lies in that box's world box, and if the box's field interval
-    /// holds none of the values the field differs from each of them there. False when no
-    /// part remains (the segment holds none of the values); true, with [t0, t1]
-    /// unchanged, for a cell without sub-cell bounds.
-    bool ClipToValues(std::int64_t c, const Ray& ray, const double* values, int count,
-                      double& t0, double& t1) const;
+    /// take one of the values whose boxes are `holding` (Holding): a point of the
+    /// segment lies in one of the cell's boxes, so it lies in that box's world box, and
+    /// if the box's interval holds none of the values the field differs from each of them
+    /// there. False when no part remains (the segment holds none of the values); true,
+    /// with [t0, t1] unchanged, for a cell without boxes and where three boxes in four or
+    /// more hold a value (their world boxes nearly always cover the segment, and the
+    /// slabs would cost more than they save).
+    bool Clip(std::int64_t c, const Ray& ray, std::uint64_t holding, double& t0,
+              double& t1) const;
 
     /// The bounds of `data`'s field (the map and values its rays evaluate), in at most
     /// `budget` bytes: 64 boxes per cell where they fit, else 8 (hexahedra in 2 x 2 x 2,

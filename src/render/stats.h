@@ -44,7 +44,7 @@ struct RenderCounters {
     double volumePixels = 0;
     double volumeNodes = 0;  ///< integrand samples of the volume quadratures
     // Isosurfaces again: segments whose projection the sub-cell bounds ruled out, and
-    // those they shortened (SubCellBounds::ClipToValues).
+    // those they shortened (SubCellBounds::Clip).
     double isoSubcellCulled = 0;
     double isoSubcellClipped = 0;
 
