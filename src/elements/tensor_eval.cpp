@@ -334,52 +334,74 @@ void HexFieldValuesAt(int p, const double* u, const double* refs, int count, dou
 }
 
 namespace {
-// sum_ijk values[(i + n (j + n k)) * comps + c] * l0[i] l1[j] l2[k], per component c.
-void TensorSum(int p, int comps, const double* values, const double* l0, const double* l1,
-               const double* l2, double* out) {
-    const int n = p + 1;
-    for (int c = 0; c < comps; ++c) out[c] = 0;
+// out[(a + m (b + m c)) comps + d] = sum_ijk in[(i + n (j + n k)) comps + d] A[a][i]
+// A[b][j] A[c][k] for an m x n matrix A (row-major): the three one-dimensional passes of
+// sum factorisation, m n^3 + m^2 n^2 + m^3 n products per component instead of m^3 n^3.
+void TensorApply(int n, int m, int comps, const double* A, const double* in,
+                 double* out) {
+    std::vector<double> t1(std::size_t(m) * n * n * comps),
+        t2(std::size_t(m) * m * n * comps);
+    // Along the first axis: t1[(a + m (j + n k)) comps + d].
+    for (int jk = 0; jk < n * n; ++jk)
+        for (int a = 0; a < m; ++a)
+            for (int d = 0; d < comps; ++d) {
+                double s = 0;
+                for (int i = 0; i < n; ++i)
+                    s += A[a * n + i] *
+                         in[(std::size_t(i) + std::size_t(n) * jk) * comps + d];
+                t1[(std::size_t(a) + std::size_t(m) * jk) * comps + d] = s;
+            }
+    // Along the second: t2[(a + m (b + m k)) comps + d].
     for (int k = 0; k < n; ++k)
-        for (int j = 0; j < n; ++j) {
-            const double w = l1[j] * l2[k];
-            const double* row = values + std::size_t(comps) * n * (j + n * k);
-            for (int i = 0; i < n; ++i)
-                for (int c = 0; c < comps; ++c) out[c] += row[comps * i + c] * l0[i] * w;
-        }
+        for (int b = 0; b < m; ++b)
+            for (int a = 0; a < m; ++a)
+                for (int d = 0; d < comps; ++d) {
+                    double s = 0;
+                    for (int j = 0; j < n; ++j)
+                        s += A[b * n + j] *
+                             t1[(std::size_t(a) +
+                                 std::size_t(m) * (j + std::size_t(n) * k)) *
+                                    comps +
+                                d];
+                    t2[(std::size_t(a) + std::size_t(m) * (b + std::size_t(m) * k)) *
+                           comps +
+                       d] = s;
+                }
+    // Along the third.
+    for (int c = 0; c < m; ++c)
+        for (int ab = 0; ab < m * m; ++ab)
+            for (int d = 0; d < comps; ++d) {
+                double s = 0;
+                for (int k = 0; k < n; ++k)
+                    s += A[c * n + k] *
+                         t2[(std::size_t(ab) + std::size_t(m) * m * k) * comps + d];
+                out[(std::size_t(ab) + std::size_t(m) * m * c) * comps + d] = s;
+            }
+}
+
+// The m x n matrix of the order-(n - 1) equispaced Lagrange basis at the order-(m - 1)
+// lattice points: A[a][i] = l_i(a / (m - 1)).
+std::vector<double> LatticeMatrix(int n, int m) {
+    std::vector<double> A(std::size_t(m) * n);
+    for (int a = 0; a < m; ++a)
+        LagrangeEquispaced1D(n - 1, m == 1 ? 0.0 : double(a) / (m - 1),
+                             &A[std::size_t(a) * n], nullptr);
+    return A;
 }
 }  // namespace
 
 void HexResample(int p, int components, const double* values, int q, std::vector<double>& out) {
-    const int m = q + 1;
+    const int n = p + 1, m = q + 1;
     out.resize(std::size_t(m) * m * m * components);
-    double l[3][kMaxOrder + 1];
-    for (int k = 0; k < m; ++k)
-        for (int j = 0; j < m; ++j)
-            for (int i = 0; i < m; ++i) {
-                LagrangeEquispaced1D(p, double(i) / q, l[0], nullptr);
-                LagrangeEquispaced1D(p, double(j) / q, l[1], nullptr);
-                LagrangeEquispaced1D(p, double(k) / q, l[2], nullptr);
-                TensorSum(p, components, values, l[0], l[1], l[2],
-                          &out[std::size_t(components) * (i + m * (j + m * k))]);
-            }
+    TensorApply(n, m, components, LatticeMatrix(n, m).data(), values, out.data());
 }
 
 void HexReductionDeviation(int p, int components, const double* values, int q,
                            const double* reduced, std::vector<double>& deviation) {
-    const int n = p + 1;
+    const int n = p + 1, m = q + 1;
     deviation.resize(std::size_t(n) * n * n * components);
-    double l[3][kMaxOrder + 1], v[3];
-    for (int k = 0; k < n; ++k)
-        for (int j = 0; j < n; ++j)
-            for (int i = 0; i < n; ++i) {
-                LagrangeEquispaced1D(q, double(i) / p, l[0], nullptr);
-                LagrangeEquispaced1D(q, double(j) / p, l[1], nullptr);
-                LagrangeEquispaced1D(q, double(k) / p, l[2], nullptr);
-                TensorSum(q, components, reduced, l[0], l[1], l[2], v);
-                const std::size_t node = i + std::size_t(n) * (j + std::size_t(n) * k);
-                for (int c = 0; c < components; ++c)
-                    deviation[components * node + c] = v[c] - values[components * node + c];
-            }
+    TensorApply(m, n, components, LatticeMatrix(m, n).data(), reduced, deviation.data());
+    for (std::size_t v = 0; v < deviation.size(); ++v) deviation[v] -= values[v];
 }
 
 }  // namespace hpray

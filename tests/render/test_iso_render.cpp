@@ -818,7 +818,9 @@ TEST(IsoRender, SubTetrahedronBoundsCullSegmentsAndKeepEveryHit) {
             EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
             bool grazing = false;
             const auto expect = RaySphere(camera.PixelRay(i, j), 0.5, grazing);
-            if (!grazing && expect) EXPECT_NEAR(with.z[p], expect->t, 1e-9);
+            if (!grazing && expect) {
+                EXPECT_NEAR(with.z[p], expect->t, 1e-9);
+            }
         }
     EXPECT_GT(hits, 300);
 }
