@@ -636,38 +636,45 @@ void HexSubBoundsFixed(const SubdivisionTable& t, int n, const double* coeffs, i
                     dst[x] = sum;
                 }
             }
-        // Along t, each coefficient straight into its box's range (no third array).
+        // Along t, each row of coefficients straight into its boxes' ranges (no third
+        // array), kept per lane and reduced once per slab of boxes.
         const int plane = w * w;
         double lo[kMaxSubdivision * kMaxSubdivision],
             hi[kMaxSubdivision * kMaxSubdivision];
         const double widen = gamma * r3 * maxAbs;
         for (int k2 = 0; k2 < n; ++k2) {
-            for (int k = 0; k < n * n; ++k) lo[k] = inf, hi[k] = -inf;
+            double laneLo[kMaxSubdivision][kMaxSubdivision * Q],
+                laneHi[kMaxSubdivision][kMaxSubdivision * Q];
+            for (int k1 = 0; k1 < n; ++k1)
+                for (int x = 0; x < w; ++x) laneLo[k1][x] = inf, laneHi[k1][x] = -inf;
             for (int z = k2 * Q; z < k2 * Q + Q; ++z) {
                 double f[Q];
                 for (int l = 0; l < Q; ++l) f[l] = m[z * Q + l];
                 for (int y = 0; y < w; ++y) {
                     const double* src = &b[static_cast<std::size_t>(w) * y];
-                    double* boxLo = lo + n * (y / Q);
-                    double* boxHi = hi + n * (y / Q);
-                    for (int k0 = 0; k0 < n; ++k0) {
-                        // The box's Q coefficients of this row together (one vector).
-                        double sum[Q] = {};
-                        for (int l = 0; l < Q; ++l) {
-                            const double* row = src + plane * l + k0 * Q;
-                            for (int x = 0; x < Q; ++x)
-                                sum[x] = std::fma(f[l], row[x], sum[x]);
-                        }
-                        double bl = boxLo[k0], bh = boxHi[k0];
-                        for (int x = 0; x < Q; ++x) {
-                            bl = std::min(bl, sum[x]);
-                            bh = std::max(bh, sum[x]);
-                        }
-                        boxLo[k0] = bl;
-                        boxHi[k0] = bh;
+                    double row[kMaxSubdivision * Q];
+                    for (int x = 0; x < w; ++x) row[x] = 0;
+                    for (int l = 0; l < Q; ++l)
+                        for (int x = 0; x < w; ++x)
+                            row[x] = std::fma(f[l], src[plane * l + x], row[x]);
+                    double* rl = laneLo[y / Q];
+                    double* rh = laneHi[y / Q];
+                    for (int x = 0; x < w; ++x) {
+                        rl[x] = std::min(rl[x], row[x]);
+                        rh[x] = std::max(rh[x], row[x]);
                     }
                 }
             }
+            for (int k1 = 0; k1 < n; ++k1)
+                for (int k0 = 0; k0 < n; ++k0) {
+                    double bl = inf, bh = -inf;
+                    for (int x = k0 * Q; x < k0 * Q + Q; ++x) {
+                        bl = std::min(bl, laneLo[k1][x]);
+                        bh = std::max(bh, laneHi[k1][x]);
+                    }
+                    lo[k0 + n * k1] = bl;
+                    hi[k0 + n * k1] = bh;
+                }
             for (int k1 = 0; k1 < n; ++k1)
                 for (int k0 = 0; k0 < n; ++k0) {
                     const double l0 = lo[k0 + n * k1], h0 = hi[k0 + n * k1];

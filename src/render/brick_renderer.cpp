@@ -63,11 +63,23 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
     }
     // Per field: the nodal values gathered once per cell (shared with the ray loop), and
     // the guaranteed per-cell ranges.
-    for (const ScalarSelector& f : s.fields) {
-        s.fieldData.push_back(cache->Data(f));
-        s.cellRanges.push_back(cache->Ranges(f));
-        // (Every field here has an isosurface: s.fields holds the isosurfaces' fields.)
-        s.subBounds.push_back(subCellBounds ? cache->SubBounds(f) : nullptr);
+    for (std::size_t f = 0; f < s.fields.size(); ++f) {
+        s.fieldData.push_back(cache->Data(s.fields[f]));
+        s.cellRanges.push_back(cache->Ranges(s.fields[f]));
+        if (!subCellBounds) {
+            s.subBounds.push_back(nullptr);
+            continue;
+        }
+        // Sub-cell bounds of the cells whose range holds one of the field's isovalues
+        // (s.fields holds the isosurfaces' fields only): no ray needs the others'.
+        const std::vector<Interval>& ranges = *s.cellRanges[f];
+        std::vector<std::uint8_t> need(ranges.size(), 0);
+        for (std::size_t c = 0; c < ranges.size(); ++c)
+            for (const BrickSetup::Iso& iso : s.isos)
+                if (iso.field == int(f) && iso.value >= ranges[c].lo &&
+                    iso.value <= ranges[c].hi)
+                    need[c] = 1;
+        s.subBounds.push_back(cache->SubBounds(s.fields[f], need));
     }
     for (const ScalarSelector& f : s.fields) {
         const auto r = f.field->Range(f.component);
@@ -160,7 +172,8 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                             here |= iso.field == int(f) && iso.value >= r.lo &&
                                     iso.value <= r.hi;
                         if (!here) continue;
-                        if (d.subStart.empty() || d.subStart[c + 1] == d.subStart[c]) {
+                        if (d.subStart.empty() || d.subStart[c + 1] == d.subStart[c] ||
+                            !d.built[c]) {
                             all = false;
                             break;
                         }

@@ -43,11 +43,15 @@ std::shared_ptr<const FieldCellData> FieldCache::Data(const ScalarSelector& sel)
     return data;
 }
 
-std::shared_ptr<const SubCellBounds> FieldCache::SubBounds(const ScalarSelector& sel) {
+std::shared_ptr<const SubCellBounds> FieldCache::SubBounds(
+    const ScalarSelector& sel, const std::vector<std::uint8_t>& need) {
     const Key key{sel.field, sel.component};
-    if (const auto it = subBounds_.find(key); it != subBounds_.end()) return it->second;
-    auto bounds = std::make_shared<const SubCellBounds>(
-        SubCellBounds::Build(*mesh_, *geometry_, *Data(sel)));
+    if (const auto it = subBounds_.find(key); it != subBounds_.end()) {
+        it->second->Extend(*mesh_, *geometry_, *Data(sel), &need);
+        return it->second;
+    }
+    auto bounds = std::make_shared<SubCellBounds>(
+        SubCellBounds::Build(*mesh_, *geometry_, *Data(sel), &need));
     subBounds_[key] = bounds;
     return bounds;
 }

@@ -28,8 +28,10 @@ class FieldCache {
     std::shared_ptr<const std::vector<Interval>> Ranges(const ScalarSelector& field);
     /// The field's nodal values gathered per cell and its derivative bounds (ray_field.h).
     std::shared_ptr<const FieldCellData> Data(const ScalarSelector& field);
-    /// The field's sub-cell bounds (ray_field.h), for the fields isosurfaces use.
-    std::shared_ptr<const SubCellBounds> SubBounds(const ScalarSelector& field);
+    /// The field's sub-cell bounds (ray_field.h), for the fields isosurfaces use, with
+    /// the boxes of the cells with need[c] != 0 computed (those of earlier calls kept).
+    std::shared_ptr<const SubCellBounds> SubBounds(const ScalarSelector& field,
+                                                   const std::vector<std::uint8_t>& need);
 
     /// Per cell, for the linear tetrahedra (derived geometry) of a point field with
     /// per-point values (FieldCellData::PointValues), a bound of the field's gradient
@@ -48,7 +50,7 @@ class FieldCache {
     const MeshGeometry* geometry_;
     std::map<Key, std::shared_ptr<const std::vector<Interval>>> ranges_;
     std::map<Key, std::shared_ptr<const FieldCellData>> data_;
-    std::map<Key, std::shared_ptr<const SubCellBounds>> subBounds_;
+    std::map<Key, std::shared_ptr<SubCellBounds>> subBounds_;
     std::map<Key, std::shared_ptr<const std::vector<float>>> gradientBounds_;
     int rangesBuilt_ = 0, dataBuilt_ = 0, gradientBoundsBuilt_ = 0;
 };

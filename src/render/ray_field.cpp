@@ -180,7 +180,9 @@ float FloatUp(double x) {
 }  // namespace
 
 SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometry,
-                                   const FieldCellData& data, std::int64_t budget) {
+                                   const FieldCellData& data,
+                                   const std::vector<std::uint8_t>* need,
+                                   std::int64_t budget) {
     SubCellBounds d;
     const std::int64_t cells = mesh.CellCount();
     // Which cells get boxes: Lagrange hexahedra and tetrahedra above the linear ones.
@@ -211,8 +213,22 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
     for (std::int64_t c = 0; c < cells; ++c) start[c + 1] = start[c] + boxesOf(c);
     if (start[cells] == 0) return d;
     d.subN = hexN;
+    d.tetLevels_ = perCell == 64 ? 2 : 1;
     d.subStart = std::move(start);
     d.subData.resize(8 * d.subStart[cells]);
+    d.built.assign(cells, 0);
+    d.Extend(mesh, geometry, data, need);
+    return d;
+}
+
+void SubCellBounds::Extend(const Mesh& mesh, const MeshGeometry& geometry,
+                           const FieldCellData& data,
+                           const std::vector<std::uint8_t>* need) {
+    if (subStart.empty()) return;
+    const std::int64_t cells = static_cast<std::int64_t>(built.size());
+    const int hexN = subN;
+    auto tetLevels = [&](int p) { return std::min(TetSubLevels(p), tetLevels_); };
+    SubCellBounds& d = *this;
     tbb::enumerable_thread_specific<std::int64_t> kept(0);
     tbb::parallel_for(
         tbb::blocked_range<std::int64_t>(0, cells, 64),
@@ -223,7 +239,7 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
             std::vector<double> packed;
             for (std::int64_t c = range.begin(); c < range.end(); ++c) {
                 const int boxes = static_cast<int>(d.subStart[c + 1] - d.subStart[c]);
-                if (boxes == 0) continue;
+                if (boxes == 0 || d.built[c] || (need && !(*need)[c])) continue;
                 const CellGeometry& g = geometry.Cell(c, scratch);
                 geo.resize(3 * boxes);
                 field.resize(boxes);
@@ -265,17 +281,20 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
                     out[6 * boxes + b] = FloatDown(field[b].lo);
                     out[7 * boxes + b] = FloatUp(field[b].hi);
                 }
+                d.built[c] = 1;
                 kept.local() += 1;
             }
         });
     for (std::int64_t k : kept) d.subCells += k;
-    return d;
 }
 
 std::uint64_t SubCellBounds::Holding(std::int64_t c, const double* values,
                                      int count) const {
     if (subStart.empty() || subStart[c + 1] == subStart[c]) return 0;
     const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
+    // A cell whose boxes are not built: every box may hold anything.
+    if (!built[c])
+        return boxes == 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << boxes) - 1;
     const float* data = subData.data() + 8 * subStart[c];
     const float* fieldLo = data + 6 * boxes;
     const float* fieldHi = data + 7 * boxes;

@@ -77,7 +77,7 @@ struct SubCellBounds {
     int subN = 0;
     std::vector<std::int64_t> subStart;
     std::vector<float> subData;
-    std::int64_t subCells = 0;
+    std::int64_t subCells = 0;  ///< cells whose boxes are built
     /// Box b of cell c.
     SubBox SubBoxOf(std::int64_t c, int b) const {
         const std::int64_t n = subStart[c + 1] - subStart[c];
@@ -103,12 +103,25 @@ struct SubCellBounds {
     bool Clip(std::int64_t c, const Ray& ray, std::uint64_t holding, double& t0,
               double& t1) const;
 
+    /// Whether cell c's boxes are computed (built[c]); a cell with boxes whose are not
+    /// (Extend has not been asked for it) counts as holding every value in every box.
+    std::vector<std::uint8_t> built;
+
     /// The bounds of `data`'s field (the map and values its rays evaluate), in at most
     /// `budget` bytes: 64 boxes per cell where they fit, else 8 (hexahedra in 2 x 2 x 2,
-    /// tetrahedra refined once), else none.
+    /// tetrahedra refined once), else none. The boxes are computed for the cells with
+    /// need[c] != 0 only (all cells without `need`); Extend computes more.
     static SubCellBounds Build(const Mesh& mesh, const MeshGeometry& geometry,
                                const FieldCellData& data,
+                               const std::vector<std::uint8_t>* need = nullptr,
                                std::int64_t budget = std::int64_t(256) << 20);
+    /// Computes the boxes of the cells with need[c] != 0 (all without `need`) not yet
+    /// built. Must not run while another thread reads those cells.
+    void Extend(const Mesh& mesh, const MeshGeometry& geometry, const FieldCellData& data,
+                const std::vector<std::uint8_t>* need);
+
+  private:
+    int tetLevels_ = 2;
 };
 
 /// The cofactors of the 3x3 matrix E (rows e[0..2]) as the columns of its adjugate:

@@ -543,6 +543,8 @@ TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
     FieldCache cache(mesh, geometry);
     Scene scene = MakeScene(kBallScene);
     const BrickSetup first = MakeBrickSetup(mesh, geometry, traverser, scene, &cache);
+    ASSERT_TRUE(first.subBounds[0]);
+    const std::int64_t builtFirst = first.subBounds[0]->subCells;
     EXPECT_EQ(cache.DataBuilt(), 1);
     EXPECT_EQ(cache.RangesBuilt(), 1);
     scene.isosurfaces[0].value = 0.25;
@@ -556,10 +558,14 @@ TEST(FieldCache, SetupsOfChangedValuesReuseTheFieldsData) {
     ASSERT_EQ(second.cellRanges.size(), 1u);
     EXPECT_EQ(first.cellRanges[0].get(), second.cellRanges[0].get());
     EXPECT_EQ(first.fieldData[0].get(), second.fieldData[0].get());
-    // The sub-cell bounds too (ball-p2's quadratic tetrahedra have them).
-    ASSERT_TRUE(first.subBounds[0]);
-    EXPECT_GT(first.subBounds[0]->subCells, 0);
+    // The sub-cell bounds too (ball-p2's quadratic tetrahedra have them): built for the
+    // cells whose range holds the first isovalue, extended to those of the second.
+    std::int64_t firstCells = 0;
+    for (const Interval& r : *first.cellRanges[0])
+        firstCells += 0.49 >= r.lo && 0.49 <= r.hi;
+    EXPECT_EQ(builtFirst, firstCells);
     EXPECT_EQ(first.subBounds[0].get(), second.subBounds[0].get());
+    EXPECT_GT(second.subBounds[0]->subCells, firstCells);
     ASSERT_TRUE(second.volume);
     EXPECT_EQ(second.volume->ranges[0].get(), second.cellRanges[0].get());
     // Gradient bounds (for linear tetrahedra; this mesh has none, so they are empty) are
@@ -892,7 +898,8 @@ TEST(SubCellBounds, BoxesHoldTheMappedPointsAndTheirValues) {
     std::mt19937_64 rng(3);
     std::uniform_real_distribution<double> unit(0, 1);
     for (const std::int64_t budget : {std::int64_t(256) << 20, cells * 8 * 32}) {
-        const SubCellBounds b = SubCellBounds::Build(mesh, geometry, data, budget);
+        const SubCellBounds b =
+            SubCellBounds::Build(mesh, geometry, data, nullptr, budget);
         const int n = budget == cells * 8 * 32 ? 2 : 4;
         ASSERT_EQ(b.subN, n);
         ASSERT_EQ(b.subCells, cells);
@@ -923,7 +930,27 @@ TEST(SubCellBounds, BoxesHoldTheMappedPointsAndTheirValues) {
         }
     }
     // Nothing fits a budget below 8 boxes per cell.
-    EXPECT_EQ(SubCellBounds::Build(mesh, geometry, data, cells * 8 * 32 - 1).subCells, 0);
+    EXPECT_EQ(
+        SubCellBounds::Build(mesh, geometry, data, nullptr, cells * 8 * 32 - 1).subCells,
+        0);
+    // Built for some cells only: the others hold everything until Extend computes them,
+    // and then they are what a full build gives.
+    const SubCellBounds all = SubCellBounds::Build(mesh, geometry, data);
+    std::vector<std::uint8_t> half(cells, 0);
+    for (std::int64_t c = 0; c < cells; c += 2) half[c] = 1;
+    SubCellBounds some = SubCellBounds::Build(mesh, geometry, data, &half);
+    EXPECT_EQ(some.subCells, (cells + 1) / 2);
+    const double value = 0.37;
+    for (std::int64_t c = 0; c < cells; ++c) {
+        if (half[c]) {
+            EXPECT_EQ(some.Holding(c, &value, 1), all.Holding(c, &value, 1));
+        } else {
+            EXPECT_EQ(some.Holding(c, &value, 1), ~std::uint64_t(0));
+        }
+    }
+    some.Extend(mesh, geometry, data, nullptr);
+    EXPECT_EQ(some.subCells, cells);
+    EXPECT_EQ(some.subData, all.subData);
 }
 
 }  // namespace
