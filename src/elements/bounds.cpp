@@ -524,6 +524,28 @@ Interval Bounds(const BasisTable& basis, const double* coeffsIn, int stride) {
 }  // namespace
 
 namespace {
+// out = a b for n x n row-major matrices, computed in extended precision and rounded to
+// double; returns the largest absolute row sum of out.
+double RoundedProduct(const std::vector<LD>& a, const std::vector<LD>& b, int n,
+                      double* out) {
+    double worst = 0;
+    for (int r = 0; r < n; ++r) {
+        double sum = 0;
+        for (int c = 0; c < n; ++c) {
+            LD v = 0;
+            for (int k = 0; k < n; ++k)
+                v += a[static_cast<std::size_t>(r) * n + k] *
+                     b[static_cast<std::size_t>(k) * n + c];
+            out[static_cast<std::size_t>(r) * n + c] = static_cast<double>(v);
+            sum += std::abs(out[static_cast<std::size_t>(r) * n + c]);
+        }
+        worst = std::max(worst, sum);
+    }
+    return worst;
+}
+}  // namespace
+
+namespace {
 // HexSubBounds' 1-D matrices for order p and n pieces: row (k (p + 1) + a) gives
 // Bernstein coefficient a, on [k / n, (k + 1) / n], of the interpolant of the p + 1
 // equispaced nodal values on [0, 1] (the line transform applied to the Lagrange basis at
@@ -566,19 +588,9 @@ const SubdivisionTable& GetSubdivisionTable(int p, int n) {
                 e[static_cast<std::size_t>(i) * q + j] = l;
             }
         }
-        for (int a = 0; a < q; ++a) {
-            double sum = 0;
-            for (int j = 0; j < q; ++j) {
-                LD v = 0;
-                for (int i = 0; i < q; ++i)
-                    v += line[static_cast<std::size_t>(a) * q + i] *
-                         e[static_cast<std::size_t>(i) * q + j];
-                const double d = static_cast<double>(v);
-                t->m[(static_cast<std::size_t>(k) * q + a) * q + j] = d;
-                sum += std::abs(d);
-            }
-            t->rowSum = std::max(t->rowSum, sum);
-        }
+        t->rowSum = std::max(
+            t->rowSum,
+            RoundedProduct(line, e, q, &t->m[static_cast<std::size_t>(k) * q * q]));
     }
     return *(mine = cache.emplace(key, std::move(t)).first->second.get());
 }
@@ -802,19 +814,9 @@ const TetSubdivisionTable& GetTetSubdivisionTable(const BasisTable& basis, int l
                     for (int m = 0; m < n; ++m)
                         e[static_cast<std::size_t>(r) * n + m] = phi[m];
                 }
-        for (int a = 0; a < n; ++a) {
-            double sum = 0;
-            for (int m = 0; m < n; ++m) {
-                LD v = 0;
-                for (int q = 0; q < n; ++q)
-                    v += simplex[static_cast<std::size_t>(a) * n + q] *
-                         e[static_cast<std::size_t>(q) * n + m];
-                const double d = static_cast<double>(v);
-                t->m[(static_cast<std::size_t>(s) * n + a) * n + m] = d;
-                sum += std::abs(d);
-            }
-            t->rowSum = std::max(t->rowSum, sum);
-        }
+        t->rowSum = std::max(
+            t->rowSum,
+            RoundedProduct(simplex, e, n, &t->m[static_cast<std::size_t>(s) * n * n]));
     }
     return *(mine = cache.emplace(key, std::move(t)).first->second.get());
 }

@@ -736,6 +736,28 @@ camera: {position: [2.2, 1.6, 2.6],
 namespace hpray {
 namespace {
 
+// A scene rendered with the sub-cell bounds and without them (one thread).
+struct WithAndWithout {
+    Image with, without;
+    RenderCounters cWith, cWithout;
+    /// Segments ruled out, by the cell filter (never traced) or in the cell.
+    double RuledOut() const {
+        return cWithout.segments - cWith.segments + cWith.isoSubcellCulled;
+    }
+};
+WithAndWithout RenderWithAndWithoutSubCellBounds(const Mesh& mesh, const Scene& scene) {
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    const BrickSetup on = MakeBrickSetup(mesh, geometry, traverser, scene);
+    const BrickSetup off =
+        MakeBrickSetup(mesh, geometry, traverser, scene, nullptr, false);
+    const Camera camera(scene.camera);
+    WithAndWithout r;
+    RenderBrick(on, camera, 1, r.with, r.cWith);
+    RenderBrick(off, camera, 1, r.without, r.cWithout);
+    return r;
+}
+
 // The sub-cell bounds rule out or shorten segments without changing what is found: the
 // plane x = C of the isoparametric field on strongly curved hexes, with the bounds and
 // without, gives the same hits to rounding, both on the analytic plane, while the bounds
@@ -750,18 +772,11 @@ isosurfaces:
   - {field: u, value: 0.37, opacity: 0.5}
   - {field: u, value: 0.81}
 )");
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    const BrickSetup on = MakeBrickSetup(mesh, geometry, traverser, scene);
-    const BrickSetup off =
-        MakeBrickSetup(mesh, geometry, traverser, scene, nullptr, false);
+    const WithAndWithout r = RenderWithAndWithoutSubCellBounds(mesh, scene);
     const Camera camera(scene.camera);
-    Image with, without;
-    RenderCounters cWith, cWithout;
-    RenderBrick(on, camera, 1, with, cWith);
-    RenderBrick(off, camera, 1, without, cWithout);
-    // Segments ruled out, by the cell filter (never traced) or in the cell.
-    const double ruledOut = cWithout.segments - cWith.segments + cWith.isoSubcellCulled;
+    const Image &with = r.with, &without = r.without;
+    const RenderCounters &cWith = r.cWith, &cWithout = r.cWithout;
+    const double ruledOut = r.RuledOut();
     EXPECT_GT(ruledOut, 0.1 * cWithout.segments);
     EXPECT_EQ(cWithout.isoSubcellCulled, 0);
     EXPECT_LT(cWith.fieldEvaluations, 0.9 * cWithout.fieldEvaluations);
@@ -798,18 +813,11 @@ TEST(IsoRender, SubTetrahedronBoundsCullSegmentsAndKeepEveryHit) {
     const Mesh mesh = MakeBuiltin("builtin:ball-p2");
     Scene scene = MakeScene(kBallScene);
     scene.isosurfaces[0].value = 0.25;  // R = 0.5
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    const BrickSetup on = MakeBrickSetup(mesh, geometry, traverser, scene);
-    const BrickSetup off =
-        MakeBrickSetup(mesh, geometry, traverser, scene, nullptr, false);
+    const WithAndWithout r = RenderWithAndWithoutSubCellBounds(mesh, scene);
     const Camera camera(scene.camera);
-    Image with, without;
-    RenderCounters cWith, cWithout;
-    RenderBrick(on, camera, 1, with, cWith);
-    RenderBrick(off, camera, 1, without, cWithout);
-    // Segments ruled out, by the cell filter (never traced) or in the cell.
-    const double ruledOut = cWithout.segments - cWith.segments + cWith.isoSubcellCulled;
+    const Image &with = r.with, &without = r.without;
+    const RenderCounters &cWith = r.cWith, &cWithout = r.cWithout;
+    const double ruledOut = r.RuledOut();
     EXPECT_GT(ruledOut, 0.1 * cWithout.segments);
     EXPECT_LT(cWith.fieldEvaluations, cWithout.fieldEvaluations);
     EXPECT_EQ(cWith.isoHits, cWithout.isoHits);
@@ -849,16 +857,10 @@ camera: {position: [3, 0.52, 0.47], look_at: [0.5, 0.52, 0.47], up: [0, 1, 0],
 isosurfaces:
   - {field: u, value: 0.81}
 )");
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    const BrickSetup on = MakeBrickSetup(mesh, geometry, traverser, scene);
-    const BrickSetup off =
-        MakeBrickSetup(mesh, geometry, traverser, scene, nullptr, false);
+    const WithAndWithout r = RenderWithAndWithoutSubCellBounds(mesh, scene);
     const Camera camera(scene.camera);
-    Image with, without;
-    RenderCounters cWith, cWithout;
-    RenderBrick(on, camera, 1, with, cWith);
-    RenderBrick(off, camera, 1, without, cWithout);
+    const Image &with = r.with, &without = r.without;
+    const RenderCounters &cWith = r.cWith, &cWithout = r.cWithout;
     EXPECT_LT(cWith.fieldEvaluations, cWithout.fieldEvaluations);
     int hits = 0;
     for (int j = 0; j < 40; ++j)
