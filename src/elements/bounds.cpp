@@ -837,12 +837,15 @@ void TetSubBounds(const BasisTable& basis, int levels, const double* coeffs, int
     // together), and four rows at a time: independent sums that keep the units busy.
     for (int c0 = 0; c0 < comps; c0 += 4) {
         const int cn = std::min(4, comps - c0);
-        alignas(32) double u[kMaxBasisNodes][4] = {};
+        // (Only the n rows used are written: zeroing the whole array cost more than the
+        // products for small cells.)
+        alignas(32) double u[kMaxBasisNodes][4];
         double maxAbs[4] = {0, 0, 0, 0};
         bool finite[4] = {true, true, true, true};
         for (int m = 0; m < n; ++m)
-            for (int c = 0; c < cn; ++c) {
-                const double v = coeffs[static_cast<std::size_t>(m) * comps + c0 + c];
+            for (int c = 0; c < 4; ++c) {
+                const double v =
+                    c < cn ? coeffs[static_cast<std::size_t>(m) * comps + c0 + c] : 0.0;
                 u[m][c] = v;
                 finite[c] = finite[c] && std::isfinite(v);
                 maxAbs[c] = std::max(maxAbs[c], std::abs(v));
