@@ -215,7 +215,7 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
     d.subN = hexN;
     d.tetLevels_ = perCell == 64 ? 2 : 1;
     d.subStart = std::move(start);
-    d.subData.resize(8 * d.subStart[cells]);
+    d.subData.reset(new float[static_cast<std::size_t>(8 * d.subStart[cells])]);
     d.built.assign(cells, 0);
     d.Extend(mesh, geometry, data, need);
     return d;
@@ -271,7 +271,7 @@ void SubCellBounds::Extend(const Mesh& mesh, const MeshGeometry& geometry,
                         field[b] = both[4 * b + 3];
                     }
                 }
-                float* out = d.subData.data() + 8 * d.subStart[c];
+                float* out = d.subData.get() + 8 * d.subStart[c];
                 const double pad = 1e-9 * g.size;
                 for (int b = 0; b < boxes; ++b) {
                     for (int k = 0; k < 3; ++k) {
@@ -295,7 +295,7 @@ std::uint64_t SubCellBounds::Holding(std::int64_t c, const double* values,
     // A cell whose boxes are not built: every box may hold anything.
     if (!built[c])
         return boxes == 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << boxes) - 1;
-    const float* data = subData.data() + 8 * subStart[c];
+    const float* data = subData.get() + 8 * subStart[c];
     const float* fieldLo = data + 6 * boxes;
     const float* fieldHi = data + 7 * boxes;
     // The boxes whose interval holds a value (at most 64 per cell), compared in float
@@ -337,7 +337,7 @@ bool SubCellBounds::Clip(std::int64_t c, const Ray& ray, std::uint64_t holding,
                          double& t0, double& t1) const {
     if (subStart.empty() || subStart[c + 1] == subStart[c]) return true;
     const int boxes = static_cast<int>(subStart[c + 1] - subStart[c]);
-    const float* data = subData.data() + 8 * subStart[c];
+    const float* data = subData.get() + 8 * subStart[c];
     if (holding == 0) return false;
     // Where three boxes in four or more hold a value, their world boxes nearly always
     // cover the segment (all of them do): not worth the slabs.

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "elements/field.h"
@@ -76,12 +77,14 @@ struct SubCellBounds {
     };
     int subN = 0;
     std::vector<std::int64_t> subStart;
-    std::vector<float> subData;
+    /// Allocated for every cell with boxes but not initialised: the pages of cells never
+    /// built are never touched (nor read: see `built`).
+    std::unique_ptr<float[]> subData;
     std::int64_t subCells = 0;  ///< cells whose boxes are built
     /// Box b of cell c.
     SubBox SubBoxOf(std::int64_t c, int b) const {
         const std::int64_t n = subStart[c + 1] - subStart[c];
-        const float* row = subData.data() + 8 * subStart[c] + b;
+        const float* row = subData.get() + 8 * subStart[c] + b;
         return {{row[0], row[n], row[2 * n]},
                 {row[3 * n], row[4 * n], row[5 * n]},
                 row[6 * n],
