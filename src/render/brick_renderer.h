@@ -40,9 +40,11 @@ struct BrickSetup {
     std::vector<double> fieldScale;  ///< max |value| of each field over the mesh
     /// Per field: nodal values gathered per cell and derivative bounds (ray_field.h).
     std::vector<std::shared_ptr<const FieldCellData>> fieldData;
-    /// Per field, its sub-cell bounds where an isosurface uses it (null otherwise), and
-    /// per cell the boxes that may hold one of the field's isovalues
-    /// (SubCellBounds::HoldingMasks).
+    /// Per field, its sub-cell bounds where an isosurface uses it, and per cell the boxes
+    /// that may hold one of the field's isovalues (SubCellBounds::HoldingMasks); null and
+    /// empty without them. Isosurfaces project a segment only where these allow an
+    /// isovalue (SubCellBounds::Clip), and the cell filter finds a cell only through
+    /// those boxes.
     std::vector<std::shared_ptr<const SubCellBounds>> subBounds;
     std::vector<std::vector<std::uint64_t>> subHolding;
 
@@ -62,11 +64,6 @@ struct BrickSetup {
     SceneLighting lighting;
 
     ProjectionOptions projection;
-    /// Isosurfaces project a segment only where the field's sub-cell bounds allow an
-    /// isovalue (SubCellBounds::Clip), and the cell filter finds a cell only
-    /// through its sub-boxes that may hold an isovalue (MakeBrickSetup's last argument).
-    /// Always on in rendering; tests turn it off to compare.
-    bool subCellBounds = true;
     RootOptions roots;
     InversionOptions inversion;
     /// Two hits of one isosurface closer than this (world units) are one hit: the same
@@ -111,6 +108,8 @@ struct BrickSetup {
 /// the numerical options from scene.accuracy. Per-field ranges and cell data come from
 /// `cache` (render/field_cache.h; a private one when null), so a setup for a scene that
 /// changes only values, transfer functions or the camera recomputes no per-cell data.
+/// `subCellBounds` false leaves the sub-cell bounds out (always on in rendering; tests
+/// turn them off to compare).
 BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
                           const BrickTraverser& traverser, const Scene& scene,
                           FieldCache* cache = nullptr, bool subCellBounds = true);
