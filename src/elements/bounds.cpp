@@ -546,6 +546,24 @@ double RoundedProduct(const std::vector<LD>& a, const std::vector<LD>& b, int n,
 }  // namespace
 
 namespace {
+// The table of key (a, b), built by `build` the first time any thread asks and kept for
+// the life of the process; each thread remembers those it has seen (at `slot` < Slots),
+// so later lookups take no lock.
+template <typename T, int Slots, typename Build>
+const T& CachedTable(int a, int b, int slot, Build&& build) {
+    thread_local std::array<const T*, Slots> seen{};
+    const T*& mine = seen[slot];
+    if (mine) return *mine;
+    static std::mutex mutex;
+    static std::map<std::pair<int, int>, std::unique_ptr<T>> cache;
+    std::lock_guard<std::mutex> lock(mutex);
+    std::unique_ptr<T>& entry = cache[{a, b}];
+    if (!entry) entry = build();
+    return *(mine = entry.get());
+}
+}  // namespace
+
+namespace {
 // HexSubBounds' 1-D matrices for order p and n pieces: row (k (p + 1) + a) gives
 // Bernstein coefficient a, on [k / n, (k + 1) / n], of the interpolant of the p + 1
 // equispaced nodal values on [0, 1] (the line transform applied to the Lagrange basis at
@@ -556,19 +574,7 @@ struct SubdivisionTable {
     double rowSum = 0;
 };
 
-const SubdivisionTable& GetSubdivisionTable(int p, int n) {
-    // Tables live as long as the process; each thread remembers those it has seen.
-    thread_local std::array<const SubdivisionTable*,
-                            (kMaxOrder + 1) * (kMaxSubdivision + 1)>
-        seen{};
-    const SubdivisionTable*& mine = seen[p * (kMaxSubdivision + 1) + n];
-    if (mine) return *mine;
-    static std::mutex mutex;
-    static std::map<std::pair<int, int>, std::unique_ptr<SubdivisionTable>> cache;
-    std::lock_guard<std::mutex> lock(mutex);
-    const auto key = std::make_pair(p, n);
-    auto it = cache.find(key);
-    if (it != cache.end()) return *(mine = it->second.get());
+std::unique_ptr<SubdivisionTable> BuildSubdivisionTable(int p, int n) {
     auto t = std::make_unique<SubdivisionTable>();
     const int q = p + 1;
     const std::vector<LD> line = LineTransform(p);  // bern_a = sum_i line[a][i] f(i / p)
@@ -592,7 +598,12 @@ const SubdivisionTable& GetSubdivisionTable(int p, int n) {
             t->rowSum,
             RoundedProduct(line, e, q, &t->m[static_cast<std::size_t>(k) * q * q]));
     }
-    return *(mine = cache.emplace(key, std::move(t)).first->second.get());
+    return t;
+}
+
+const SubdivisionTable& GetSubdivisionTable(int p, int n) {
+    return CachedTable<SubdivisionTable, (kMaxOrder + 1) * (kMaxSubdivision + 1)>(
+        p, n, p * (kMaxSubdivision + 1) + n, [&] { return BuildSubdivisionTable(p, n); });
 }
 }  // namespace
 
@@ -762,17 +773,9 @@ std::vector<SubTet> RefineTets(const std::vector<SubTet>& in) {
     return out;
 }
 
-const TetSubdivisionTable& GetTetSubdivisionTable(const BasisTable& basis, int levels) {
+std::unique_ptr<TetSubdivisionTable> BuildTetSubdivisionTable(const BasisTable& basis,
+                                                              int levels) {
     const int p = basis.order;
-    thread_local std::array<const TetSubdivisionTable*, (kMaxOrder + 1) * 3> seen{};
-    const TetSubdivisionTable*& mine = seen[p * 3 + levels];
-    if (mine) return *mine;
-    static std::mutex mutex;
-    static std::map<std::pair<int, int>, std::unique_ptr<TetSubdivisionTable>> cache;
-    std::lock_guard<std::mutex> lock(mutex);
-    const auto key = std::make_pair(p, levels);
-    auto it = cache.find(key);
-    if (it != cache.end()) return *(mine = it->second.get());
     auto t = std::make_unique<TetSubdivisionTable>();
     const int n = basis.nodeCount;
     const std::vector<LD> simplex = SimplexTransform(p, 3);  // lattice order -> Bernstein
@@ -818,7 +821,14 @@ const TetSubdivisionTable& GetTetSubdivisionTable(const BasisTable& basis, int l
             t->rowSum,
             RoundedProduct(simplex, e, n, &t->m[static_cast<std::size_t>(s) * n * n]));
     }
-    return *(mine = cache.emplace(key, std::move(t)).first->second.get());
+    return t;
+}
+
+const TetSubdivisionTable& GetTetSubdivisionTable(const BasisTable& basis, int levels) {
+    const int p = basis.order;
+    return CachedTable<TetSubdivisionTable, (kMaxOrder + 1) * 3>(
+        p, levels, p * 3 + levels,
+        [&] { return BuildTetSubdivisionTable(basis, levels); });
 }
 }  // namespace
 
