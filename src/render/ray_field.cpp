@@ -199,21 +199,16 @@ SubCellBounds SubCellBounds::Build(const Mesh& mesh, const MeshGeometry& geometr
     // 131072 cells by default), else 8, else none.
     const int perCell = count * 64 * 32 <= budget ? 64 : count * 8 * 32 <= budget ? 8 : 0;
     if (perCell == 0) return d;
-    const int hexN = perCell == 64 ? kSubdivision : 2;
-    const int hexBoxes = hexN * hexN * hexN;
-    auto tetLevels = [&](int p) {
-        return std::min(TetSubLevels(p), perCell == 64 ? 2 : 1);
-    };
+    d.subN = perCell == 64 ? kSubdivision : 2;
+    d.tetLevels_ = perCell == 64 ? 2 : 1;
     auto boxesOf = [&](std::int64_t c) {
         if (!eligible(c)) return 0;
-        if (mesh.cellShape[c] == CellShape::Hex) return hexBoxes;
-        return TetSubCount(tetLevels(mesh.cellOrder[c]));
+        if (mesh.cellShape[c] == CellShape::Hex) return d.subN * d.subN * d.subN;
+        return TetSubCount(d.TetLevels(mesh.cellOrder[c]));
     };
     std::vector<std::int64_t> start(cells + 1, 0);
     for (std::int64_t c = 0; c < cells; ++c) start[c + 1] = start[c] + boxesOf(c);
-    if (start[cells] == 0) return d;
-    d.subN = hexN;
-    d.tetLevels_ = perCell == 64 ? 2 : 1;
+    if (start[cells] == 0) return SubCellBounds{};
     d.subStart = std::move(start);
     d.subData.reset(new float[static_cast<std::size_t>(8 * d.subStart[cells])]);
     d.built.assign(cells, 0);
@@ -227,7 +222,6 @@ void SubCellBounds::Extend(const Mesh& mesh, const MeshGeometry& geometry,
     if (subStart.empty()) return;
     const std::int64_t cells = static_cast<std::int64_t>(built.size());
     const int hexN = subN;
-    auto tetLevels = [&](int p) { return std::min(TetSubLevels(p), tetLevels_); };
     SubCellBounds& d = *this;
     tbb::enumerable_thread_specific<std::int64_t> kept(0);
     tbb::parallel_for(
@@ -264,7 +258,7 @@ void SubCellBounds::Extend(const Mesh& mesh, const MeshGeometry& geometry,
                         packed[4 * m + 3] = values[m];
                     }
                     both.resize(4 * boxes);
-                    TetSubBounds(*g.basis, tetLevels(g.basis->order), packed.data(), 4,
+                    TetSubBounds(*g.basis, d.TetLevels(g.basis->order), packed.data(), 4,
                                  both.data());
                     for (int b = 0; b < boxes; ++b) {
                         for (int k = 0; k < 3; ++k) geo[3 * b + k] = both[4 * b + k];

@@ -2,11 +2,13 @@
 // (closed form in affine cells, warm-started Newton in curved ones) -> true field value.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
+#include "elements/bounds.h"
 #include "elements/field.h"
 #include "elements/mesh_geometry.h"
 #include "render/stats.h"
@@ -124,6 +126,8 @@ struct SubCellBounds {
                 const std::vector<std::uint8_t>* need);
 
   private:
+    /// The refinements of an order-p tetrahedron: TetSubLevels(p), at most tetLevels_.
+    int TetLevels(int p) const { return std::min(TetSubLevels(p), tetLevels_); }
     int tetLevels_ = 2;
 };
 
