@@ -322,6 +322,17 @@ bool Canonicalize(const std::int32_t* ids, int n, std::int32_t* out, Less less) 
 
 }  // namespace
 
+// The triangle a walk last left a planar tetrahedron by, with its corners in the ray
+// frame in the face record's order: the next cell's entry face, whose corners need not
+// be transformed again (Transform is a pure function of the point, so a kept corner is
+// bitwise the one a new transform would give).
+struct TetWalkFace {
+    std::int32_t face = -1;
+    int side = 0;  ///< the crossing's side: the sign of each of the face's edges
+    std::int32_t v[3] = {-1, -1, -1};
+    ShearedPoint p[3];
+};
+
 struct BrickTraverser::Impl {
     Brick brick;
     TraceOptions options;
@@ -390,9 +401,15 @@ struct BrickTraverser::Impl {
     // face entryFace at (unclamped) entryT; tIn = the walk's t there (>= entryT).
     // exitPoint (optional): the exit's face point where a planar tet is left through a
     // triangle and meshPointIds holds, else not Valid.
+    // lastFace (optional): the face the walk left its previous planar tet by, with its
+    // corners in the ray frame, updated here (see TetWalkFace).
     bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
-                  const RayFrame& frame, Crossing& exit,
-                  FacePoint* exitPoint = nullptr) const;
+                  const RayFrame& frame, Crossing& exit, FacePoint* exitPoint = nullptr,
+                  TetWalkFace* lastFace = nullptr) const;
+    // FindExit for a tetrahedron c whose faces cf[0..3] are planar triangles.
+    bool PlanarTetExit(std::int64_t c, const std::int32_t* cf, std::int32_t entryFace,
+                       const RayFrame& frame, Crossing& exit, FacePoint* exitPoint,
+                       TetWalkFace* lastFace) const;
     // The face point of the crossing `x` of triangular face f (not Valid if f is not a
     // triangle or its crossing is not x).
     void EntryPoint(const Crossing& x, const RayFrame& frame, FacePoint& fp) const;
@@ -1866,7 +1883,7 @@ bool BrickTraverser::Impl::LocateStart(double t, const Ray& ray, const RayFrame&
 
 bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, double entryT,
                                     double tIn, const RayFrame& frame, Crossing& exit,
-                                    FacePoint* exitPoint) const {
+                                    FacePoint* exitPoint, TetWalkFace* lastFace) const {
     if (exitPoint) exitPoint->v[0] = -1;
     // A brick of planar tets only needs none of the checks (each of them a load from
     // memory that the walk would wait for).
@@ -1880,27 +1897,8 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
                            faces[cf[1]].kind == FaceKind::Triangle &&
                            faces[cf[2]].kind == FaceKind::Triangle &&
                            faces[cf[3]].kind == FaceKind::Triangle)) {
-        // A planar tet seen along the (perturbed) ray covers the ray with exactly one
-        // entering and one leaving face (exact predicates on the projected corners), so
-        // the first leaving face is the exit.
-        TriangleCrossing x;
-        for (int k = 0; k < 4; ++k) {
-            const std::int32_t f = cf[k];
-            if (f == entryFace) continue;
-            const FaceRec& rec = faces[f];
-            const ShearedPoint a = frame.Transform(P(rec.v[0]));
-            const ShearedPoint b = frame.Transform(P(rec.v[1]));
-            const ShearedPoint d = frame.Transform(P(rec.v[2]));
-            if (!CrossTriangle(a, b, d, x)) continue;
-            const Crossing cand{x.t, f, x.side, x.bary[1], x.bary[2]};
-            if (Leaves(cand, c)) {
-                exit = cand;
-                if (exitPoint && meshPointIds)
-                    MakeFacePoint(rec.v, a, b, d, x, std::abs(frame.dir[frame.kz]),
-                                  *exitPoint);
-                return true;
-            }
-        }
+        if (PlanarTetExit(c, cf, entryFace, frame, exit, exitPoint, lastFace))
+            return true;
     } else {
         // General cells (bilinear faces can be crossed twice, curved cells left and
         // re-entered): all crossings of the cell's faces along the whole line, sorted by
@@ -1919,6 +1917,98 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
     if (TolerantExit(c, tIn, frame, exit)) {
         walkRepairs.fetch_add(1, std::memory_order_relaxed);
         return true;
+    }
+    return false;
+}
+
+// A planar tet seen along the (perturbed) ray covers the ray with exactly one entering
+// and one leaving face (exact predicates on the projected corners), so the first face in
+// the order of cf that the ray crosses leaving c is the exit: CrossTriangle decides each
+// face, in its record's corner order.
+//
+// Where the walk entered c by the face it left the previous tet by (lastFace), that
+// face's corners A, B, C are in the ray frame already and the signs of its edges (A, B),
+// (B, C), (C, A) are all that crossing's side s (CrossTriangle found them equal). Only
+// the corner D off it is new, with the signs m_X = EdgeSign(X, D) of the three edges
+// through it. The face opposite A, cyclically (B, C, D), has edge signs s, m_C, -m_B
+// (EdgeSign is exactly antisymmetric), so CrossTriangle crosses it exactly when m_C = s
+// and m_B = -s; the other order negates all three signs, with the same outcome. Likewise
+// the face opposite B when m_A = s and m_C = -s, the face opposite C when m_B = s and m_A
+// = -s. So one transform and three signs decide the step, with the same outcome as
+// CrossTriangle on every face, and the crossing is computed from the same sheared
+// corners in the same order: bitwise the same exit.
+bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
+                                         std::int32_t entryFace, const RayFrame& frame,
+                                         Crossing& exit, FacePoint* exitPoint,
+                                         TetWalkFace* lastFace) const {
+    TriangleCrossing x;
+    // The exit through face f crossed as x at the sheared corners a, b, d (f's order).
+    const auto found = [&](std::int32_t f, const FaceRec& rec, const ShearedPoint& a,
+                           const ShearedPoint& b, const ShearedPoint& d) {
+        const Crossing cand{x.t, f, x.side, x.bary[1], x.bary[2]};
+        if (!Leaves(cand, c)) return false;
+        exit = cand;
+        if (exitPoint && meshPointIds)
+            MakeFacePoint(rec.v, a, b, d, x, std::abs(frame.dir[frame.kz]), *exitPoint);
+        if (lastFace) *lastFace = {f, x.side, {rec.v[0], rec.v[1], rec.v[2]}, {a, b, d}};
+        return true;
+    };
+    if (lastFace && lastFace->face == entryFace) {
+        const std::int32_t* e = lastFace->v;
+        const auto onEntry = [e](std::int32_t v) {
+            return v == e[0] || v == e[1] || v == e[2];
+        };
+        const FaceRec& other = faces[cf[cf[0] == entryFace ? 1 : 0]];
+        const std::int32_t d = !onEntry(other.v[0])   ? other.v[0]
+                               : !onEntry(other.v[1]) ? other.v[1]
+                                                      : other.v[2];
+        const int s = lastFace->side;
+        const ShearedPoint pd = frame.Transform(P(d));
+        const int m[3] = {EdgeSign(lastFace->p[0], pd), EdgeSign(lastFace->p[1], pd),
+                          EdgeSign(lastFace->p[2], pd)};
+        // The entry corner opposite the crossed face (at most one is: each pair of these
+        // conditions asks opposite signs of one m), or none.
+        const int o = m[2] == s && m[1] == -s   ? 0
+                      : m[0] == s && m[2] == -s ? 1
+                      : m[1] == s && m[0] == -s ? 2
+                                                : -1;
+        if (o < 0) return false;
+        const int o1 = o == 2 ? 0 : o + 1, o2 = o == 0 ? 2 : o - 1;
+        for (int k = 0; k < 4; ++k) {
+            const std::int32_t f = cf[k];
+            if (f == entryFace) continue;
+            const FaceRec& rec = faces[f];
+            if (rec.v[0] == e[o] || rec.v[1] == e[o] || rec.v[2] == e[o]) continue;
+            // Corner index: 0, 1, 2 on the entry face, 3 for d.
+            int l[3];
+            for (int q = 0; q < 3; ++q) {
+                const std::int32_t v = rec.v[q];
+                l[q] = v == d ? 3 : v == e[o1] ? o1 : v == e[o2] ? o2 : -1;
+            }
+            if ((l[0] | l[1] | l[2]) < 0 || l[0] == l[1] || l[1] == l[2] || l[0] == l[2])
+                break;  // not the corners of one tetrahedron: face by face below
+            // EdgeSign of the face's edge (corner l[1], corner l[2]), from s and m.
+            const int sa = l[2] == 3                            ? m[l[1]]
+                           : l[1] == 3                          ? -m[l[2]]
+                           : l[2] == (l[1] == 2 ? 0 : l[1] + 1) ? s
+                                                                : -s;
+            const ShearedPoint& a = l[0] == 3 ? pd : lastFace->p[l[0]];
+            const ShearedPoint& b = l[1] == 3 ? pd : lastFace->p[l[1]];
+            const ShearedPoint& dd = l[2] == 3 ? pd : lastFace->p[l[2]];
+            trace::FinishCrossing(a, b, dd, sa, x);
+            return found(f, rec, a, b, dd);
+        }
+    }
+    // Face by face: the walk's first cell, or corners that are not those of one
+    // tetrahedron.
+    for (int k = 0; k < 4; ++k) {
+        const std::int32_t f = cf[k];
+        if (f == entryFace) continue;
+        const FaceRec& rec = faces[f];
+        const ShearedPoint a = frame.Transform(P(rec.v[0]));
+        const ShearedPoint b = frame.Transform(P(rec.v[1]));
+        const ShearedPoint d = frame.Transform(P(rec.v[2]));
+        if (CrossTriangle(a, b, d, x) && found(f, rec, a, b, d)) return true;
     }
     return false;
 }
@@ -2065,6 +2155,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                         const Crossing& entry) {
         int zeroSteps = 0;
         Crossing in = entry;  // the crossing the walk entered c by
+        TetWalkFace lastFace;
         if (ends) {
             ends->emplace_back();
             im.EntryPoint(entry, frame, ends->back().enter);
@@ -2073,7 +2164,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             Crossing ex;
             SegmentEnds* pending = ends ? &ends->back() : nullptr;
             if (!im.FindExit(c, entryFace, entryT, tIn, frame, ex,
-                             pending ? &pending->exit : nullptr)) {
+                             pending ? &pending->exit : nullptr, &lastFace)) {
                 im.walkFailures.fetch_add(1, std::memory_order_relaxed);
                 return false;
             }

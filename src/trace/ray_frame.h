@@ -131,6 +131,28 @@ struct TriangleCrossing {
     int side = 0;
 };
 
+/// The crossing of the ray with triangle (A, B, C) once the signs of its three edges
+/// (EdgeSign of (B, C), (C, A), (A, B)) are known to be all `side`: t and the
+/// barycentrics in floating point from the sheared corners, in the order given.
+inline void FinishCrossing(const ShearedPoint& a, const ShearedPoint& b,
+                           const ShearedPoint& c, int side, TriangleCrossing& out) {
+    double w[3] = {b.x * c.y - b.y * c.x, c.x * a.y - c.y * a.x, a.x * b.y - a.y * b.x};
+    // Weights whose rounded value disagrees with the exact decision are ties: zero them.
+    double sum = 0;
+    for (double& x : w) {
+        if (x * side < 0) x = 0;
+        sum += x;
+    }
+    if (sum == 0) {
+        out.bary[0] = out.bary[1] = out.bary[2] = 1.0 / 3.0;
+    } else {
+        const double inv = 1.0 / sum;
+        for (int k = 0; k < 3; ++k) out.bary[k] = w[k] * inv;
+    }
+    out.t = out.bary[0] * a.z + out.bary[1] * b.z + out.bary[2] * c.z;
+    out.side = side;
+}
+
 /// Watertight crossing test of the (perturbed) ray with triangle (A, B, C) given in the
 /// ray frame. The decision uses only EdgeSign of the three edges; t and the barycentrics
 /// are computed in floating point from the same sheared points, so a triangle evaluated
@@ -143,21 +165,7 @@ inline bool CrossTriangle(const ShearedPoint& a, const ShearedPoint& b,
     if (sb != sa) return false;
     const int sc = EdgeSign(a, b);
     if (sc != sa) return false;
-    double w[3] = {b.x * c.y - b.y * c.x, c.x * a.y - c.y * a.x, a.x * b.y - a.y * b.x};
-    // Weights whose rounded value disagrees with the exact decision are ties: zero them.
-    double sum = 0;
-    for (double& x : w) {
-        if (x * sa < 0) x = 0;
-        sum += x;
-    }
-    if (sum == 0) {
-        out.bary[0] = out.bary[1] = out.bary[2] = 1.0 / 3.0;
-    } else {
-        const double inv = 1.0 / sum;
-        for (int k = 0; k < 3; ++k) out.bary[k] = w[k] * inv;
-    }
-    out.t = out.bary[0] * a.z + out.bary[1] * b.z + out.bary[2] * c.z;
-    out.side = sa;
+    FinishCrossing(a, b, c, sa, out);
     return true;
 }
 
