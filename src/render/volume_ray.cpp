@@ -1110,7 +1110,7 @@ void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
     piece.tauError = s.extinctionTf.SteepestOn(ke) * st.error;
 }
 
-bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
+[[gnu::flatten]] bool VolumeRayMarcher::FlushLinearTets(RayComposite& composite) {
     const std::size_t n = queued_;
     if (n == 0) return false;
     // The closed forms of all queued pieces at once, then each composited in order with
@@ -1468,7 +1468,7 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
     return true;
 }
 
-VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
+[[gnu::flatten]] VolumeRayMarcher::LinearTetResult VolumeRayMarcher::LinearTet(
     const MeshGeometry& geometry, const Segment& seg, const SegmentEnds& ends,
     RayComposite& composite) {
     const VolumeSetup& s = *setup_;

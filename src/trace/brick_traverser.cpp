@@ -142,9 +142,9 @@ double Now() {
 // The face point of a crossing x of triangle (a, b, c) (sheared corners of the face's
 // canonical representation, whose point ids are `ids`); dirKz = |ray direction| along the
 // frame's z axis (|a_kz| = |z| dirKz for a corner's offset a from the ray origin).
-void MakeFacePoint(const std::int32_t* ids, const ShearedPoint& a, const ShearedPoint& b,
-                   const ShearedPoint& c, const TriangleCrossing& x, double dirKz,
-                   FacePoint& fp) {
+[[gnu::always_inline]] inline void MakeFacePoint(
+    const std::int32_t* ids, const ShearedPoint& a, const ShearedPoint& b,
+    const ShearedPoint& c, const TriangleCrossing& x, double dirKz, FacePoint& fp) {
     constexpr double kU = 0.5 * std::numeric_limits<double>::epsilon();
     constexpr double kEps = std::numeric_limits<double>::epsilon();
     const ShearedPoint* p[3] = {&a, &b, &c};
