@@ -49,13 +49,18 @@ def load_scene(hpray, config, size):
 
 
 def run_hpray(hpray, config, size, tolerance, out_npy, threads):
+    """One `hpray render` writing what a user's run writes (PNG, EXR, stats), plus the
+    float64 RGBA array for the errors where out_npy is given (untimed runs only: the
+    image is the same on every run)."""
     with tempfile.TemporaryDirectory() as tmp:
         stats = os.path.join(tmp, "s.json")
         cmd = [hpray, "render", os.path.join(ROOT, config), "-q",
                "--set", "isosurfaces=null", "--set", f"threads={threads}",
                "--set", f"camera.width={size}", "--set", f"camera.height={size}",
                "--set", f"output.png={tmp}/f.png", "--set", f"output.exr={tmp}/f.exr",
-               "--set", f"output.stats={stats}", "--set", f"output.rgba={out_npy}"]
+               "--set", f"output.stats={stats}"]
+        if out_npy:
+            cmd += ["--set", f"output.rgba={out_npy}"]
         if tolerance:
             cmd += ["--set", f"accuracy.volume_tolerance={tolerance}"]
         t0 = time.perf_counter()
@@ -96,6 +101,7 @@ def main():
         ours.append("baseline")
         LABEL["baseline"] = f"hpray at {args.baseline_rev} (same tolerance)"
     results = []
+    load = {}  # per scene: the 1-minute load average before and after its rounds
     with tempfile.TemporaryDirectory() as tmp:
         for sc in SCENES:
             size = args.size or sc["size"]
@@ -107,15 +113,19 @@ def main():
             run_hpray(hpray, sc["config"], size, 1e-12, ref, args.threads)
             times = {k: {"first": [], "later": []} for k in ours + MAPPERS}
             err = {}
+            for k in ours:
+                out = os.path.join(tmp, k + ".npy")
+                binary = args.baseline_bin if k == "baseline" else hpray
+                run_hpray(binary, sc["config"], size, None, out, args.threads)
+                err[k] = errors(out, ref)
+            load[sc["name"]] = [os.getloadavg()[0]]
             for r in range(args.runs):
                 for k in ours:
-                    out = os.path.join(tmp, k + ".npy")
                     binary = args.baseline_bin if k == "baseline" else hpray
-                    wall, render = run_hpray(binary, sc["config"], size, None, out,
+                    wall, render = run_hpray(binary, sc["config"], size, None, None,
                                              args.threads)
                     times[k]["first"].append(wall)
                     times[k]["later"].append(render)
-                    err[k] = errors(out, ref)
                 for m in MAPPERS:
                     out = os.path.join(tmp, m + ".npy")
                     first, later = run_vtk(m, scene, out, args.frames)
@@ -123,15 +133,16 @@ def main():
                     times[m]["later"].append(later)
                     err[m] = errors(out, ref)
                 print(f"{sc['name']}: round {r + 1} of {args.runs} done", file=sys.stderr)
+            load[sc["name"]].append(os.getloadavg()[0])
             for k in ours + MAPPERS:
                 results.append({"scene": sc["name"], "size": size, "renderer": k,
                                 "first": statistics.median(times[k]["first"]),
                                 "later": statistics.median(times[k]["later"]),
                                 "max_error": err[k][0], "mean_error": err[k][1]})
-    write_docs(results, args)
+    write_docs(results, load, args)
 
 
-def write_docs(results, args):
+def write_docs(results, load, args):
     lines = [
         "| scene | renderer | first frame (read to image) | later frames | max abs RGBA error | mean abs RGBA error |",
         "|---|---|---|---|---|---|"]
@@ -156,7 +167,13 @@ def write_docs(results, args):
                "Errors are against hpray at volume_tolerance 1e-12; VTK's include its 8-bit "
                "framebuffer (up to 0.002) and, at silhouettes, its own pixel sampling."
                + (f" `hpray at {args.baseline_rev}` is this program at that revision, "
-                  "timed in the same rounds." if args.baseline_bin else "") + "\n\n"
+                  "timed in the same rounds." if args.baseline_bin else "")
+               + " The timed hpray runs write what a user's run writes (EXR, PNG, stats); "
+               "the arrays for the errors come from one more, untimed run of each. "
+               "Load average (1 minute) before and after each scene's rounds: "
+               + "; ".join(f"{name} {a:.1f} and {b:.1f}" for name, (a, b) in load.items())
+               + " (other work on the machine slows hpray and VTK alike; the rounds "
+               "alternate them).\n\n"
                f"{table}\n\n![time against error](benchmarks_peers.png)\n{footer}\n")
     text = ""
     if os.path.exists(md):

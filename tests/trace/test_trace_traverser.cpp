@@ -1165,6 +1165,9 @@ std::vector<std::pair<std::string, Mesh>> StartMeshes() {
     meshes.emplace_back("q2 hexes", GridHexes(3, map));
     meshes.emplace_back("ball-p2", MakeBuiltin("builtin:ball-p2?n=3"));
     meshes.emplace_back("mixed", MakeCubeMesh("mixed"));
+    // Planar tetrahedra only: the walk's steps from tet to tet (bitwise CrossTriangle
+    // face by face, which starts each walk).
+    meshes.emplace_back("tets", MakeCubeMesh("tets-jitter"));
     return meshes;
 }
 
