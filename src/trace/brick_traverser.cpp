@@ -1953,15 +1953,18 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         if (lastFace) *lastFace = {f, x.side, {rec.v[0], rec.v[1], rec.v[2]}, {a, b, d}};
         return true;
     };
-    if (lastFace && lastFace->face == entryFace) {
-        const std::int32_t* e = lastFace->v;
-        const auto onEntry = [e](std::int32_t v) {
-            return v == e[0] || v == e[1] || v == e[2];
-        };
-        const FaceRec& other = faces[cf[cf[0] == entryFace ? 1 : 0]];
-        const std::int32_t d = !onEntry(other.v[0])   ? other.v[0]
-                               : !onEntry(other.v[1]) ? other.v[1]
-                                                      : other.v[2];
+    const std::int32_t* e = lastFace ? lastFace->v : nullptr;
+    const auto onEntry = [e](std::int32_t v) {
+        return v == e[0] || v == e[1] || v == e[2];
+    };
+    const FaceRec& other = faces[cf[cf[0] == entryFace ? 1 : 0]];
+    // The corner off the entry face (none where the corners are not distinct).
+    const std::int32_t d = !e                     ? -1
+                           : !onEntry(other.v[0]) ? other.v[0]
+                           : !onEntry(other.v[1]) ? other.v[1]
+                           : !onEntry(other.v[2]) ? other.v[2]
+                                                  : -1;
+    if (lastFace && lastFace->face == entryFace && d >= 0) {
         const int s = lastFace->side;
         const ShearedPoint pd = frame.Transform(P(d));
         const int m[3] = {EdgeSign(lastFace->p[0], pd), EdgeSign(lastFace->p[1], pd),
