@@ -39,9 +39,10 @@ void WriteExr(const std::string& path, const Image& image) {
     std::vector<std::vector<float>> buffers(channels.size(), std::vector<float>(n));
     Imf::Header header(image.width, image.height);
     header.compression() = Imf::ZIP_COMPRESSION;
-    // zlib level 4 instead of the default 6: rendered images (large flat regions) compress
-    // nearly as well, faster.
-    header.zipCompressionLevel() = 4;
+    // zlib level 1 instead of the default 6: rendered images (large flat regions)
+    // compress nearly as well, much faster (the quick start's 11 channels at 1024^2: 0.32
+    // s against 0.47 s at level 4, for a file 2.7% larger).
+    header.zipCompressionLevel() = 1;
     Imf::FrameBuffer frameBuffer;
     for (std::size_t c = 0; c < channels.size(); ++c) {
         const std::vector<double>& src = *channels[c].second;
