@@ -2,6 +2,8 @@
 // zlib blocks, every numeric type, either byte order), straight into the destination.
 #include "io/vtk_xml_detail.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -601,29 +603,69 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
         inflated.resize(total);
         dst = inflated.data();
     }
-    std::uint64_t at = 0;
-    for (std::uint64_t b = 0; b < blocks; ++b) {
-        const std::uint64_t len = (b + 1 == blocks && lastSize) ? lastSize : blockSize;
-        const std::size_t blockAt = src.FileOffset();
-        const std::uint8_t* c = src.Take(compressed[b], scratch);
-        if (!c) FailShort(file, a, src, "a compressed block", compressed[b]);
-        uLongf produced = static_cast<uLongf>(len);
-        const int rc =
-            uncompress(dst + at, &produced, c, static_cast<uLong>(compressed[b]));
-        if (rc != Z_OK || produced != len) {
-            std::ostringstream os;
-            os << "zlib block " << b << " of " << blocks << ": ";
-            if (rc == Z_OK)
-                os << "inflates to " << produced << " bytes, expected " << len;
-            else if (rc == Z_BUF_ERROR)
-                os << "inflates to more than " << len << " bytes or is incomplete";
-            else if (rc == Z_DATA_ERROR)
-                os << "corrupt compressed data";
-            else
-                os << "zlib error " << rc;
-            Fail(file, ByteWhere(a.where, blockAt), os.str());
+    const auto blockLength = [&](std::uint64_t b) {
+        return (b + 1 == blocks && lastSize) ? lastSize : blockSize;
+    };
+    const auto failBlock = [&](std::uint64_t b, int rc, uLongf produced,
+                               std::size_t blockAt) {
+        std::ostringstream os;
+        os << "zlib block " << b << " of " << blocks << ": ";
+        if (rc == Z_OK)
+            os << "inflates to " << produced << " bytes, expected " << blockLength(b);
+        else if (rc == Z_BUF_ERROR)
+            os << "inflates to more than " << blockLength(b) << " bytes or is incomplete";
+        else if (rc == Z_DATA_ERROR)
+            os << "corrupt compressed data";
+        else
+            os << "zlib error " << rc;
+        Fail(file, ByteWhere(a.where, blockAt), os.str());
+    };
+    if (src.IsBase64()) {
+        // Decoded block by block into the one scratch buffer.
+        std::uint64_t at = 0;
+        for (std::uint64_t b = 0; b < blocks; ++b) {
+            const std::uint64_t len = blockLength(b);
+            const std::size_t blockAt = src.FileOffset();
+            const std::uint8_t* c = src.Take(compressed[b], scratch);
+            if (!c) FailShort(file, a, src, "a compressed block", compressed[b]);
+            uLongf produced = static_cast<uLongf>(len);
+            const int rc =
+                uncompress(dst + at, &produced, c, static_cast<uLong>(compressed[b]));
+            if (rc != Z_OK || produced != len) failBlock(b, rc, produced, blockAt);
+            at += len;
         }
-        at += len;
+    } else {
+        // Raw bytes stay in place: the blocks (independent zlib streams) inflate side by
+        // side. The errors are those of inflating them in order: the first bad block, or
+        // a block the data ends in if every block before it inflates.
+        struct Block {
+            const std::uint8_t* data;
+            std::size_t at;  // file offset
+            int rc;
+            uLongf produced;
+        };
+        std::vector<Block> list(blocks);
+        std::uint64_t present = 0;
+        for (; present < blocks; ++present) {
+            list[present].at = src.FileOffset();
+            list[present].data = src.Take(compressed[present], scratch);
+            if (!list[present].data) break;
+        }
+        tbb::parallel_for(
+            tbb::blocked_range<std::uint64_t>(0, present, 8),
+            [&](const tbb::blocked_range<std::uint64_t>& range) {
+                for (std::uint64_t b = range.begin(); b < range.end(); ++b) {
+                    Block& k = list[b];
+                    k.produced = static_cast<uLongf>(blockLength(b));
+                    k.rc = uncompress(dst + b * blockSize, &k.produced, k.data,
+                                      static_cast<uLong>(compressed[b]));
+                }
+            });
+        for (std::uint64_t b = 0; b < present; ++b)
+            if (list[b].rc != Z_OK || list[b].produced != blockLength(b))
+                failBlock(b, list[b].rc, list[b].produced, list[b].at);
+        if (present < blocks)
+            FailShort(file, a, src, "a compressed block", compressed[present]);
     }
     if (!direct) {
         out.resize(n);

@@ -646,6 +646,26 @@ TEST(VtkXmlErrors, ZlibCorruption) {
                      {"<DataArray Name=\"Int8\">", "zlib"});
 }
 
+// Raw zlib blocks inflate side by side; the error is still the first bad block's, with
+// its offset, as when they are inflated in order.
+TEST(VtkXmlErrors, ZlibCorruptionNamesTheFirstBadBlock) {
+    Encoding e = Enc(Format::AppendedRaw, true);
+    e.blockSize = 8;
+    std::string text = BuildVtu(SyntheticDoc(e), e);
+    // The first array (offset 0) is Int8 with 20 bytes: blocks of 8, 8 and 4 bytes. Its
+    // header is 3 + 3 UInt32 words (blocks, block size, last size, compressed sizes).
+    const std::size_t data = text.find("   _") + 4;
+    std::uint32_t words[6];
+    std::memcpy(words, &text[data], sizeof words);
+    ASSERT_EQ(words[0], 3u);
+    const std::size_t block1 = data + sizeof words + words[3], block2 = block1 + words[4];
+    text[block2 + 3] = static_cast<char>(text[block2 + 3] ^ 0x5a);
+    text[block1 + 3] = static_cast<char>(text[block1 + 3] ^ 0x5a);
+    ExpectInputError(WriteFile("xml_badzlib_blocks.vtu", text),
+                     {"<DataArray Name=\"Int8\">", "zlib block 1 of 3",
+                      "byte " + std::to_string(block1)});
+}
+
 TEST(VtkXmlErrors, ImplausibleCompressedSizeRejected) {
     const Encoding e = Enc(Format::AppendedRaw, true);
     std::string text = BuildVtu(SyntheticDoc(e), e);
