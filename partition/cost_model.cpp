@@ -15,9 +15,10 @@
 namespace hpray::partition {
 namespace {
 
-/// Half the length of (p1 - p0) x (q1 - q0): a triangle's area from two edges, or a
-/// planar-ish quadrilateral's from its diagonals.
-double HalfCrossNorm(const double* p0, const double* p1, const double* q0, const double* q1) {
+/// The squared length of (p1 - p0) x (q1 - q0): a triangle's area from two edges, or a
+/// planar-ish quadrilateral's from its diagonals, is half its square root.
+inline double CrossNorm2(const double* p0, const double* p1, const double* q0,
+                         const double* q1) {
     double u[3], v[3];
     for (int d = 0; d < 3; ++d) {
         u[d] = p1[d] - p0[d];
@@ -25,29 +26,54 @@ double HalfCrossNorm(const double* p0, const double* p1, const double* q0, const
     }
     const double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
                  z = u[0] * v[1] - u[1] * v[0];
-    return 0.5 * std::sqrt(x * x + y * y + z * z);
+    return x * x + y * y + z * z;
 }
 
-double TriangleArea(const double* a, const double* b, const double* c) {
-    return HalfCrossNorm(a, b, a, c);
-}
+/// The corners' internal node indices of a cell kind, and whether they are 0..corners-1
+/// (every order-1 cell), so the nodes can be used as they are.
+struct Corners {
+    std::vector<int> index;
+    bool leading = false;
+};
 
-double QuadArea(const double* a, const double* b, const double* c, const double* d) {
-    return HalfCrossNorm(a, c, b, d);
+}  // namespace
+
+namespace {
+
+/// HullSurfaceArea for a topology of `Faces` faces (so that the loops unroll).
+template <int Faces>
+double HullArea(const CellTopology& t, const double* v) {
+    auto P = [v](int i) { return v + 3 * i; };
+    // Triangles from two edges, quadrilaterals from their diagonals; the square roots of
+    // all faces are independent of each other (so they overlap), the sum is in face
+    // order.
+    double norm2[Faces];
+    for (int f = 0; f < Faces; ++f) {
+        const int* c = t.face[f];
+        norm2[f] = t.faceSize[f] == 3 ? CrossNorm2(P(c[0]), P(c[1]), P(c[0]), P(c[2]))
+                                      : CrossNorm2(P(c[0]), P(c[2]), P(c[1]), P(c[3]));
+    }
+    double half[Faces];
+    for (int f = 0; f < Faces; ++f) half[f] = 0.5 * std::sqrt(norm2[f]);
+    double area = 0;
+    for (int f = 0; f < Faces; ++f) area += half[f];
+    return area;
 }
 
 }  // namespace
 
 double HullSurfaceArea(CellShape shape, const double* v) {
-    auto P = [v](int i) { return v + 3 * i; };
     const CellTopology& t = Topology(shape);
-    double area = 0;
-    for (int f = 0; f < t.faces; ++f) {
-        const int* c = t.face[f];
-        area += t.faceSize[f] == 3 ? TriangleArea(P(c[0]), P(c[1]), P(c[2]))
-                                   : QuadArea(P(c[0]), P(c[1]), P(c[2]), P(c[3]));
+    switch (t.faces) {
+        case 4:
+            return HullArea<4>(t, v);
+        case 5:
+            return HullArea<5>(t, v);
+        case 6:
+            return HullArea<6>(t, v);
     }
-    return area;
+    HPRAY_CHECK_MSG(false, "a cell shape with " << t.faces << " faces");
+    return 0;
 }
 
 double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
@@ -56,32 +82,35 @@ double CellHullSurfaceArea(CellShape shape, int order, CellFamily family,
     // family); each thread also remembers the last kind it asked for (cells of one kind
     // tend to follow each other), which skips the lock.
     static std::mutex mutex;
-    static std::map<std::tuple<int, int, int>, std::vector<int>> cache;
+    static std::map<std::tuple<int, int, int>, Corners> cache;
     const std::tuple<int, int, int> key{static_cast<int>(shape), order,
                                         static_cast<int>(family)};
     thread_local std::tuple<int, int, int> lastKey{-1, -1, -1};
-    thread_local const std::vector<int>* lastCorners = nullptr;
-    const std::vector<int>* corners = lastKey == key ? lastCorners : nullptr;
+    thread_local const Corners* lastCorners = nullptr;
+    const Corners* corners = lastKey == key ? lastCorners : nullptr;
     if (!corners) {
         std::lock_guard<std::mutex> lock(mutex);
-        auto& entry = cache[key];
-        if (entry.empty()) {
+        Corners& entry = cache[key];
+        if (entry.index.empty()) {
             const CellTopology& t = Topology(shape);
+            entry.leading = true;
             for (int k = 0; k < t.corners; ++k) {
                 const LatticeIndex ijk{order * t.lattice[k][0], order * t.lattice[k][1],
                                        order * t.lattice[k][2]};
                 const int index = InternalNodeIndex(shape, order, family, ijk);
                 HPRAY_CHECK_GE(index, 0);
-                entry.push_back(index);
+                entry.index.push_back(index);
+                entry.leading &= index == k;
             }
         }
         corners = &entry;  // map entries stay where they are
         lastKey = key;
         lastCorners = corners;
     }
+    if (corners->leading) return HullSurfaceArea(shape, nodeXyz);
     double v[8 * 3];
-    for (std::size_t k = 0; k < corners->size(); ++k)
-        for (int d = 0; d < 3; ++d) v[3 * k + d] = nodeXyz[3 * (*corners)[k] + d];
+    for (std::size_t k = 0; k < corners->index.size(); ++k)
+        for (int d = 0; d < 3; ++d) v[3 * k + d] = nodeXyz[3 * corners->index[k] + d];
     return HullSurfaceArea(shape, v);
 }
 

@@ -17,9 +17,12 @@ namespace hpray::partition {
 namespace {
 
 constexpr int kBins = 1024;
+constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kMaxRounds = 40;
 /// Lanes summing a block of routed centroids in parallel (see the pass below).
 constexpr std::size_t kSumLanes = 2;
+/// Blocks of fewer points are summed in one lane.
+constexpr std::size_t kLaneMinPoints = 8192;
 
 /// The search for one node's split plane.
 struct Search {
@@ -102,6 +105,50 @@ struct Best {
 
 }  // namespace
 
+CentroidBlocks::CentroidBlocks(std::size_t maxBytes)
+    : maxBlocks_(std::max<std::size_t>(
+          2, maxBytes / sizeof(std::array<float, 6>) & ~std::size_t(1))) {
+    current_ = Box::Empty();
+}
+
+void CentroidBlocks::Add(const double x[3]) {
+    current_.Extend(x);
+    ++count_;
+    const std::int64_t mask = (std::int64_t(1) << shift_) - 1;
+    if ((count_ & mask) != 0) return;
+    if (boxes_.size() == maxBlocks_) {
+        // Full: neighbours merge into blocks of twice the centroids, and the block just
+        // completed becomes the first half of the next one.
+        for (std::size_t i = 0; i < maxBlocks_ / 2; ++i)
+            for (int d = 0; d < 3; ++d) {
+                boxes_[i][d] = std::min(boxes_[2 * i][d], boxes_[2 * i + 1][d]);
+                boxes_[i][3 + d] =
+                    std::max(boxes_[2 * i][3 + d], boxes_[2 * i + 1][3 + d]);
+            }
+        boxes_.resize(maxBlocks_ / 2);
+        ++shift_;
+        return;
+    }
+    std::array<float, 6> rounded;
+    for (int d = 0; d < 3; ++d) {
+        constexpr float inf = std::numeric_limits<float>::infinity();
+        float lo = static_cast<float>(current_.lo[d]),
+              hi = static_cast<float>(current_.hi[d]);
+        if (static_cast<double>(lo) > current_.lo[d]) lo = std::nextafter(lo, -inf);
+        if (static_cast<double>(hi) < current_.hi[d]) hi = std::nextafter(hi, inf);
+        rounded[d] = lo;
+        rounded[3 + d] = hi;
+    }
+    boxes_.push_back(rounded);
+    current_ = Box::Empty();
+}
+
+Box CentroidBlocks::BlockBox(std::size_t b) const {
+    if (b == boxes_.size()) return current_;  // the block being filled
+    const std::array<float, 6>& f = boxes_[b];
+    return Box{{f[0], f[1], f[2]}, {f[3], f[4], f[5]}};
+}
+
 int OwnerBrick(const KdTree& tree, const double x[3]) {
     const std::vector<KdNode>& nodes = tree.nodes;
     int n = tree.root;
@@ -114,6 +161,10 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
     HPRAY_CHECK_GE(leaves, 1);
     std::vector<KdNode> nodes(1);
     std::vector<Box> boxes{root};  // each node's region (closed; for the search only)
+    // Each node's region without its faces on split planes, open to infinity at the root
+    // box: a centroid strictly inside it descends to that node, however GoesLow breaks
+    // ties on the planes.
+    std::vector<Box> interiors{Box{{-kInf, -kInf, -kInf}, {kInf, kInf, kInf}}};
     std::vector<int> leafCount{leaves};
     // Exclusive upper ends of each node's region per axis: the root's region is closed,
     // so its end is the next double above the box.
@@ -122,6 +173,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
         ends[0][d] = std::nextafter(root.hi[d], std::numeric_limits<double>::infinity());
 
     std::vector<int> level{0};
+    std::array<std::vector<std::pair<double, double>>, 3> slabs;
     std::vector<Route> route;
     std::vector<int> laneOf;
     while (true) {
@@ -163,7 +215,50 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 break;
             }
             HPRAY_CHECK_LT(round, kMaxRounds + 2);
-            pass([&](const WeightedPoint* pts, std::size_t count) {
+            // After a search's first pass, only its centroids in [a, b) along its axis
+            // matter (the others below and above are known): when every search of the
+            // round is past its first pass, blocks of centroids outside all those slabs
+            // may be left out.
+            bool all = false;
+            for (int d = 0; d < 3; ++d) slabs[d].clear();
+            for (const Search& s : searches) {
+                if (s.done) continue;
+                if (s.first) all = true;
+                slabs[s.axis].push_back({s.a, s.b});
+            }
+            BlockFilter wanted;
+            if (!all) {
+                for (auto& list : slabs) {
+                    // Sorted and merged into disjoint slabs, so that their ends ascend
+                    // too.
+                    std::sort(list.begin(), list.end());
+                    std::size_t m = 0;
+                    for (std::size_t i = 0; i < list.size(); ++i) {
+                        if (m > 0 && list[i].first <= list[m - 1].second) {
+                            list[m - 1].second =
+                                std::max(list[m - 1].second, list[i].second);
+                        } else {
+                            list[m++] = list[i];
+                        }
+                    }
+                    list.resize(m);
+                }
+                wanted = [&slabs](const Box& box) {
+                    for (int d = 0; d < 3; ++d) {
+                        // The first slab ending after box.lo; [box.lo, box.hi] meets it
+                        // unless it starts beyond box.hi.
+                        const auto& list = slabs[d];
+                        const auto it = std::upper_bound(
+                            list.begin(), list.end(), box.lo[d],
+                            [](double v, const std::pair<double, double>& slab) {
+                                return v < slab.second;
+                            });
+                        if (it != list.end() && it->first <= box.hi[d]) return true;
+                    }
+                    return false;
+                };
+            }
+            pass(wanted, [&](const WeightedPoint* pts, std::size_t count) {
                 // Where each point goes, in parallel: its search (or none) and what the
                 // search does with it; then the sums in the points' order, so the
                 // result does not depend on the number of threads.
@@ -171,11 +266,23 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 tbb::parallel_for(
                     tbb::blocked_range<std::size_t>(0, count, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
+                        // Neighbouring centroids tend to share a node: the last one found
+                        // is tried first.
+                        int last = -1;
+                        Box in{};
                         for (std::size_t i = range.begin(); i < range.end(); ++i) {
                             const WeightedPoint& p = pts[i];
-                            int n = 0;
-                            while (nodes[n].axis >= 0)
-                                n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
+                            int n = last;
+                            if (!(n >= 0 && p.x[0] > in.lo[0] && p.x[0] < in.hi[0] &&
+                                  p.x[1] > in.lo[1] && p.x[1] < in.hi[1] &&
+                                  p.x[2] > in.lo[2] && p.x[2] < in.hi[2])) {
+                                n = 0;
+                                while (nodes[n].axis >= 0)
+                                    n = GoesLow(nodes[n], p.x) ? nodes[n].low
+                                                               : nodes[n].high;
+                                last = n;
+                                in = interiors[n];
+                            }
                             const int si = searchOf[n];
                             Route& r = route[i];
                             r.search = -1;
@@ -198,8 +305,10 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 // The sums of each search in the points' order; searches are split
                 // between lanes (search index modulo the lane count), which run in
                 // parallel, each over every point but adding only to its own searches.
-                const int lanes =
-                    static_cast<int>(std::min<std::size_t>(searches.size(), kSumLanes));
+                const int lanes = count < kLaneMinPoints
+                                      ? 1
+                                      : static_cast<int>(std::min<std::size_t>(
+                                            searches.size(), kSumLanes));
                 // The lane of each search (search index modulo the lanes), looked up
                 // rather than divided per point.
                 laneOf.resize(searches.size());
@@ -402,6 +511,11 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
             nodes.push_back(highNode);
             boxes.push_back(lowBox);
             boxes.push_back(highBox);
+            Box lowInterior = interiors[n], highInterior = interiors[n];
+            lowInterior.hi[s.axis] = s.split;
+            highInterior.lo[s.axis] = s.split;
+            interiors.push_back(lowInterior);
+            interiors.push_back(highInterior);
             ends.push_back(lowEnd);
             ends.push_back(highEnd);
             leafCount.push_back(s.lowLeaves);
