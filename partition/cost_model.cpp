@@ -1,6 +1,11 @@
 // Hull surface areas for the cost model (see cost_model.h).
 #include "cost_model.h"
 
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
+
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <map>
@@ -54,9 +59,19 @@ double HullArea(const CellTopology& t, const double* v) {
                                       : CrossNorm2(P(c[0]), P(c[2]), P(c[1]), P(c[3]));
     }
     double half[Faces];
-    for (int f = 0; f < Faces; ++f) half[f] = 0.5 * std::sqrt(norm2[f]);
+    int f = 0;
+#if defined(__AVX__)
+    // Four faces per instruction (the same correctly rounded square roots and halving),
+    // gathered in registers.
+    for (; f + 4 <= Faces; f += 4)
+        _mm256_storeu_pd(
+            half + f, _mm256_mul_pd(_mm256_set1_pd(0.5), _mm256_sqrt_pd(_mm256_set_pd(
+                                                             norm2[f + 3], norm2[f + 2],
+                                                             norm2[f + 1], norm2[f]))));
+#endif
+    for (; f < Faces; ++f) half[f] = 0.5 * std::sqrt(norm2[f]);
     double area = 0;
-    for (int f = 0; f < Faces; ++f) area += half[f];
+    for (int k = 0; k < Faces; ++k) area += half[k];
     return area;
 }
 
@@ -130,6 +145,72 @@ CellCostInput CellCostFromNodes(CellShape shape, int order, CellFamily family,
         lastKey = key;
     }
     return {lastParts, CellHullSurfaceArea(shape, order, family, nodeXyz)};
+}
+
+namespace {
+
+/// The faces of the tet of mesh/cell.h Topology, written out (checked against it once)
+/// so that the loops below hold no lookups; the corners of an order-1 tet are its nodes,
+/// in order (CellHullSurfaceArea).
+constexpr int kTetFaces[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+
+const CellCostParts& LinearTetParts() {
+    static const CellCostParts parts = [] {
+        const CellTopology& t = Topology(CellShape::Tet);
+        HPRAY_CHECK_EQ(t.faces, 4);
+        for (int f = 0; f < 4; ++f) {
+            HPRAY_CHECK_EQ(t.faceSize[f], 3);
+            for (int k = 0; k < 3; ++k) HPRAY_CHECK_EQ(t.face[f][k], kTetFaces[f][k]);
+        }
+        return CellCostModel(CellShape::Tet, 1, CellFamily::Lagrange, /*curved=*/false);
+    }();
+    return parts;
+}
+
+/// HullArea<4>'s squared cross products of a tet's faces.
+void TetFaceNorms(const double* xyz, double* norm2) {
+    auto P = [xyz](int i) { return xyz + 3 * i; };
+    for (int f = 0; f < 4; ++f) {
+        const int* c = kTetFaces[f];
+        norm2[f] = CrossNorm2(P(c[0]), P(c[1]), P(c[0]), P(c[2]));
+    }
+}
+
+/// half[i] = 0.5 * sqrt(norm2[i]) for i < n.
+void HalfRoots(const double* norm2, double* half, std::size_t n) {
+    std::size_t i = 0;
+#if defined(__AVX__)
+    for (; i + 4 <= n; i += 4)
+        _mm256_storeu_pd(half + i,
+                         _mm256_mul_pd(_mm256_set1_pd(0.5),
+                                       _mm256_sqrt_pd(_mm256_loadu_pd(norm2 + i))));
+#endif
+    for (; i < n; ++i) half[i] = 0.5 * std::sqrt(norm2[i]);
+}
+
+}  // namespace
+
+CellCostInput LinearTetCost(const double* nodeXyz) {
+    CellCostInput out;
+    LinearTetCosts(&nodeXyz, 1, &out);
+    return out;
+}
+
+void LinearTetCosts(const double* const* nodeXyz, std::size_t count, CellCostInput* out) {
+    const CellCostParts& parts = LinearTetParts();
+    constexpr std::size_t kGroup = 64;
+    double norm2[4 * kGroup], half[4 * kGroup];
+    for (std::size_t first = 0; first < count; first += kGroup) {
+        const std::size_t n = std::min(kGroup, count - first);
+        for (std::size_t i = 0; i < n; ++i)
+            TetFaceNorms(nodeXyz[first + i], norm2 + 4 * i);
+        HalfRoots(norm2, half, 4 * n);
+        for (std::size_t i = 0; i < n; ++i) {
+            double area = 0;
+            for (int f = 0; f < 4; ++f) area += half[4 * i + f];
+            out[first + i] = {parts, area};
+        }
+    }
 }
 
 }  // namespace hpray::partition

@@ -2,13 +2,14 @@
 // selection over streamed centroids; tree queries.
 #include "kd_tree.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "util/check.h"
 #include "util/log.h"
@@ -19,10 +20,6 @@ namespace {
 constexpr int kBins = 1024;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kMaxRounds = 40;
-/// Lanes summing a block of routed centroids in parallel (see the pass below).
-constexpr std::size_t kSumLanes = 2;
-/// Blocks of fewer points are summed in one lane.
-constexpr std::size_t kLaneMinPoints = 8192;
 
 /// The search for one node's split plane.
 struct Search {
@@ -81,14 +78,38 @@ struct Search {
 };
 
 /// What a pass does with one point: the index of its node's search (-1: none or done)
-/// and the histogram bin (>= 0) or one of the actions below.
-struct Route {
+/// and the histogram bin (>= 0) or one of the actions below; and the point.
+struct Routed {
     int search = -1;
     int action = 0;
+    WeightedPoint point;
 };
 constexpr int kBelow = -3;    ///< x < a
 constexpr int kAbove = -4;    ///< x >= b
 constexpr int kCollect = -5;  ///< in [a, b), collected for the exact split
+
+/// Adds routed points to their searches, in order.
+void Sum(std::vector<Search>& searches, const Routed* routed, std::size_t count) {
+    for (std::size_t i = 0; i < count; ++i) {
+        const Routed& r = routed[i];
+        if (r.search < 0) continue;
+        const WeightedPoint& p = r.point;
+        Search& s = searches[r.search];
+        if (s.first) s.total += p.cost;
+        if (r.action >= 0) {
+            const double x = p.x[s.axis];
+            s.binCost[r.action] += p.cost;
+            ++s.binCount[r.action];
+            s.binLo[r.action] = std::min(s.binLo[r.action], x);
+            s.binHi[r.action] = std::max(s.binHi[r.action], x);
+        } else if (r.action == kBelow) {
+            if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+        } else if (r.action == kCollect) {
+            s.collected.push_back(
+                {p.x[s.axis], p.cost, p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3]});
+        }
+    }
+}
 
 /// Chooses the best split among candidates: low cost at s is `lowCost`.
 struct Best {
@@ -174,8 +195,7 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
 
     std::vector<int> level{0};
     std::array<std::vector<std::pair<double, double>>, 3> slabs;
-    std::vector<Route> route;
-    std::vector<int> laneOf;
+    std::vector<Routed> routed[2];  // the block being summed and the next one
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -258,11 +278,27 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                     return false;
                 };
             }
+            // Each block of points is routed in parallel (its search, or none, and what
+            // the search does with it) into records that keep a copy of the point; the
+            // sums then run in the points' order, one block after the other, while the
+            // next block is read and routed. So the result does not depend on the number
+            // of threads.
+            tbb::task_group summing;
+            struct WaitForSums {
+                tbb::task_group& group;
+                ~WaitForSums() {
+                    try {
+                        group.wait();
+                    } catch (...) {
+                        // Only on the way out of an exception: the first one propagates.
+                    }
+                }
+            } waitForSums{summing};
+            int buffer = 0;
             pass(wanted, [&](const WeightedPoint* pts, std::size_t count) {
-                // Where each point goes, in parallel: its search (or none) and what the
-                // search does with it; then the sums in the points' order, so the
-                // result does not depend on the number of threads.
-                route.resize(count);
+                std::vector<Routed>& block = routed[buffer];
+                buffer ^= 1;
+                block.resize(count);
                 tbb::parallel_for(
                     tbb::blocked_range<std::size_t>(0, count, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
@@ -283,13 +319,14 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                                 last = n;
                                 in = interiors[n];
                             }
-                            const int si = searchOf[n];
-                            Route& r = route[i];
+                            Routed& r = block[i];
                             r.search = -1;
+                            const int si = searchOf[n];
                             if (si < 0) continue;
                             const Search& s = searches[si];
                             if (s.done) continue;
                             r.search = si;
+                            r.point = p;
                             const double x = p.x[s.axis];
                             if (x < s.a) {
                                 r.action = kBelow;
@@ -302,47 +339,11 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                             }
                         }
                     });
-                // The sums of each search in the points' order; searches are split
-                // between lanes (search index modulo the lane count), which run in
-                // parallel, each over every point but adding only to its own searches.
-                const int lanes = count < kLaneMinPoints
-                                      ? 1
-                                      : static_cast<int>(std::min<std::size_t>(
-                                            searches.size(), kSumLanes));
-                // The lane of each search (search index modulo the lanes), looked up
-                // rather than divided per point.
-                laneOf.resize(searches.size());
-                for (std::size_t k = 0; k < searches.size(); ++k)
-                    laneOf[k] = static_cast<int>(k % static_cast<std::size_t>(lanes));
-                auto sum = [&](int lane) {
-                    for (std::size_t i = 0; i < count; ++i) {
-                        const Route& r = route[i];
-                        if (r.search < 0 || laneOf[r.search] != lane) continue;
-                        const WeightedPoint& p = pts[i];
-                        Search& s = searches[r.search];
-                        if (s.first) s.total += p.cost;
-                        if (r.action >= 0) {
-                            const double x = p.x[s.axis];
-                            s.binCost[r.action] += p.cost;
-                            ++s.binCount[r.action];
-                            s.binLo[r.action] = std::min(s.binLo[r.action], x);
-                            s.binHi[r.action] = std::max(s.binHi[r.action], x);
-                        } else if (r.action == kBelow) {
-                            if (s.first)
-                                s.below += p.cost;  // cannot happen: a is the box's lo
-                        } else if (r.action == kCollect) {
-                            s.collected.push_back({p.x[s.axis], p.cost,
-                                                   p.x[(s.axis + 1) % 3],
-                                                   p.x[(s.axis + 2) % 3]});
-                        }
-                    }
-                };
-                if (lanes < 2) {
-                    sum(0);
-                } else {
-                    tbb::parallel_for(0, lanes, [&](int lane) { sum(lane); });
-                }
+                summing.wait();  // the block before
+                summing.run(
+                    [&searches, &block, count] { Sum(searches, block.data(), count); });
             });
+            summing.wait();
             for (Search& s : searches) {
                 if (s.done) continue;
                 const double lo = boxes[s.node].lo[s.axis];

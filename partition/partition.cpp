@@ -469,6 +469,26 @@ class ScanSink : public MeshSink {
     /// The most nodes of a cell.
     static constexpr int kMaxNodes = (kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1);
 
+    /// FlushBatch's node bounds and centroid of an order-1 Lagrange tet (the most common
+    /// cell of large meshes), its four nodes unrolled: the same operations in the same
+    /// order. Its cost comes from LinearTetCosts.
+    static void LinearTetGeometry(Pending& c, const double* xyz) {
+        double sum[3] = {0, 0, 0};
+        for (int d = 0; d < 3; ++d) {
+            c.lo[d] = std::numeric_limits<double>::infinity();
+            c.hi[d] = -c.lo[d];
+        }
+        for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) {
+                const double v = xyz[3 * k + d];
+                sum[d] += v;
+                c.lo[d] = std::min(c.lo[d], v);
+                c.hi[d] = std::max(c.hi[d], v);
+            }
+        for (int d = 0; d < 3; ++d)
+            c.centroid[d] = std::clamp(sum[d] / 4, c.lo[d], c.hi[d]);
+    }
+
     /// The cells' geometry (node bounds, centroid, the Bernstein hull of curved cells)
     /// and cost parts, in parallel (each cell on its own, so the same doubles as one at a
     /// time); then the records, in input order.
@@ -477,12 +497,31 @@ class ScanSink : public MeshSink {
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, pendingCount_, 1024),
             [&](const tbb::blocked_range<std::size_t>& range) {
+                // Order-1 tets get their costs a group at a time.
+                constexpr std::size_t kTets = 256;
+                const double* tetXyz[kTets] = {};
+                Pending* tets[kTets];
+                CellCostInput tetCosts[kTets];
+                std::size_t nTets = 0;
+                auto costTets = [&] {
+                    LinearTetCosts(tetXyz, nTets, tetCosts);
+                    for (std::size_t k = 0; k < nTets; ++k) tets[k]->cost = tetCosts[k];
+                    nTets = 0;
+                };
                 for (std::size_t i = range.begin(); i < range.end(); ++i) {
                     Pending& c = pending_[i];
                     const int nodeCount = c.r.nodeCount;
                     const double* xyz = batchXyz_.data() + 3 * c.first;
                     const auto shape = static_cast<CellShape>(c.r.shape);
                     const auto family = static_cast<CellFamily>(c.r.family);
+                    if (shape == CellShape::Tet && c.r.order == 1 &&
+                        family == CellFamily::Lagrange) {
+                        LinearTetGeometry(c, xyz);
+                        tetXyz[nTets] = xyz;
+                        tets[nTets] = &c;
+                        if (++nTets == kTets) costTets();
+                        continue;
+                    }
                     double sum[3] = {0, 0, 0};
                     for (int d = 0; d < 3; ++d) {
                         c.lo[d] = std::numeric_limits<double>::infinity();
@@ -509,6 +548,7 @@ class ScanSink : public MeshSink {
                     }
                     c.cost = CellCostFromNodes(shape, c.r.order, family, xyz);
                 }
+                costTets();
             });
         for (std::size_t i = 0; i < pendingCount_; ++i) {
             const Pending& c = pending_[i];
@@ -609,11 +649,9 @@ class ScanSink : public MeshSink {
 /// order-1 Lagrange cell (the same minima and maxima in the same order, so the same
 /// doubles). `stored` holds nodeCount ids, int64 when `wide`, else int32.
 Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wide) {
-    Box box;
-    for (int d = 0; d < 3; ++d) {
-        box.lo[d] = std::numeric_limits<double>::infinity();
-        box.hi[d] = -box.lo[d];
-    }
+    // Six scalars rather than a Box, so that they stay in registers.
+    const double inf = std::numeric_limits<double>::infinity();
+    double lo0 = inf, lo1 = inf, lo2 = inf, hi0 = -inf, hi1 = -inf, hi2 = -inf;
     for (int k = 0; k < nodeCount; ++k) {
         std::int64_t id;
         if (wide) {
@@ -624,12 +662,14 @@ Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wid
             id = id32;
         }
         const double* p = points.Get(id);
-        for (int d = 0; d < 3; ++d) {
-            box.lo[d] = std::min(box.lo[d], p[d]);
-            box.hi[d] = std::max(box.hi[d], p[d]);
-        }
+        lo0 = std::min(lo0, p[0]);
+        hi0 = std::max(hi0, p[0]);
+        lo1 = std::min(lo1, p[1]);
+        hi1 = std::max(hi1, p[1]);
+        lo2 = std::min(lo2, p[2]);
+        hi2 = std::max(hi2, p[2]);
     }
-    return box;
+    return Box{{lo0, lo1, lo2}, {hi0, hi1, hi2}};
 }
 
 /// Per-brick tallies of the distribution pass.
@@ -1179,7 +1219,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     int exitAfter = -1;
     if (const char* env = std::getenv(kTestExitEnv)) exitAfter = std::atoi(env);
     nlohmann::json bricksJson = nlohmann::json::array();
-    std::vector<std::future<std::string>> checksums;
     std::uint64_t bytesWritten = 0;
     std::int64_t storedCells = 0;
     {
@@ -1193,17 +1232,17 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             std::size_t points = 0;
             /// brickBytes of the assembled brick, or the mesh's capacity if larger
             std::uint64_t bytes = 0;
-            std::future<nlohmann::json> ranges;  ///< after the file is written
+            /// The field ranges and the checksum, after the file is written.
+            std::future<std::pair<nlohmann::json, std::string>> written;
         } inFlight;
-        // Waits for the brick in flight, then records it and starts its checksum.
+        // Waits for the brick in flight, then records it.
         auto finish = [&] {
             if (inFlight.brick < 0) return;
-            const nlohmann::json ranges = inFlight.ranges.get();
+            const auto [ranges, sha256] = inFlight.written.get();
             const int b = inFlight.brick;
             const BrickTally& t = tally[b];
             const std::string file = BrickName(b);
             const std::string path = (fs::path(dir) / file).string();
-            checksums.push_back(std::async(std::launch::async, FileSha256, path));
             const std::uint64_t bytes = fs::file_size(path);
             bytesWritten += bytes;
             storedCells += inFlight.mesh->CellCount();
@@ -1215,13 +1254,13 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                                   {"cost", t.cost},
                                   {"cost_with_ghosts", t.cost + t.ghostCost},
                                   {"ranges", ranges},
+                                  {"sha256", sha256},
                                   {"bytes", bytes}});
             std::shared_ptr<Mesh> written = std::move(inFlight.mesh);
             inFlight = InFlight{};
             // The next brick reuses the mesh's arrays (no fresh pages to fault in).
             if (written.use_count() == 1) spare = std::move(written);
             if (exitAfter >= 0 && b + 1 >= exitAfter) {
-                for (std::future<std::string>& c : checksums) c.wait();
                 std::fflush(nullptr);
                 ::_exit(75);  // test hook: die like a killed process, spills left behind
             }
@@ -1230,7 +1269,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         struct WaitInFlight {
             InFlight& f;
             ~WaitInFlight() {
-                if (f.ranges.valid()) f.ranges.wait();
+                if (f.written.valid()) f.written.wait();
             }
         } waitInFlight{inFlight};
         for (int b = 0; b < nBricks; ++b) {
@@ -1248,15 +1287,17 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 assembled = std::make_shared<Mesh>();
             }
             Mesh& mesh = *assembled;
-            mesh.cellOffsets.reserve(t.cells + 1);
-            mesh.connectivity.reserve(t.nodes);
-            mesh.cellShape.reserve(t.cells);
-            mesh.cellOrder.reserve(t.cells);
-            mesh.cellFamily.reserve(t.cells);
-            mesh.ghost.reserve(t.cells);
-            mesh.vtkType.reserve(t.cells);
-            std::vector<double> cellValues;
-            cellValues.reserve(static_cast<std::size_t>(t.cells) * scan.cellValues);
+            // The arrays are sized from the tallies and filled in place.
+            const auto nCells = static_cast<std::size_t>(t.cells);
+            const auto nNodes = static_cast<std::size_t>(t.nodes);
+            mesh.cellOffsets.resize(nCells + 1);
+            mesh.connectivity.resize(nNodes);
+            mesh.cellShape.resize(nCells);
+            mesh.cellOrder.resize(nCells);
+            mesh.cellFamily.resize(nCells);
+            mesh.ghost.resize(nCells);
+            mesh.vtkType.resize(nCells);
+            std::vector<double> cellValues(nCells * scan.cellValues);
             {
                 const std::string path =
                     spill.Path() + "/brick-" + std::to_string(b) + ".bin";
@@ -1265,9 +1306,11 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 // The node count of the last kind seen, checked once per run of cells of
                 // one kind (Mesh::AddCell checks it for every cell).
                 std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
+                std::size_t c = 0, at = 0;  // cells and nodes filled
                 while (brickKinds.Read(reader, r)) {
                     const char* stored = reader.Take(r.NodeBytes() + recordTail);
-                    if (!stored) throw InternalError("brick spill ends inside a record");
+                    if (!stored || c == nCells || nNodes - at < r.nodeCount)
+                        throw InternalError("brick spill does not match its tally");
                     if (r.shape != lastKind[0] || r.order != lastKind[1] ||
                         r.family != lastKind[2]) {
                         HPRAY_CHECK_EQ(static_cast<int>(r.nodeCount),
@@ -1277,9 +1320,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                         lastKind[1] = r.order;
                         lastKind[2] = r.family;
                     }
-                    const std::size_t first = mesh.connectivity.size();
-                    mesh.connectivity.resize(first + r.nodeCount);
-                    std::int64_t* nodes = mesh.connectivity.data() + first;
+                    std::int64_t* nodes = mesh.connectivity.data() + at;
                     if (r.wide) {
                         std::memcpy(nodes, stored, r.NodeBytes());
                     } else {
@@ -1289,18 +1330,20 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             nodes[k] = id;
                         }
                     }
-                    mesh.cellOffsets.push_back(
-                        static_cast<std::int64_t>(mesh.connectivity.size()));
-                    mesh.cellShape.push_back(static_cast<CellShape>(r.shape));
-                    mesh.cellOrder.push_back(r.order);
-                    mesh.cellFamily.push_back(static_cast<CellFamily>(r.family));
-                    mesh.ghost.push_back(r.ghost);
-                    mesh.vtkType.push_back(r.vtkType);
-                    const std::size_t v = cellValues.size();
-                    cellValues.resize(v + scan.cellValues);
-                    std::memcpy(cellValues.data() + v, stored + r.NodeBytes(),
-                                recordTail);
+                    at += r.nodeCount;
+                    mesh.cellOffsets[c + 1] = static_cast<std::int64_t>(at);
+                    mesh.cellShape[c] = static_cast<CellShape>(r.shape);
+                    mesh.cellOrder[c] = r.order;
+                    mesh.cellFamily[c] = static_cast<CellFamily>(r.family);
+                    mesh.ghost[c] = r.ghost;
+                    mesh.vtkType[c] = r.vtkType;
+                    if (recordTail > 0)
+                        std::memcpy(cellValues.data() + c * scan.cellValues,
+                                    stored + r.NodeBytes(), recordTail);
+                    ++c;
                 }
+                if (c != nCells || at != nNodes)
+                    throw InternalError("brick spill does not match its tally");
                 std::error_code ec;
                 fs::remove(path, ec);
             }
@@ -1332,7 +1375,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             std::vector<std::int64_t>().swap(ids);
             {
                 int offset = 0;
-                const std::size_t nCells = static_cast<std::size_t>(mesh.CellCount());
                 mesh.cellFields.resize(scan.cellFields.size());
                 for (std::size_t j = 0; j < scan.cellFields.size(); ++j) {
                     const StreamField& f = scan.cellFields[j];
@@ -1350,7 +1392,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 std::vector<double>().swap(cellValues);
             }
             finish();
-            // The field ranges are computed while the file is written, and its checksum
+            // The field ranges are computed while the file is written and checksummed,
             // while the next brick is assembled.
             const std::string path = (fs::path(dir) / BrickName(b)).string();
             const bool degrees = scan.higherOrderDegrees;
@@ -1359,16 +1401,21 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             inFlight.points = nPoints;
             inFlight.bytes = std::max(brickBytes(t, static_cast<std::int64_t>(nPoints)),
                                       MeshCapacityBytes(mesh));
-            inFlight.ranges = std::async(std::launch::async, [assembled, path, degrees] {
+            inFlight.written = std::async(std::launch::async, [assembled, path, degrees] {
                 std::future<nlohmann::json> ranges = std::async(
                     std::launch::async, [assembled] { return BrickRanges(*assembled); });
+                Sha256
+                    sha;  // of the bytes as they are written: the file is not read back
                 try {
-                    WriteVtu(path, *assembled, degrees);
+                    WriteVtu(path, *assembled, degrees,
+                             [&sha](const char* data, std::size_t bytes) {
+                                 sha.Update(data, bytes);
+                             });
                 } catch (...) {
                     ranges.wait();
                     throw;
                 }
-                return ranges.get();
+                return std::make_pair(ranges.get(), sha.HexDigest());
             });
         }
         finish();
@@ -1376,7 +1423,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                    std::to_string(pointsCache.Misses()) + " blocks read");
     }
 
-    for (int b = 0; b < nBricks; ++b) bricksJson[b]["sha256"] = checksums[b].get();
     phase("bricks");
 
     // 6. Index, then the manifest last.

@@ -74,7 +74,8 @@ std::string XmlEscape(const std::string& s) {
     return out;
 }
 
-void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees) {
+void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees,
+              const std::function<void(const char* data, std::size_t bytes)>& written) {
     const std::int64_t nCells = mesh.CellCount();
     HPRAY_CHECK(mesh.vtkType.empty() ||
                 static_cast<std::int64_t>(mesh.vtkType.size()) == nCells);
@@ -205,8 +206,13 @@ void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees
     {
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
         if (!out) fail("cannot create " + tmp);
+        auto emit = [&](const void* data, std::size_t bytes) {
+            out.write(static_cast<const char*>(data),
+                      static_cast<std::streamsize>(bytes));
+            if (written) written(static_cast<const char*>(data), bytes);
+        };
         const std::string head = xml.str();
-        out.write(head.data(), static_cast<std::streamsize>(head.size()));
+        emit(head.data(), head.size());
         // The generated arrays, a chunk of whole cells at a time (at least one cell).
         constexpr std::int64_t kChunkValues = std::int64_t(1) << 17;
         std::vector<std::int64_t> chunk;
@@ -251,23 +257,21 @@ void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees
                     bytes =
                         sizeof(std::int64_t) * static_cast<std::size_t>(o - chunk.data());
                 }
-                out.write(reinterpret_cast<const char*>(chunk.data()),
-                          static_cast<std::streamsize>(bytes));
+                emit(chunk.data(), bytes);
                 first = end;
             }
         };
         for (const Item& item : order) {
             const std::uint64_t size = item.block->bytes;
-            out.write(reinterpret_cast<const char*>(&size), sizeof(size));
+            emit(&size, sizeof(size));
             if (item.source != Source::Data) {
                 generate(item.source);
             } else if (size > 0) {
-                out.write(static_cast<const char*>(item.block->data),
-                          static_cast<std::streamsize>(size));
+                emit(item.block->data, size);
             }
         }
         const char* tail = "\n  </AppendedData>\n</VTKFile>\n";
-        out.write(tail, static_cast<std::streamsize>(std::strlen(tail)));
+        emit(tail, std::strlen(tail));
         out.close();
         if (!out) fail("cannot write " + tmp);
     }

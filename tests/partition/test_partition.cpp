@@ -898,6 +898,25 @@ TEST(Partition, SpillReaderThatReleasesReadsTheSameBytes) {
     }
 }
 
+TEST(Partition, Sha256OfPiecesEqualsTheFileChecksum) {
+    // Bytes given in pieces of any size (empty ones too) digest as the file holding them.
+    ScratchDir dir("partition_sha256");
+    std::mt19937 rng(37);
+    std::string bytes(3 << 20, '\0');
+    for (char& c : bytes) c = static_cast<char>(rng());
+    std::ofstream(dir / "f.bin", std::ios::binary) << bytes;
+    partition::Sha256 sha;
+    for (std::size_t at = 0; at < bytes.size();) {
+        const std::size_t n = std::min<std::size_t>(rng() % 100000, bytes.size() - at);
+        sha.Update(bytes.data() + at, n);
+        at += n;
+    }
+    EXPECT_EQ(sha.HexDigest(), partition::FileSha256(dir / "f.bin"));
+    partition::Sha256 empty;
+    EXPECT_EQ(empty.HexDigest(),
+              "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+}
+
 TEST(Partition, RecordCacheReturnsTheStoredRecords) {
     // Records of 3, 5, 8 and 4097 doubles (blocks of 2048, 1024, 1024 and 1 records),
     // read in random order through caches that evict (the smallest holds 16 blocks) and
