@@ -691,20 +691,6 @@ std::uint64_t MeshCapacityBytes(const Mesh& m) {
     return bytes;
 }
 
-/// Empties a mesh for the next brick, keeping the arrays' memory.
-void ClearKeepingCapacity(Mesh& m) {
-    m.points.clear();
-    m.cellOffsets.assign(1, 0);
-    m.connectivity.clear();
-    m.cellShape.clear();
-    m.cellOrder.clear();
-    m.cellFamily.clear();
-    m.ghost.clear();
-    m.vtkType.clear();
-    for (std::vector<Field>* fields : {&m.pointFields, &m.cellFields})
-        for (Field& f : *fields) f.values.clear();
-}
-
 /// Guaranteed ranges of the fields over all cells of a brick mesh. Every point of a brick
 /// is a node of one of its cells.
 nlohmann::json BrickRanges(const Mesh& mesh) {
@@ -1095,11 +1081,11 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         for (int b = first; b < last; ++b)
             writers.push_back(std::make_unique<SpillWriter>(
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
-        // The last pass over the scan's spills gives their pages back as it goes, for the
-        // brick spills to reuse.
+        // The last pass over the cell spill gives its pages back as it goes, for the
+        // brick spills to reuse (the centroid spill's serve the brick files, below).
         const bool lastPass = last == nBricks;
         SpillReader reader(scan.CellsPath(), std::size_t(1) << 20, lastPass);
-        SpillReader centroids(centroidsPath, std::size_t(1) << 20, lastPass);
+        SpillReader centroids(centroidsPath, std::size_t(1) << 20);
         SetupCosts setups(scan.SetupsPath(), scan.setupValues);
         // Order-1 cells' boxes from their nodes (see CellRecord).
         RecordCache points(scan.PointsPath(), scan.pointStride, budget / 4);
@@ -1182,7 +1168,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     {
         std::error_code ec;
         fs::remove(scan.CellsPath(), ec);
-        fs::remove(centroidsPath, ec);
         fs::remove(scan.SetupsPath(), ec);
     }
 
@@ -1222,6 +1207,9 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     std::uint64_t bytesWritten = 0;
     std::int64_t storedCells = 0;
     {
+        // The centroid spill is given back as the bricks are written, about a brick's
+        // size at a time, so that their pages are reused.
+        SpillRelease centroidSpace(centroidsPath);
         RecordCache pointsCache(scan.PointsPath(), scan.pointStride,
                                 std::size_t(4) << 20);
         // The mesh of the last brick written, kept for the next one's arrays.
@@ -1281,16 +1269,14 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                     budget)
                 finish();
             std::shared_ptr<Mesh> assembled = std::move(spare);
-            if (assembled) {
-                ClearKeepingCapacity(*assembled);
-            } else {
-                assembled = std::make_shared<Mesh>();
-            }
+            if (!assembled) assembled = std::make_shared<Mesh>();
             Mesh& mesh = *assembled;
-            // The arrays are sized from the tallies and filled in place.
+            // The arrays are sized from the tallies and filled in place (a reused mesh's
+            // are overwritten, not cleared first).
             const auto nCells = static_cast<std::size_t>(t.cells);
             const auto nNodes = static_cast<std::size_t>(t.nodes);
             mesh.cellOffsets.resize(nCells + 1);
+            mesh.cellOffsets[0] = 0;
             mesh.connectivity.resize(nNodes);
             mesh.cellShape.resize(nCells);
             mesh.cellOrder.resize(nCells);
@@ -1396,6 +1382,12 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             // while the next brick is assembled.
             const std::string path = (fs::path(dir) / BrickName(b)).string();
             const bool degrees = scan.higherOrderDegrees;
+            centroidSpace.Release(
+                sizeof(std::int64_t) *
+                    (mesh.connectivity.size() + mesh.cellOffsets.size()) +
+                2 * nCells +
+                sizeof(double) * (mesh.points.size() + nPoints * (scan.pointStride - 3) +
+                                  nCells * scan.cellValues));
             inFlight.brick = b;
             inFlight.mesh = assembled;
             inFlight.points = nPoints;

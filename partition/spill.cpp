@@ -211,6 +211,29 @@ bool SpillReader::Fill(std::size_t need) {
     throw InternalError("spill file " + path_ + " ends inside a record");
 }
 
+SpillRelease::SpillRelease(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+}
+
+SpillRelease::~SpillRelease() {
+    if (fd_ >= 0) ::close(fd_);
+    ::unlink(path_.c_str());
+}
+
+void SpillRelease::Release(std::uint64_t bytes) {
+    if (fd_ < 0) return;
+    const std::uint64_t upTo = (released_ + bytes) & ~std::uint64_t(4095);
+    if (upTo <= released_) return;
+    if (::fallocate(fd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE,
+                    static_cast<off_t>(released_),
+                    static_cast<off_t>(upTo - released_)) != 0) {
+        ::close(fd_);  // no holes here: the space comes back when the file is removed
+        fd_ = -1;
+        return;
+    }
+    released_ = upTo;
+}
+
 SpillFile::SpillFile(const std::string& path) : path_(path) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) IoFail(path, "cannot open the spill file");

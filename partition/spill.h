@@ -112,6 +112,26 @@ class SpillReader {
     std::uint64_t released_ = 0;  ///< bytes at the start of the file given back
 };
 
+/// A spill file no longer read, whose space is given back to the system a piece at a time
+/// (holes punched from its start) so that files written meanwhile reuse its pages rather
+/// than the page cache growing; the file is removed on destruction.
+class SpillRelease {
+  public:
+    explicit SpillRelease(const std::string& path);
+    ~SpillRelease();
+    SpillRelease(const SpillRelease&) = delete;
+    SpillRelease& operator=(const SpillRelease&) = delete;
+
+    /// Gives back about the next `bytes` of the file (whole pages; nothing on a file
+    /// system without holes).
+    void Release(std::uint64_t bytes);
+
+  private:
+    std::string path_;
+    int fd_ = -1;
+    std::uint64_t released_ = 0;
+};
+
 /// Random reads of a spill file (pread), for passes that skip parts of it.
 class SpillFile {
   public:

@@ -898,6 +898,35 @@ TEST(Partition, SpillReaderThatReleasesReadsTheSameBytes) {
     }
 }
 
+TEST(Partition, SpillReleaseGivesBackSpaceAndRemovesTheFile) {
+    // A spill no longer read gives its space back a piece at a time (where the file
+    // system has holes) and is removed with its SpillRelease.
+    ScratchDir dir("partition_spill_space");
+    const std::string path = dir / "s.bin";
+    const std::size_t size = std::size_t(16) << 20;
+    {
+        partition::SpillWriter w(path, 1 << 20);
+        std::vector<char> bytes(size, 'x');
+        w.Write(bytes.data(), bytes.size());
+    }
+    auto allocated = [&] {
+        struct stat st {};
+        EXPECT_EQ(::stat(path.c_str(), &st), 0);
+        return static_cast<std::uint64_t>(st.st_blocks) * 512;
+    };
+    {
+        partition::SpillRelease release(path);
+        const std::uint64_t before = allocated();
+        release.Release(std::uint64_t(5) << 20);
+        release.Release(std::uint64_t(3) << 20);
+        EXPECT_EQ(std::filesystem::file_size(path), size);
+        if (before >= size) {  // a file system that allocates blocks and has holes
+            EXPECT_LE(allocated(), before - (std::uint64_t(8) << 20));
+        }
+    }
+    EXPECT_FALSE(std::filesystem::exists(path));
+}
+
 TEST(Partition, Sha256OfPiecesEqualsTheFileChecksum) {
     // Bytes given in pieces of any size (empty ones too) digest as the file holding them.
     ScratchDir dir("partition_sha256");
