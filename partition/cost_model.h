@@ -45,6 +45,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
 
 #include "mesh/cell.h"
 
@@ -132,6 +133,11 @@ struct CellCostInput {
 };
 CellCostInput CellCostFromNodes(CellShape shape, int order, CellFamily family,
                                 const double* nodeXyz);
+/// The same for an order-1 Lagrange tet (always affine), without the lookups by kind.
+CellCostInput LinearTetCost(const double* nodeXyz);
+/// LinearTetCost of `count` tets at once, the nodes of tet i at nodeXyz[i], into out[i]:
+/// the same doubles, with the square roots of all their faces taken together.
+void LinearTetCosts(const double* const* nodeXyz, std::size_t count, CellCostInput* out);
 
 /// Estimated seconds to render a cell in a kReferencePixels^2 view of the whole data
 /// (box diagonal `rootDiagonal`), given its parts and hull surface area.

@@ -2,13 +2,14 @@
 // selection over streamed centroids; tree queries.
 #include "kd_tree.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "util/check.h"
 #include "util/log.h"
@@ -17,9 +18,8 @@ namespace hpray::partition {
 namespace {
 
 constexpr int kBins = 1024;
+constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kMaxRounds = 40;
-/// Lanes summing a block of routed centroids in parallel (see the pass below).
-constexpr std::size_t kSumLanes = 2;
 
 /// The search for one node's split plane.
 struct Search {
@@ -78,14 +78,38 @@ struct Search {
 };
 
 /// What a pass does with one point: the index of its node's search (-1: none or done)
-/// and the histogram bin (>= 0) or one of the actions below.
-struct Route {
+/// and the histogram bin (>= 0) or one of the actions below; and the point.
+struct Routed {
     int search = -1;
     int action = 0;
+    WeightedPoint point;
 };
 constexpr int kBelow = -3;    ///< x < a
 constexpr int kAbove = -4;    ///< x >= b
 constexpr int kCollect = -5;  ///< in [a, b), collected for the exact split
+
+/// Adds routed points to their searches, in order.
+void Sum(std::vector<Search>& searches, const Routed* routed, std::size_t count) {
+    for (std::size_t i = 0; i < count; ++i) {
+        const Routed& r = routed[i];
+        if (r.search < 0) continue;
+        const WeightedPoint& p = r.point;
+        Search& s = searches[r.search];
+        if (s.first) s.total += p.cost;
+        if (r.action >= 0) {
+            const double x = p.x[s.axis];
+            s.binCost[r.action] += p.cost;
+            ++s.binCount[r.action];
+            s.binLo[r.action] = std::min(s.binLo[r.action], x);
+            s.binHi[r.action] = std::max(s.binHi[r.action], x);
+        } else if (r.action == kBelow) {
+            if (s.first) s.below += p.cost;  // cannot happen: a is the box's lo
+        } else if (r.action == kCollect) {
+            s.collected.push_back(
+                {p.x[s.axis], p.cost, p.x[(s.axis + 1) % 3], p.x[(s.axis + 2) % 3]});
+        }
+    }
+}
 
 /// Chooses the best split among candidates: low cost at s is `lowCost`.
 struct Best {
@@ -102,6 +126,50 @@ struct Best {
 
 }  // namespace
 
+CentroidBlocks::CentroidBlocks(std::size_t maxBytes)
+    : maxBlocks_(std::max<std::size_t>(
+          2, maxBytes / sizeof(std::array<float, 6>) & ~std::size_t(1))) {
+    current_ = Box::Empty();
+}
+
+void CentroidBlocks::Add(const double x[3]) {
+    current_.Extend(x);
+    ++count_;
+    const std::int64_t mask = (std::int64_t(1) << shift_) - 1;
+    if ((count_ & mask) != 0) return;
+    if (boxes_.size() == maxBlocks_) {
+        // Full: neighbours merge into blocks of twice the centroids, and the block just
+        // completed becomes the first half of the next one.
+        for (std::size_t i = 0; i < maxBlocks_ / 2; ++i)
+            for (int d = 0; d < 3; ++d) {
+                boxes_[i][d] = std::min(boxes_[2 * i][d], boxes_[2 * i + 1][d]);
+                boxes_[i][3 + d] =
+                    std::max(boxes_[2 * i][3 + d], boxes_[2 * i + 1][3 + d]);
+            }
+        boxes_.resize(maxBlocks_ / 2);
+        ++shift_;
+        return;
+    }
+    std::array<float, 6> rounded;
+    for (int d = 0; d < 3; ++d) {
+        constexpr float inf = std::numeric_limits<float>::infinity();
+        float lo = static_cast<float>(current_.lo[d]),
+              hi = static_cast<float>(current_.hi[d]);
+        if (static_cast<double>(lo) > current_.lo[d]) lo = std::nextafter(lo, -inf);
+        if (static_cast<double>(hi) < current_.hi[d]) hi = std::nextafter(hi, inf);
+        rounded[d] = lo;
+        rounded[3 + d] = hi;
+    }
+    boxes_.push_back(rounded);
+    current_ = Box::Empty();
+}
+
+Box CentroidBlocks::BlockBox(std::size_t b) const {
+    if (b == boxes_.size()) return current_;  // the block being filled
+    const std::array<float, 6>& f = boxes_[b];
+    return Box{{f[0], f[1], f[2]}, {f[3], f[4], f[5]}};
+}
+
 int OwnerBrick(const KdTree& tree, const double x[3]) {
     const std::vector<KdNode>& nodes = tree.nodes;
     int n = tree.root;
@@ -114,6 +182,10 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
     HPRAY_CHECK_GE(leaves, 1);
     std::vector<KdNode> nodes(1);
     std::vector<Box> boxes{root};  // each node's region (closed; for the search only)
+    // Each node's region without its faces on split planes, open to infinity at the root
+    // box: a centroid strictly inside it descends to that node, however GoesLow breaks
+    // ties on the planes.
+    std::vector<Box> interiors{Box{{-kInf, -kInf, -kInf}, {kInf, kInf, kInf}}};
     std::vector<int> leafCount{leaves};
     // Exclusive upper ends of each node's region per axis: the root's region is closed,
     // so its end is the next double above the box.
@@ -122,8 +194,8 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
         ends[0][d] = std::nextafter(root.hi[d], std::numeric_limits<double>::infinity());
 
     std::vector<int> level{0};
-    std::vector<Route> route;
-    std::vector<int> laneOf;
+    std::array<std::vector<std::pair<double, double>>, 3> slabs;
+    std::vector<Routed> routed[2];  // the block being summed and the next one
     while (true) {
         std::vector<Search> searches;
         std::vector<int> searchOf(nodes.size(), -1);
@@ -163,26 +235,98 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                 break;
             }
             HPRAY_CHECK_LT(round, kMaxRounds + 2);
-            pass([&](const WeightedPoint* pts, std::size_t count) {
-                // Where each point goes, in parallel: its search (or none) and what the
-                // search does with it; then the sums in the points' order, so the
-                // result does not depend on the number of threads.
-                route.resize(count);
+            // After a search's first pass, only its centroids in [a, b) along its axis
+            // matter (the others below and above are known): when every search of the
+            // round is past its first pass, blocks of centroids outside all those slabs
+            // may be left out.
+            bool all = false;
+            for (int d = 0; d < 3; ++d) slabs[d].clear();
+            for (const Search& s : searches) {
+                if (s.done) continue;
+                if (s.first) all = true;
+                slabs[s.axis].push_back({s.a, s.b});
+            }
+            BlockFilter wanted;
+            if (!all) {
+                for (auto& list : slabs) {
+                    // Sorted and merged into disjoint slabs, so that their ends ascend
+                    // too.
+                    std::sort(list.begin(), list.end());
+                    std::size_t m = 0;
+                    for (std::size_t i = 0; i < list.size(); ++i) {
+                        if (m > 0 && list[i].first <= list[m - 1].second) {
+                            list[m - 1].second =
+                                std::max(list[m - 1].second, list[i].second);
+                        } else {
+                            list[m++] = list[i];
+                        }
+                    }
+                    list.resize(m);
+                }
+                wanted = [&slabs](const Box& box) {
+                    for (int d = 0; d < 3; ++d) {
+                        // The first slab ending after box.lo; [box.lo, box.hi] meets it
+                        // unless it starts beyond box.hi.
+                        const auto& list = slabs[d];
+                        const auto it = std::upper_bound(
+                            list.begin(), list.end(), box.lo[d],
+                            [](double v, const std::pair<double, double>& slab) {
+                                return v < slab.second;
+                            });
+                        if (it != list.end() && it->first <= box.hi[d]) return true;
+                    }
+                    return false;
+                };
+            }
+            // Each block of points is routed in parallel (its search, or none, and what
+            // the search does with it) into records that keep a copy of the point; the
+            // sums then run in the points' order, one block after the other, while the
+            // next block is read and routed. So the result does not depend on the number
+            // of threads.
+            tbb::task_group summing;
+            struct WaitForSums {
+                tbb::task_group& group;
+                ~WaitForSums() {
+                    try {
+                        group.wait();
+                    } catch (...) {
+                        // Only on the way out of an exception: the first one propagates.
+                    }
+                }
+            } waitForSums{summing};
+            int buffer = 0;
+            pass(wanted, [&](const WeightedPoint* pts, std::size_t count) {
+                std::vector<Routed>& block = routed[buffer];
+                buffer ^= 1;
+                block.resize(count);
                 tbb::parallel_for(
                     tbb::blocked_range<std::size_t>(0, count, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
+                        // Neighbouring centroids tend to share a node: the last one found
+                        // is tried first.
+                        int last = -1;
+                        Box in{};
                         for (std::size_t i = range.begin(); i < range.end(); ++i) {
                             const WeightedPoint& p = pts[i];
-                            int n = 0;
-                            while (nodes[n].axis >= 0)
-                                n = GoesLow(nodes[n], p.x) ? nodes[n].low : nodes[n].high;
-                            const int si = searchOf[n];
-                            Route& r = route[i];
+                            int n = last;
+                            if (!(n >= 0 && p.x[0] > in.lo[0] && p.x[0] < in.hi[0] &&
+                                  p.x[1] > in.lo[1] && p.x[1] < in.hi[1] &&
+                                  p.x[2] > in.lo[2] && p.x[2] < in.hi[2])) {
+                                n = 0;
+                                while (nodes[n].axis >= 0)
+                                    n = GoesLow(nodes[n], p.x) ? nodes[n].low
+                                                               : nodes[n].high;
+                                last = n;
+                                in = interiors[n];
+                            }
+                            Routed& r = block[i];
                             r.search = -1;
+                            const int si = searchOf[n];
                             if (si < 0) continue;
                             const Search& s = searches[si];
                             if (s.done) continue;
                             r.search = si;
+                            r.point = p;
                             const double x = p.x[s.axis];
                             if (x < s.a) {
                                 r.action = kBelow;
@@ -195,45 +339,11 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
                             }
                         }
                     });
-                // The sums of each search in the points' order; searches are split
-                // between lanes (search index modulo the lane count), which run in
-                // parallel, each over every point but adding only to its own searches.
-                const int lanes =
-                    static_cast<int>(std::min<std::size_t>(searches.size(), kSumLanes));
-                // The lane of each search (search index modulo the lanes), looked up
-                // rather than divided per point.
-                laneOf.resize(searches.size());
-                for (std::size_t k = 0; k < searches.size(); ++k)
-                    laneOf[k] = static_cast<int>(k % static_cast<std::size_t>(lanes));
-                auto sum = [&](int lane) {
-                    for (std::size_t i = 0; i < count; ++i) {
-                        const Route& r = route[i];
-                        if (r.search < 0 || laneOf[r.search] != lane) continue;
-                        const WeightedPoint& p = pts[i];
-                        Search& s = searches[r.search];
-                        if (s.first) s.total += p.cost;
-                        if (r.action >= 0) {
-                            const double x = p.x[s.axis];
-                            s.binCost[r.action] += p.cost;
-                            ++s.binCount[r.action];
-                            s.binLo[r.action] = std::min(s.binLo[r.action], x);
-                            s.binHi[r.action] = std::max(s.binHi[r.action], x);
-                        } else if (r.action == kBelow) {
-                            if (s.first)
-                                s.below += p.cost;  // cannot happen: a is the box's lo
-                        } else if (r.action == kCollect) {
-                            s.collected.push_back({p.x[s.axis], p.cost,
-                                                   p.x[(s.axis + 1) % 3],
-                                                   p.x[(s.axis + 2) % 3]});
-                        }
-                    }
-                };
-                if (lanes < 2) {
-                    sum(0);
-                } else {
-                    tbb::parallel_for(0, lanes, [&](int lane) { sum(lane); });
-                }
+                summing.wait();  // the block before
+                summing.run(
+                    [&searches, &block, count] { Sum(searches, block.data(), count); });
             });
+            summing.wait();
             for (Search& s : searches) {
                 if (s.done) continue;
                 const double lo = boxes[s.node].lo[s.axis];
@@ -402,6 +512,11 @@ KdTree BuildKdTree(const Box& root, int leaves, const CentroidPass& pass,
             nodes.push_back(highNode);
             boxes.push_back(lowBox);
             boxes.push_back(highBox);
+            Box lowInterior = interiors[n], highInterior = interiors[n];
+            lowInterior.hi[s.axis] = s.split;
+            highInterior.lo[s.axis] = s.split;
+            interiors.push_back(lowInterior);
+            interiors.push_back(highInterior);
             ends.push_back(lowEnd);
             ends.push_back(highEnd);
             leafCount.push_back(s.lowLeaves);

@@ -2,6 +2,7 @@
 // and the queries the partitioner and readers share (owner leaf, overlapped leaves).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -17,9 +18,42 @@ struct WeightedPoint {
     double cost;
 };
 
-/// Calls `visit(points, count)` for every stored centroid, in blocks; one full pass.
+/// Whether any centroid inside the closed box `box` can matter to a pass of the tree
+/// builder; false when the pass ignores every centroid there.
+using BlockFilter = std::function<bool(const Box& box)>;
+
+/// Calls `visit(points, count)` for the stored centroids, in their order, in blocks; one
+/// pass. A pass may leave out stored blocks of centroids whose bounding box `wanted`
+/// rejects (see CentroidBlocks); an empty `wanted` keeps everything, and a pass may also
+/// ignore the filter (the tree is the same).
 using CentroidPass = std::function<void(
+    const BlockFilter& wanted,
     const std::function<void(const WeightedPoint* points, std::size_t count)>& visit)>;
+
+/// The bounding boxes of consecutive blocks of centroids, 2^Shift() per block, for passes
+/// that skip blocks: centroids are added in their order. The boxes are stored as floats
+/// rounded outwards (so they hold their centroids) in at most about `maxBytes`: when they
+/// would need more, neighbouring blocks merge.
+class CentroidBlocks {
+  public:
+    explicit CentroidBlocks(std::size_t maxBytes = std::size_t(1) << 20);
+    void Add(const double x[3]);
+    std::int64_t Count() const { return count_; }
+    int Shift() const { return shift_; }
+    std::size_t Blocks() const {
+        return boxes_.size() +
+               ((count_ & ((std::int64_t(1) << shift_) - 1)) != 0 ? 1 : 0);
+    }
+    /// The box of block b (centroids [b << Shift(), (b + 1) << Shift())).
+    Box BlockBox(std::size_t b) const;
+
+  private:
+    std::vector<std::array<float, 6>> boxes_;  ///< complete blocks: lo, then hi
+    Box current_;                              ///< the block being filled
+    std::size_t maxBlocks_;
+    int shift_ = 6;
+    std::int64_t count_ = 0;
+};
 
 /// Builds the tree of `leaves` leaves over the closed box `root`: a node with n leaves
 /// splits its longest axis into floor(n/2) and ceil(n/2) leaves, at the plane whose low

@@ -67,24 +67,25 @@ bool SameBox(const Box& a, const Box& b) { return a.lo == b.lo && a.hi == b.hi; 
 
 }  // namespace
 
-std::string FileSha256(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw InputError(path, "", "cannot open");
-    std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(),
-                                                                &EVP_MD_CTX_free);
-    HPRAY_CHECK(ctx && EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) == 1);
-    std::vector<char> buffer(std::size_t(1) << 20);
-    while (in) {
-        in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-        const std::streamsize n = in.gcount();
-        if (n > 0)
-            HPRAY_CHECK(EVP_DigestUpdate(ctx.get(), buffer.data(),
-                                         static_cast<std::size_t>(n)) == 1);
-    }
-    if (in.bad()) throw InputError(path, "", "read error");
+Sha256::Sha256() {
+    EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+    HPRAY_CHECK(ctx && EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) == 1);
+    context_ = ctx;
+}
+
+Sha256::~Sha256() { EVP_MD_CTX_free(static_cast<EVP_MD_CTX*>(context_)); }
+
+void Sha256::Update(const void* data, std::size_t bytes) {
+    if (bytes > 0)
+        HPRAY_CHECK(EVP_DigestUpdate(static_cast<EVP_MD_CTX*>(context_), data, bytes) ==
+                    1);
+}
+
+std::string Sha256::HexDigest() {
     unsigned char digest[EVP_MAX_MD_SIZE];
     unsigned int length = 0;
-    HPRAY_CHECK(EVP_DigestFinal_ex(ctx.get(), digest, &length) == 1);
+    HPRAY_CHECK(EVP_DigestFinal_ex(static_cast<EVP_MD_CTX*>(context_), digest, &length) ==
+                1);
     std::string hex;
     char byte[3];
     for (unsigned int i = 0; i < length; ++i) {
@@ -92,6 +93,20 @@ std::string FileSha256(const std::string& path) {
         hex += byte;
     }
     return hex;
+}
+
+std::string FileSha256(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(path, "", "cannot open");
+    Sha256 sha;
+    std::vector<char> buffer(std::size_t(1) << 20);
+    while (in) {
+        in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+        const std::streamsize n = in.gcount();
+        if (n > 0) sha.Update(buffer.data(), static_cast<std::size_t>(n));
+    }
+    if (in.bad()) throw InputError(path, "", "read error");
+    return sha.HexDigest();
 }
 
 std::string Partition::BrickPath(int brick) const {

@@ -8,20 +8,25 @@
 // buffers and spill buffers a few MiB (the distribution's brick spill buffers B/8, twice:
 // spill writers fill one buffer while a background thread writes the other), the tree
 // builder collects at most B/4 of centroids per level (a coordinate, the cost and the
-// other two coordinates of each, the latter for a tie-break without another pass), and
-// one brick is assembled at a time; a brick that would need more than B is an input
-// error (ask for more bricks). A gmsh input's tag -> index maps take at most B/8 each
-// (gmsh_stream.h), in the scan only. Everything else lives in DIR/.spill-PID-N/ (removed
-// at the end, and by the next run if this one dies).
+// other two coordinates of each, the latter for a tie-break without another pass) and
+// keeps the bounding boxes of blocks of centroids in B/32 (from the scan on, so that its
+// passes skip blocks), and one brick is assembled while the one before it is written,
+// when both fit (the meshes' arrays are reused); a brick that would need more than B is
+// an input error (ask for more bricks). A gmsh input's tag -> index maps take at most B/8
+// each (gmsh_stream.h), in the scan only. Everything else lives in DIR/.spill-PID-N/
+// (removed at the end, and by the next run if this one dies).
 #include "partition.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -31,9 +36,6 @@
 #include <limits>
 #include <map>
 #include <sstream>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "cost_model.h"
 #include "elements/basis.h"
@@ -120,14 +122,17 @@ class KindCodes {
     }
 
     void Write(SpillWriter& w, const Record& r) {
-        std::uint8_t item[1 + sizeof(Record)];
-        item[0] = Code(r);
-        std::size_t bytes = 1;
-        if (item[0] == kEscape) {
-            std::memcpy(item + 1, &r, sizeof r);
-            bytes += sizeof r;
-        }
-        w.Write(item, bytes);
+        std::uint8_t item[kMaxBytes];
+        w.Write(item, Encode(r, item));
+    }
+    /// The most bytes a record takes in a spill.
+    static constexpr std::size_t kMaxBytes = 1 + sizeof(Record);
+    /// Stores the spilled form of `r` at `out` (kMaxBytes of room); returns its size.
+    std::size_t Encode(const Record& r, std::uint8_t* out) {
+        out[0] = Code(r);
+        if (out[0] != kEscape) return 1;
+        std::memcpy(out + 1, &r, sizeof r);
+        return 1 + sizeof r;
     }
     /// The next record; false at a clean end of the spill.
     bool Read(SpillReader& in, Record& r) const {
@@ -208,9 +213,28 @@ class SetupCosts {
         }
     }
     double Next() {
+        if (left_ > 0) {
+            --left_;
+            return value_;
+        }
         double v;
         Next(&v, 1);
         return v;
+    }
+    /// Passes over the setup costs of the next `n` cells.
+    void Skip(std::int64_t n) {
+        while (n > 0) {
+            if (left_ == 0) {
+                double v;
+                Next(&v, 1);
+                --n;
+                continue;
+            }
+            const std::uint32_t k =
+                static_cast<std::uint32_t>(std::min<std::int64_t>(n, left_));
+            left_ -= k;
+            n -= k;
+        }
     }
 
   private:
@@ -309,7 +333,7 @@ void RemovePreviousRun(const std::string& dir, const std::string& keepSpill) {
 class ScanSink : public MeshSink {
   public:
     ScanSink(const std::string& spill, std::size_t memoryLimit)
-        : spill_(spill), memoryLimit_(memoryLimit) {
+        : centroidBlocks(memoryLimit / 32), spill_(spill), memoryLimit_(memoryLimit) {
         const char* wide = std::getenv(kTestWideIdsEnv);
         allWide_ = wide && std::string(wide) == "1";
     }
@@ -331,6 +355,9 @@ class ScanSink : public MeshSink {
             std::make_unique<RecordCache>(PointsPath(), pointStride, memoryLimit_ / 4);
         batchNodeLimit_ = std::clamp<std::size_t>(
             memoryLimit_ / 64 / (4 * sizeof(double)), 4096, std::size_t(1) << 17);
+        batchNodes_.resize(batchNodeLimit_ + kMaxNodes);
+        batchXyz_.resize(3 * (batchNodeLimit_ + kMaxNodes));
+        pending_.resize(kBatchCells);
         for (int d = 0; d < 3; ++d) {
             root.lo[d] = std::numeric_limits<double>::infinity();
             root.hi[d] = -std::numeric_limits<double>::infinity();
@@ -354,8 +381,8 @@ class ScanSink : public MeshSink {
     /// a full batch is processed by FlushBatch.
     void Cell(CellShape shape, int order, CellFamily family, const std::int64_t* nodes,
               int nodeCount, const double* values, std::uint8_t vtkType) override {
-        HPRAY_CHECK(nodeCount > 0 && nodeCount <= 0xffff);
-        Pending c;
+        HPRAY_CHECK(nodeCount > 0 && nodeCount <= kMaxNodes);
+        Pending& c = pending_[pendingCount_++];  // every field set here or in FlushBatch
         c.r.shape = static_cast<std::uint8_t>(shape);
         c.r.order = static_cast<std::uint8_t>(order);
         c.r.family = static_cast<std::uint8_t>(family);
@@ -363,16 +390,24 @@ class ScanSink : public MeshSink {
         c.r.nodeCount = static_cast<std::uint16_t>(nodeCount);
         c.r.wide = allWide_ ? 1 : 0;
         c.r.boxStored = StoresBox(order, family) ? 1 : 0;
-        c.first = batchNodes_.size();
+        c.first = batchNodeCount_;
         c.firstValue = batchValues_.size();
+        // The batch arrays have room for one more cell than the batch limit.
+        std::int64_t* batchNodes = batchNodes_.data() + batchNodeCount_;
+        double* xyz = batchXyz_.data() + 3 * batchNodeCount_;
         for (int k = 0; k < nodeCount; ++k) {
-            HPRAY_CHECK_LT(nodes[k], points);
-            if (nodes[k] > std::numeric_limits<std::int32_t>::max()) c.r.wide = 1;
-            const double* p = cache_->Get(nodes[k]);
-            batchXyz_.insert(batchXyz_.end(), p, p + 3);
+            const std::int64_t id = nodes[k];
+            HPRAY_CHECK_LT(id, points);
+            if (id > std::numeric_limits<std::int32_t>::max()) c.r.wide = 1;
+            const double* p = cache_->Get(id);
+            xyz[3 * k] = p[0];
+            xyz[3 * k + 1] = p[1];
+            xyz[3 * k + 2] = p[2];
+            batchNodes[k] = id;
         }
-        batchNodes_.insert(batchNodes_.end(), nodes, nodes + nodeCount);
-        batchValues_.insert(batchValues_.end(), values, values + cellValues);
+        batchNodeCount_ += static_cast<std::size_t>(nodeCount);
+        if (cellValues > 0)
+            batchValues_.insert(batchValues_.end(), values, values + cellValues);
         // Every brick carries HigherOrderDegrees when any cell is written as a Lagrange
         // type, so the pieces agree with the arrays bricks.pvtu declares.
         if (shape != lastShape_ || order != lastOrder_ || family != lastFamily_ ||
@@ -384,9 +419,8 @@ class ScanSink : public MeshSink {
             lastFamily_ = family;
             lastVtkType_ = vtkType;
         }
-        pending_.push_back(c);
         ++cells;
-        if (batchNodes_.size() >= batchNodeLimit_ || pending_.size() >= kBatchCells)
+        if (batchNodeCount_ >= batchNodeLimit_ || pendingCount_ >= kBatchCells)
             FlushBatch();
     }
 
@@ -419,6 +453,8 @@ class ScanSink : public MeshSink {
     /// The distinct setup costs of the cells (SetupRun::value indexes them); at most one
     /// per cell class of the cost model.
     std::vector<double> setupValues;
+    /// Bounding boxes of blocks of the centroid spill, for passes that skip blocks.
+    CentroidBlocks centroidBlocks;
 
   private:
     /// A queued cell: its record, where its nodes (and their coordinates, 3 per node) and
@@ -430,21 +466,62 @@ class ScanSink : public MeshSink {
         CellCostInput cost;
     };
     static constexpr std::size_t kBatchCells = 16384;
+    /// The most nodes of a cell.
+    static constexpr int kMaxNodes = (kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1);
+
+    /// FlushBatch's node bounds and centroid of an order-1 Lagrange tet (the most common
+    /// cell of large meshes), its four nodes unrolled: the same operations in the same
+    /// order. Its cost comes from LinearTetCosts.
+    static void LinearTetGeometry(Pending& c, const double* xyz) {
+        double sum[3] = {0, 0, 0};
+        for (int d = 0; d < 3; ++d) {
+            c.lo[d] = std::numeric_limits<double>::infinity();
+            c.hi[d] = -c.lo[d];
+        }
+        for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) {
+                const double v = xyz[3 * k + d];
+                sum[d] += v;
+                c.lo[d] = std::min(c.lo[d], v);
+                c.hi[d] = std::max(c.hi[d], v);
+            }
+        for (int d = 0; d < 3; ++d)
+            c.centroid[d] = std::clamp(sum[d] / 4, c.lo[d], c.hi[d]);
+    }
 
     /// The cells' geometry (node bounds, centroid, the Bernstein hull of curved cells)
     /// and cost parts, in parallel (each cell on its own, so the same doubles as one at a
     /// time); then the records, in input order.
     void FlushBatch() {
-        if (pending_.empty()) return;
+        if (pendingCount_ == 0) return;
         tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, pending_.size(), 1024),
+            tbb::blocked_range<std::size_t>(0, pendingCount_, 1024),
             [&](const tbb::blocked_range<std::size_t>& range) {
+                // Order-1 tets get their costs a group at a time.
+                constexpr std::size_t kTets = 256;
+                const double* tetXyz[kTets] = {};
+                Pending* tets[kTets];
+                CellCostInput tetCosts[kTets];
+                std::size_t nTets = 0;
+                auto costTets = [&] {
+                    LinearTetCosts(tetXyz, nTets, tetCosts);
+                    for (std::size_t k = 0; k < nTets; ++k) tets[k]->cost = tetCosts[k];
+                    nTets = 0;
+                };
                 for (std::size_t i = range.begin(); i < range.end(); ++i) {
                     Pending& c = pending_[i];
                     const int nodeCount = c.r.nodeCount;
                     const double* xyz = batchXyz_.data() + 3 * c.first;
                     const auto shape = static_cast<CellShape>(c.r.shape);
                     const auto family = static_cast<CellFamily>(c.r.family);
+                    if (shape == CellShape::Tet && c.r.order == 1 &&
+                        family == CellFamily::Lagrange) {
+                        LinearTetGeometry(c, xyz);
+                        tetXyz[nTets] = xyz;
+                        tets[nTets] = &c;
+                        if (++nTets == kTets) costTets();
+                        continue;
+                    }
                     double sum[3] = {0, 0, 0};
                     for (int d = 0; d < 3; ++d) {
                         c.lo[d] = std::numeric_limits<double>::infinity();
@@ -471,40 +548,60 @@ class ScanSink : public MeshSink {
                     }
                     c.cost = CellCostFromNodes(shape, c.r.order, family, xyz);
                 }
+                costTets();
             });
-        for (const Pending& c : pending_) {
+        for (std::size_t i = 0; i < pendingCount_; ++i) {
+            const Pending& c = pending_[i];
             for (int d = 0; d < 3; ++d) {
                 root.lo[d] = std::min(root.lo[d], c.lo[d]);
                 root.hi[d] = std::max(root.hi[d], c.hi[d]);
             }
             const int nodeCount = c.r.nodeCount;
             const std::int64_t* nodes = batchNodes_.data() + c.first;
-            cellKinds.Write(*cells_, c.r);
+            // The record (see CellRecord) is composed in the spill's buffer.
+            std::uint8_t kind[KindCodes<CellRecord>::kMaxBytes];
+            const std::size_t kindBytes = cellKinds.Encode(c.r, kind);
+            const std::size_t boxBytes = c.r.boxStored ? 6 * sizeof(double) : 0;
+            const std::size_t valueBytes = sizeof(double) * cellValues;
+            const std::size_t bytes = kindBytes + boxBytes + c.r.NodeBytes() + valueBytes;
+            std::vector<char> large;  // a record beyond a quarter of the buffer
+            char* out;
+            if (bytes <= cells_->BufferBytes() / 4) {
+                out = cells_->Append(bytes);
+            } else {
+                large.resize(bytes);
+                out = large.data();
+            }
+            std::memcpy(out, kind, kindBytes);
+            out += kindBytes;
             if (c.r.boxStored) {
                 const double box[6] = {c.lo[0], c.lo[1], c.lo[2],
                                        c.hi[0], c.hi[1], c.hi[2]};
-                cells_->Write(box, sizeof box);
+                std::memcpy(out, box, sizeof box);
+                out += sizeof box;
             }
             if (c.r.wide) {
-                cells_->Write(nodes, sizeof(std::int64_t) * nodeCount);
+                std::memcpy(out, nodes, sizeof(std::int64_t) * nodeCount);
             } else {
-                nodes32_.resize(static_cast<std::size_t>(nodeCount));
-                for (int k = 0; k < nodeCount; ++k)
-                    nodes32_[k] = static_cast<std::int32_t>(nodes[k]);
-                cells_->Write(nodes32_.data(), sizeof(std::int32_t) * nodeCount);
+                for (int k = 0; k < nodeCount; ++k) {
+                    const auto id = static_cast<std::int32_t>(nodes[k]);
+                    std::memcpy(out + sizeof id * k, &id, sizeof id);
+                }
             }
-            cells_->Write(batchValues_.data() + c.firstValue,
-                          sizeof(double) * cellValues);
+            out += c.r.NodeBytes();
+            if (valueBytes > 0)
+                std::memcpy(out, batchValues_.data() + c.firstValue, valueBytes);
+            if (!large.empty()) cells_->Write(large.data(), large.size());
             // perSegment * area: CellRenderSeconds with an area of 1 multiplies by 1.0,
             // so the tree sees the same doubles as from the parts and the area.
             const CentroidRecord w{{c.centroid[0], c.centroid[1], c.centroid[2]},
                                    c.cost.parts.perSegment * c.cost.area};
             centroids_->Write(&w, sizeof w);
+            centroidBlocks.Add(c.centroid);
             AddSetup(c.cost.parts.setup);
         }
-        pending_.clear();
-        batchNodes_.clear();
-        batchXyz_.clear();
+        pendingCount_ = 0;
+        batchNodeCount_ = 0;
         batchValues_.clear();
     }
 
@@ -530,12 +627,16 @@ class ScanSink : public MeshSink {
     std::unique_ptr<SpillWriter> points_, cells_, centroids_, setupRuns_;
     SetupRun run_;
     std::unique_ptr<RecordCache> cache_;
+    /// The batch: the first pendingCount_ of kBatchCells entries.
     std::vector<Pending> pending_;
+    std::size_t pendingCount_ = 0;
+    /// The nodes of the batch's cells (and their coordinates, 3 per node): the first
+    /// batchNodeCount_ of arrays sized for the batch limit plus one cell.
     std::vector<std::int64_t> batchNodes_;
     std::vector<double> batchXyz_, batchValues_;
+    std::size_t batchNodeCount_ = 0;
     /// Nodes per batch: about B/64 of nodes and coordinates, at least 4096.
     std::size_t batchNodeLimit_ = 4096;
-    std::vector<std::int32_t> nodes32_;
     bool allWide_ = false;
     /// The last cell kind whose written VTK type was checked for HigherOrderDegrees.
     CellShape lastShape_ = CellShape::Tet;
@@ -548,11 +649,9 @@ class ScanSink : public MeshSink {
 /// order-1 Lagrange cell (the same minima and maxima in the same order, so the same
 /// doubles). `stored` holds nodeCount ids, int64 when `wide`, else int32.
 Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wide) {
-    Box box;
-    for (int d = 0; d < 3; ++d) {
-        box.lo[d] = std::numeric_limits<double>::infinity();
-        box.hi[d] = -box.lo[d];
-    }
+    // Six scalars rather than a Box, so that they stay in registers.
+    const double inf = std::numeric_limits<double>::infinity();
+    double lo0 = inf, lo1 = inf, lo2 = inf, hi0 = -inf, hi1 = -inf, hi2 = -inf;
     for (int k = 0; k < nodeCount; ++k) {
         std::int64_t id;
         if (wide) {
@@ -563,12 +662,14 @@ Box CellNodeBox(RecordCache& points, const char* stored, int nodeCount, bool wid
             id = id32;
         }
         const double* p = points.Get(id);
-        for (int d = 0; d < 3; ++d) {
-            box.lo[d] = std::min(box.lo[d], p[d]);
-            box.hi[d] = std::max(box.hi[d], p[d]);
-        }
+        lo0 = std::min(lo0, p[0]);
+        hi0 = std::max(hi0, p[0]);
+        lo1 = std::min(lo1, p[1]);
+        hi1 = std::max(hi1, p[1]);
+        lo2 = std::min(lo2, p[2]);
+        hi2 = std::max(hi2, p[2]);
     }
-    return box;
+    return Box{{lo0, lo1, lo2}, {hi0, hi1, hi2}};
 }
 
 /// Per-brick tallies of the distribution pass.
@@ -578,7 +679,20 @@ struct BrickTally {
     std::uint64_t spillBytes = 0;
 };
 
-/// Guaranteed ranges of the fields over all cells of a brick mesh.
+/// Bytes a mesh's arrays hold (their capacities).
+std::uint64_t MeshCapacityBytes(const Mesh& m) {
+    std::uint64_t bytes =
+        sizeof(double) * m.points.capacity() +
+        sizeof(std::int64_t) * (m.cellOffsets.capacity() + m.connectivity.capacity()) +
+        m.cellShape.capacity() + m.cellOrder.capacity() + m.cellFamily.capacity() +
+        m.ghost.capacity() + m.vtkType.capacity();
+    for (const std::vector<Field>* fields : {&m.pointFields, &m.cellFields})
+        for (const Field& f : *fields) bytes += sizeof(double) * f.values.capacity();
+    return bytes;
+}
+
+/// Guaranteed ranges of the fields over all cells of a brick mesh. Every point of a brick
+/// is a node of one of its cells.
 nlohmann::json BrickRanges(const Mesh& mesh) {
     nlohmann::json ranges = nlohmann::json::object();
     const double inf = std::numeric_limits<double>::infinity();
@@ -604,9 +718,33 @@ nlohmann::json BrickRanges(const Mesh& mesh) {
         return Interval{std::nextafter(std::sqrt(lo2), 0.0) * (1 - 4e-16),
                         std::nextafter(std::sqrt(hi2), inf) * (1 + 4e-16)};
     };
+    // When every cell is linear, a scalar field's range over the cells is its range over
+    // the points (each cell's range is that of its nodes, and every point is a node).
+    // Taken so when the extremes are finite and nonzero: then the same doubles as the
+    // cell by cell minima and maxima, whose results for -0 and +0 depend on the order.
+    bool allLinear = true;
+    for (std::int64_t c = 0; c < mesh.CellCount() && allLinear; ++c)
+        allLinear = mesh.cellOrder[c] == 1 && mesh.cellFamily[c] == CellFamily::Lagrange;
+    auto pointRange = [inf](const Field& f, Interval& range) {
+        double lo = inf, hi = -inf;
+        bool finite = true;
+        for (const double v : f.values) {
+            finite &= std::isfinite(v);
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+        }
+        range = Interval{lo, hi};
+        return finite && lo != 0 && hi != 0 && lo <= hi;
+    };
     for (const Field& f : mesh.pointFields) {
         Interval all{inf, -inf};
         std::vector<Interval> comps(f.components, all), cell(f.components);
+        Interval points;
+        if (mesh.CellCount() > 0 && allLinear && f.components == 1 &&
+            pointRange(f, points)) {
+            add(f.name, points);
+            continue;
+        }
         for (std::int64_t c = 0; c < mesh.CellCount(); ++c) {
             const std::int64_t* nodes = mesh.CellNodes(c);
             const int n = mesh.CellNodeCount(c);
@@ -850,35 +988,69 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     // 2. The k-d tree over the centroids.
     const std::string centroidsPath = scan.CentroidsPath();
     const double rootDiagonal = Diagonal(scan.root);
+    // A pass reads the centroid records straight into WeightedPoints (the same layout,
+    // the per-segment cost in place of the cost), chunk by chunk, and turns them into
+    // costs; blocks the tree builder does not want are not read (nor their setup costs).
+    static_assert(
+        sizeof(CentroidRecord) == sizeof(WeightedPoint) &&
+            offsetof(CentroidRecord, segmentArea) == offsetof(WeightedPoint, cost),
+        "centroid records are read as WeightedPoints");
     const CentroidPass pass =
-        [&](const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
-            SpillMap file(centroidsPath);
+        [&](const BlockFilter& wanted,
+            const std::function<void(const WeightedPoint*, std::size_t)>& visit) {
+            SpillFile file(centroidsPath);
             SetupCosts setups(scan.SetupsPath(), scan.setupValues);
-            constexpr std::size_t kBlock = 65536;
-            std::vector<WeightedPoint> block(kBlock);
-            std::vector<double> setup(kBlock);
-            for (std::int64_t done = 0; done < scan.cells;) {
-                const std::size_t n =
-                    static_cast<std::size_t>(std::min<std::int64_t>(scan.cells - done, kBlock));
-                const char* records =
-                    file.Map(static_cast<std::uint64_t>(done) * sizeof(CentroidRecord),
-                             n * sizeof(CentroidRecord));
-                done += static_cast<std::int64_t>(n);
-                setups.Next(setup.data(), n);
-                tbb::parallel_for(
-                    tbb::blocked_range<std::size_t>(0, n, 8192),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                        for (std::size_t i = range.begin(); i < range.end(); ++i) {
-                            CentroidRecord c;
-                            std::memcpy(&c, records + i * sizeof c, sizeof c);
-                            WeightedPoint& w = block[i];
-                            std::copy(c.x, c.x + 3, w.x);
-                            w.cost = CellRenderSeconds({setup[i], c.segmentArea}, 1.0,
-                                                       rootDiagonal);
-                        }
-                    });
-                visit(block.data(), n);
+            const CentroidBlocks& blocks = scan.centroidBlocks;
+            HPRAY_CHECK_EQ(blocks.Count(), scan.cells);
+            constexpr std::size_t kChunk = 8192;  // points per visit (256 KiB)
+            std::vector<WeightedPoint> chunk(kChunk);
+            std::vector<double> setup(kChunk);
+            std::size_t filled = 0;
+            // Turns the records of the chunk from `from` on into points; visits a full
+            // chunk.
+            auto flush = [&](std::size_t from) {
+                setups.Next(setup.data() + from, filled - from);
+                for (std::size_t i = from; i < filled; ++i)
+                    chunk[i].cost =
+                        CellRenderSeconds({setup[i], chunk[i].cost}, 1.0, rootDiagonal);
+            };
+            std::int64_t next = 0;     // the cell of the next setup cost
+            std::int64_t skipped = 0;  // cells left out before `next`
+            const std::size_t nBlocks = blocks.Blocks();
+            for (std::size_t b = 0; b < nBlocks;) {
+                if (wanted && !wanted(blocks.BlockBox(b))) {
+                    ++b;
+                    continue;
+                }
+                // A run of wanted blocks: cells [first, end).
+                std::size_t e = b + 1;
+                while (e < nBlocks && (!wanted || wanted(blocks.BlockBox(e)))) ++e;
+                const std::int64_t first = static_cast<std::int64_t>(b) << blocks.Shift();
+                const std::int64_t end =
+                    std::min(scan.cells, static_cast<std::int64_t>(e) << blocks.Shift());
+                setups.Skip(first - next);
+                skipped += first - next;
+                next = end;
+                for (std::int64_t c = first; c < end;) {
+                    const std::size_t n = static_cast<std::size_t>(std::min<std::int64_t>(
+                        end - c, static_cast<std::int64_t>(kChunk - filled)));
+                    file.Read(chunk.data() + filled,
+                              static_cast<std::uint64_t>(c) * sizeof(CentroidRecord),
+                              n * sizeof(CentroidRecord));
+                    const std::size_t from = filled;
+                    filled += n;
+                    flush(from);
+                    c += static_cast<std::int64_t>(n);
+                    if (filled == kChunk) {
+                        visit(chunk.data(), filled);
+                        filled = 0;
+                    }
+                }
+                b = e;
             }
+            if (filled > 0) visit(chunk.data(), filled);
+            log::Debug("partition: tree pass over " + std::to_string(next - skipped) +
+                       " of " + std::to_string(scan.cells) + " centroids");
         };
     const std::size_t collectLimit = std::clamp<std::size_t>(
         budget / 8 / (2 * sizeof(double)) / static_cast<std::size_t>(options.bricks), 256,
@@ -892,6 +1064,15 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     std::vector<BrickTally> tally(nBricks);
     KindCodes<BrickCellRecord> brickKinds;  // the records in the brick spills
     const std::size_t recordTail = sizeof(double) * scan.cellValues;
+    // Each leaf's region without its faces on split planes (faces on the root box open to
+    // infinity): a cell box strictly inside its owner's touches no other leaf, as
+    // TouchedLeaves would find.
+    std::vector<Box> interior = leafBoxes;
+    for (Box& b : interior)
+        for (int d = 0; d < 3; ++d) {
+            if (!b.InnerLo(d)) b.lo[d] = -std::numeric_limits<double>::infinity();
+            if (!b.InnerHi(d)) b.hi[d] = std::numeric_limits<double>::infinity();
+        }
     for (int first = 0; first < nBricks; first += kBricksPerPass) {
         const int last = std::min(nBricks, first + kBricksPerPass);
         const std::size_t buffer = std::clamp<std::size_t>(
@@ -900,7 +1081,10 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         for (int b = first; b < last; ++b)
             writers.push_back(std::make_unique<SpillWriter>(
                 spill.Path() + "/brick-" + std::to_string(b) + ".bin", buffer));
-        SpillReader reader(scan.CellsPath(), std::size_t(1) << 20);
+        // The last pass over the cell spill gives its pages back as it goes, for the
+        // brick spills to reuse (the centroid spill's serve the brick files, below).
+        const bool lastPass = last == nBricks;
+        SpillReader reader(scan.CellsPath(), std::size_t(1) << 20, lastPass);
         SpillReader centroids(centroidsPath, std::size_t(1) << 20);
         SetupCosts setups(scan.SetupsPath(), scan.setupValues);
         // Order-1 cells' boxes from their nodes (see CellRecord).
@@ -908,6 +1092,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         CellRecord r;
         CentroidRecord c;
         std::vector<int> hits, stack;
+        int lastOwner = -1;
         while (scan.cellKinds.Read(reader, r)) {
             Box box;
             if (r.boxStored) {
@@ -922,10 +1107,25 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             if (!rest || !centroids.Read(&c, sizeof c))
                 throw InternalError("cell spill ends inside a record");
             if (!r.boxStored) box = CellNodeBox(points, rest, r.nodeCount, r.wide != 0);
-            const int owner = OwnerBrick(tree, c.x);
+            // A box strictly inside the interior of the last cell's owner (neighbouring
+            // cells tend to share it) holds the centroid too: the same owner, no other
+            // brick touched.
+            auto inside = [&box](const Box& in) {
+                return box.lo[0] > in.lo[0] && box.lo[1] > in.lo[1] &&
+                       box.lo[2] > in.lo[2] && box.hi[0] < in.hi[0] &&
+                       box.hi[1] < in.hi[1] && box.hi[2] < in.hi[2];
+            };
             hits.clear();
-            tree.TouchedLeaves(box, hits, stack);
-            HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
+            int owner = lastOwner;
+            if (owner < 0 || !inside(interior[owner])) {
+                owner = OwnerBrick(tree, c.x);
+                if (!inside(interior[owner])) {
+                    tree.TouchedLeaves(box, hits, stack);
+                    HPRAY_CHECK(std::find(hits.begin(), hits.end(), owner) != hits.end());
+                }
+                lastOwner = owner;
+            }
+            if (hits.empty()) hits.push_back(owner);
             const double cost =
                 CellRenderSeconds({setups.Next(), c.segmentArea}, 1.0, rootDiagonal);
             BrickCellRecord h;
@@ -939,8 +1139,16 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 if (b < first || b >= last) continue;
                 h.ghost = b == owner ? 0 : 1;
                 SpillWriter& w = *writers[b - first];
-                brickKinds.Write(w, h);
-                w.Write(rest, restBytes);
+                std::uint8_t kind[KindCodes<BrickCellRecord>::kMaxBytes];
+                const std::size_t kindBytes = brickKinds.Encode(h, kind);
+                if (kindBytes + restBytes <= w.BufferBytes() / 4) {
+                    char* out = w.Append(kindBytes + restBytes);
+                    std::memcpy(out, kind, kindBytes);
+                    std::memcpy(out + kindBytes, rest, restBytes);
+                } else {
+                    w.Write(kind, kindBytes);
+                    w.Write(rest, restBytes);
+                }
                 BrickTally& t = tally[b];
                 ++t.cells;
                 t.nodes += r.nodeCount;
@@ -960,7 +1168,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     {
         std::error_code ec;
         fs::remove(scan.CellsPath(), ec);
-        fs::remove(centroidsPath, ec);
         fs::remove(scan.SetupsPath(), ec);
     }
 
@@ -969,9 +1176,11 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     // 4. Check every brick fits the memory limit before writing anything.
     const std::size_t pointBytes = sizeof(double) * scan.pointStride;
     auto brickBytes = [&](const BrickTally& t, std::int64_t points) {
-        // Peak of the assembly: two copies of the connectivity (sorted ids, then the VTK
-        // copy of the writer), per-cell arrays (offsets twice, kinds, ghost, source and
-        // written VTK types, degrees, field values twice) and the point records.
+        // Peak of the assembly, an upper bound: two copies of the connectivity (the
+        // brick's and the sorted ids of a renumbering without bitmap; the writer derives
+        // its arrays a chunk at a time), per-cell arrays (offsets twice, kinds, ghost,
+        // source and written VTK types, degrees, field values twice) and the point
+        // records.
         return static_cast<std::uint64_t>(t.nodes) * 16 +
                static_cast<std::uint64_t>(points) * pointBytes +
                static_cast<std::uint64_t>(t.cells) * (16 + 6 + 24 + 2 * recordTail);
@@ -995,28 +1204,33 @@ PartitionReport PartitionMesh(const std::string& meshPath,
     int exitAfter = -1;
     if (const char* env = std::getenv(kTestExitEnv)) exitAfter = std::atoi(env);
     nlohmann::json bricksJson = nlohmann::json::array();
-    std::vector<std::future<std::string>> checksums;
     std::uint64_t bytesWritten = 0;
     std::int64_t storedCells = 0;
     {
+        // The centroid spill is given back as the bricks are written, about a brick's
+        // size at a time, so that their pages are reused.
+        SpillRelease centroidSpace(centroidsPath);
         RecordCache pointsCache(scan.PointsPath(), scan.pointStride,
                                 std::size_t(4) << 20);
+        // The mesh of the last brick written, kept for the next one's arrays.
+        std::shared_ptr<Mesh> spare;
         struct InFlight {
             int brick = -1;
-            std::shared_ptr<const Mesh> mesh;
+            std::shared_ptr<Mesh> mesh;
             std::size_t points = 0;
-            std::uint64_t bytes = 0;             ///< brickBytes of the assembled brick
-            std::future<nlohmann::json> ranges;  ///< after the file is written
+            /// brickBytes of the assembled brick, or the mesh's capacity if larger
+            std::uint64_t bytes = 0;
+            /// The field ranges and the checksum, after the file is written.
+            std::future<std::pair<nlohmann::json, std::string>> written;
         } inFlight;
-        // Waits for the brick in flight, then records it and starts its checksum.
+        // Waits for the brick in flight, then records it.
         auto finish = [&] {
             if (inFlight.brick < 0) return;
-            const nlohmann::json ranges = inFlight.ranges.get();
+            const auto [ranges, sha256] = inFlight.written.get();
             const int b = inFlight.brick;
             const BrickTally& t = tally[b];
             const std::string file = BrickName(b);
             const std::string path = (fs::path(dir) / file).string();
-            checksums.push_back(std::async(std::launch::async, FileSha256, path));
             const std::uint64_t bytes = fs::file_size(path);
             bytesWritten += bytes;
             storedCells += inFlight.mesh->CellCount();
@@ -1028,10 +1242,13 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                                   {"cost", t.cost},
                                   {"cost_with_ghosts", t.cost + t.ghostCost},
                                   {"ranges", ranges},
+                                  {"sha256", sha256},
                                   {"bytes", bytes}});
+            std::shared_ptr<Mesh> written = std::move(inFlight.mesh);
             inFlight = InFlight{};
+            // The next brick reuses the mesh's arrays (no fresh pages to fault in).
+            if (written.use_count() == 1) spare = std::move(written);
             if (exitAfter >= 0 && b + 1 >= exitAfter) {
-                for (std::future<std::string>& c : checksums) c.wait();
                 std::fflush(nullptr);
                 ::_exit(75);  // test hook: die like a killed process, spills left behind
             }
@@ -1040,27 +1257,33 @@ PartitionReport PartitionMesh(const std::string& meshPath,
         struct WaitInFlight {
             InFlight& f;
             ~WaitInFlight() {
-                if (f.ranges.valid()) f.ranges.wait();
+                if (f.written.valid()) f.written.wait();
             }
         } waitInFlight{inFlight};
         for (int b = 0; b < nBricks; ++b) {
             const BrickTally& t = tally[b];
             if (inFlight.brick >= 0 &&
-                inFlight.bytes +
-                        brickBytes(t, std::min<std::int64_t>(t.nodes, scan.points)) >
+                inFlight.bytes + std::max(brickBytes(t, std::min<std::int64_t>(
+                                                            t.nodes, scan.points)),
+                                          spare ? MeshCapacityBytes(*spare) : 0) >
                     budget)
                 finish();
-            auto assembled = std::make_shared<Mesh>();
+            std::shared_ptr<Mesh> assembled = std::move(spare);
+            if (!assembled) assembled = std::make_shared<Mesh>();
             Mesh& mesh = *assembled;
-            mesh.cellOffsets.reserve(t.cells + 1);
-            mesh.connectivity.reserve(t.nodes);
-            mesh.cellShape.reserve(t.cells);
-            mesh.cellOrder.reserve(t.cells);
-            mesh.cellFamily.reserve(t.cells);
-            mesh.ghost.reserve(t.cells);
-            mesh.vtkType.reserve(t.cells);
-            std::vector<double> cellValues;
-            cellValues.reserve(static_cast<std::size_t>(t.cells) * scan.cellValues);
+            // The arrays are sized from the tallies and filled in place (a reused mesh's
+            // are overwritten, not cleared first).
+            const auto nCells = static_cast<std::size_t>(t.cells);
+            const auto nNodes = static_cast<std::size_t>(t.nodes);
+            mesh.cellOffsets.resize(nCells + 1);
+            mesh.cellOffsets[0] = 0;
+            mesh.connectivity.resize(nNodes);
+            mesh.cellShape.resize(nCells);
+            mesh.cellOrder.resize(nCells);
+            mesh.cellFamily.resize(nCells);
+            mesh.ghost.resize(nCells);
+            mesh.vtkType.resize(nCells);
+            std::vector<double> cellValues(nCells * scan.cellValues);
             {
                 const std::string path =
                     spill.Path() + "/brick-" + std::to_string(b) + ".bin";
@@ -1069,9 +1292,11 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                 // The node count of the last kind seen, checked once per run of cells of
                 // one kind (Mesh::AddCell checks it for every cell).
                 std::uint8_t lastKind[3] = {0xff, 0xff, 0xff};
+                std::size_t c = 0, at = 0;  // cells and nodes filled
                 while (brickKinds.Read(reader, r)) {
                     const char* stored = reader.Take(r.NodeBytes() + recordTail);
-                    if (!stored) throw InternalError("brick spill ends inside a record");
+                    if (!stored || c == nCells || nNodes - at < r.nodeCount)
+                        throw InternalError("brick spill does not match its tally");
                     if (r.shape != lastKind[0] || r.order != lastKind[1] ||
                         r.family != lastKind[2]) {
                         HPRAY_CHECK_EQ(static_cast<int>(r.nodeCount),
@@ -1081,9 +1306,7 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                         lastKind[1] = r.order;
                         lastKind[2] = r.family;
                     }
-                    const std::size_t first = mesh.connectivity.size();
-                    mesh.connectivity.resize(first + r.nodeCount);
-                    std::int64_t* nodes = mesh.connectivity.data() + first;
+                    std::int64_t* nodes = mesh.connectivity.data() + at;
                     if (r.wide) {
                         std::memcpy(nodes, stored, r.NodeBytes());
                     } else {
@@ -1093,18 +1316,20 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             nodes[k] = id;
                         }
                     }
-                    mesh.cellOffsets.push_back(
-                        static_cast<std::int64_t>(mesh.connectivity.size()));
-                    mesh.cellShape.push_back(static_cast<CellShape>(r.shape));
-                    mesh.cellOrder.push_back(r.order);
-                    mesh.cellFamily.push_back(static_cast<CellFamily>(r.family));
-                    mesh.ghost.push_back(r.ghost);
-                    mesh.vtkType.push_back(r.vtkType);
-                    const std::size_t v = cellValues.size();
-                    cellValues.resize(v + scan.cellValues);
-                    std::memcpy(cellValues.data() + v, stored + r.NodeBytes(),
-                                recordTail);
+                    at += r.nodeCount;
+                    mesh.cellOffsets[c + 1] = static_cast<std::int64_t>(at);
+                    mesh.cellShape[c] = static_cast<CellShape>(r.shape);
+                    mesh.cellOrder[c] = r.order;
+                    mesh.cellFamily[c] = static_cast<CellFamily>(r.family);
+                    mesh.ghost[c] = r.ghost;
+                    mesh.vtkType[c] = r.vtkType;
+                    if (recordTail > 0)
+                        std::memcpy(cellValues.data() + c * scan.cellValues,
+                                    stored + r.NodeBytes(), recordTail);
+                    ++c;
                 }
+                if (c != nCells || at != nNodes)
+                    throw InternalError("brick spill does not match its tally");
                 std::error_code ec;
                 fs::remove(path, ec);
             }
@@ -1115,13 +1340,13 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             if (brickBytes(t, static_cast<std::int64_t>(nPoints)) > budget)
                 throw tooLarge(b, brickBytes(t, static_cast<std::int64_t>(nPoints)));
             mesh.points.resize(3 * nPoints);
-            for (const StreamField& f : scan.pointFields) {
-                Field field;
-                field.name = f.name;
+            mesh.pointFields.resize(scan.pointFields.size());
+            for (std::size_t k = 0; k < scan.pointFields.size(); ++k) {
+                Field& field = mesh.pointFields[k];
+                field.name = scan.pointFields[k].name;
                 field.association = Association::Point;
-                field.components = f.components;
-                field.values.resize(nPoints * f.components);
-                mesh.pointFields.push_back(std::move(field));
+                field.components = scan.pointFields[k].components;
+                field.values.resize(nPoints * field.components);
             }
             for (std::size_t i = 0; i < nPoints; ++i) {
                 const double* rec = pointsCache.Get(ids[i]);
@@ -1136,9 +1361,10 @@ PartitionReport PartitionMesh(const std::string& meshPath,
             std::vector<std::int64_t>().swap(ids);
             {
                 int offset = 0;
-                const std::size_t nCells = static_cast<std::size_t>(mesh.CellCount());
-                for (const StreamField& f : scan.cellFields) {
-                    Field field;
+                mesh.cellFields.resize(scan.cellFields.size());
+                for (std::size_t j = 0; j < scan.cellFields.size(); ++j) {
+                    const StreamField& f = scan.cellFields[j];
+                    Field& field = mesh.cellFields[j];
                     field.name = f.name;
                     field.association = Association::Cell;
                     field.components = f.components;
@@ -1148,29 +1374,40 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                             field.values[c * f.components + k] =
                                 cellValues[c * scan.cellValues + offset + k];
                     offset += f.components;
-                    mesh.cellFields.push_back(std::move(field));
                 }
                 std::vector<double>().swap(cellValues);
             }
             finish();
-            // The field ranges are computed while the file is written, and its checksum
+            // The field ranges are computed while the file is written and checksummed,
             // while the next brick is assembled.
             const std::string path = (fs::path(dir) / BrickName(b)).string();
             const bool degrees = scan.higherOrderDegrees;
+            centroidSpace.Release(
+                sizeof(std::int64_t) *
+                    (mesh.connectivity.size() + mesh.cellOffsets.size()) +
+                2 * nCells +
+                sizeof(double) * (mesh.points.size() + nPoints * (scan.pointStride - 3) +
+                                  nCells * scan.cellValues));
             inFlight.brick = b;
             inFlight.mesh = assembled;
             inFlight.points = nPoints;
-            inFlight.bytes = brickBytes(t, static_cast<std::int64_t>(nPoints));
-            inFlight.ranges = std::async(std::launch::async, [assembled, path, degrees] {
+            inFlight.bytes = std::max(brickBytes(t, static_cast<std::int64_t>(nPoints)),
+                                      MeshCapacityBytes(mesh));
+            inFlight.written = std::async(std::launch::async, [assembled, path, degrees] {
                 std::future<nlohmann::json> ranges = std::async(
                     std::launch::async, [assembled] { return BrickRanges(*assembled); });
+                Sha256
+                    sha;  // of the bytes as they are written: the file is not read back
                 try {
-                    WriteVtu(path, *assembled, degrees);
+                    WriteVtu(path, *assembled, degrees,
+                             [&sha](const char* data, std::size_t bytes) {
+                                 sha.Update(data, bytes);
+                             });
                 } catch (...) {
                     ranges.wait();
                     throw;
                 }
-                return ranges.get();
+                return std::make_pair(ranges.get(), sha.HexDigest());
             });
         }
         finish();
@@ -1178,7 +1415,6 @@ PartitionReport PartitionMesh(const std::string& meshPath,
                    std::to_string(pointsCache.Misses()) + " blocks read");
     }
 
-    for (int b = 0; b < nBricks; ++b) bricksJson[b]["sha256"] = checksums[b].get();
     phase("bricks");
 
     // 6. Index, then the manifest last.

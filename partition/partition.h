@@ -144,4 +144,20 @@ std::string FormatPartitionSummary(const nlohmann::json& summary);
 /// SHA-256 of a file as 64 lowercase hex digits. Throws InputError(path) if unreadable.
 std::string FileSha256(const std::string& path);
 
+/// SHA-256 of bytes given piece by piece (the same digest as FileSha256 of a file of
+/// those bytes).
+class Sha256 {
+  public:
+    Sha256();
+    ~Sha256();
+    Sha256(const Sha256&) = delete;
+    Sha256& operator=(const Sha256&) = delete;
+    void Update(const void* data, std::size_t bytes);
+    /// The digest of everything given, as 64 lowercase hex digits; once.
+    std::string HexDigest();
+
+  private:
+    void* context_ = nullptr;  ///< the OpenSSL digest context
+};
+
 }  // namespace hpray::partition

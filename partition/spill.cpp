@@ -2,7 +2,6 @@
 #include "spill.h"
 
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -165,9 +164,13 @@ void SpillWriter::Close() {
     capacity_ = 0;  // a Write after Close reaches Ship's check
 }
 
-SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes)
-    : path_(path), buffer_(std::max<std::size_t>(bufferBytes, 4096)) {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+SpillReader::SpillReader(const std::string& path, std::size_t bufferBytes, bool release)
+    : path_(path), buffer_(std::max<std::size_t>(bufferBytes, 4096)), release_(release) {
+    if (release_) fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+    if (fd_ < 0) {
+        release_ = false;
+        fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    }
     if (fd_ < 0) IoFail(path, "cannot open the spill file");
 }
 
@@ -181,59 +184,76 @@ bool SpillReader::Fill(std::size_t need) {
     std::memmove(buffer_.data(), buffer_.data() + begin_, end_ - begin_);
     end_ -= begin_;
     begin_ = 0;
+    if (release_) {
+        // Everything before the buffered bytes has been read: punch it out of the file in
+        // steps of at least 4 MiB (on a file system without holes, the pages stay).
+        const std::uint64_t upTo = (offset_ - end_) & ~std::uint64_t(4095);
+        if (upTo >= released_ + (std::uint64_t(4) << 20)) {
+            if (::fallocate(fd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE,
+                            static_cast<off_t>(released_),
+                            static_cast<off_t>(upTo - released_)) == 0) {
+                released_ = upTo;
+            } else {
+                release_ = false;
+            }
+        }
+    }
     while (end_ < need && !eof_) {
         const ssize_t n = ::read(fd_, buffer_.data() + end_, buffer_.size() - end_);
         if (n < 0 && errno == EINTR) continue;
         if (n < 0) IoFail(path_, "cannot read the spill file");
         if (n == 0) eof_ = true;
         end_ += static_cast<std::size_t>(n);
+        offset_ += static_cast<std::uint64_t>(n);
     }
     if (end_ >= need) return true;
     if (end_ == 0) return false;
     throw InternalError("spill file " + path_ + " ends inside a record");
 }
 
-const char* SpillReader::Take(std::size_t bytes) {
-    if (!Fill(bytes)) return nullptr;
-    const char* p = buffer_.data() + begin_;
-    begin_ += bytes;
-    return p;
+SpillRelease::SpillRelease(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
 }
 
-bool SpillReader::Read(void* dst, std::size_t bytes) {
-    const char* p = Take(bytes);
-    if (!p) return false;
-    std::memcpy(dst, p, bytes);
-    return true;
+SpillRelease::~SpillRelease() {
+    if (fd_ >= 0) ::close(fd_);
+    ::unlink(path_.c_str());
 }
 
-SpillMap::SpillMap(const std::string& path) : path_(path) {
+void SpillRelease::Release(std::uint64_t bytes) {
+    if (fd_ < 0) return;
+    const std::uint64_t upTo = (released_ + bytes) & ~std::uint64_t(4095);
+    if (upTo <= released_) return;
+    if (::fallocate(fd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE,
+                    static_cast<off_t>(released_),
+                    static_cast<off_t>(upTo - released_)) != 0) {
+        ::close(fd_);  // no holes here: the space comes back when the file is removed
+        fd_ = -1;
+        return;
+    }
+    released_ = upTo;
+}
+
+SpillFile::SpillFile(const std::string& path) : path_(path) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) IoFail(path, "cannot open the spill file");
 }
 
-SpillMap::~SpillMap() {
-    Unmap();
+SpillFile::~SpillFile() {
     if (fd_ >= 0) ::close(fd_);
 }
 
-void SpillMap::Unmap() {
-    if (base_) ::munmap(base_, length_);
-    base_ = nullptr;
-    length_ = 0;
-}
-
-const char* SpillMap::Map(std::uint64_t offset, std::size_t bytes) {
-    Unmap();
-    static const std::uint64_t page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
-    const std::uint64_t start = offset - offset % page;
-    const std::size_t length = static_cast<std::size_t>(offset - start) + bytes;
-    void* base = ::mmap(nullptr, length, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd_,
-                        static_cast<off_t>(start));
-    if (base == MAP_FAILED) IoFail(path_, "cannot map the spill file");
-    base_ = base;
-    length_ = length;
-    return static_cast<const char*>(base) + (offset - start);
+void SpillFile::Read(void* dst, std::uint64_t offset, std::size_t bytes) {
+    auto* p = static_cast<char*>(dst);
+    while (bytes > 0) {
+        const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) IoFail(path_, "cannot read the spill file");
+        if (n == 0) throw InternalError("spill file " + path_ + " ends inside a record");
+        p += n;
+        bytes -= static_cast<std::size_t>(n);
+        offset += static_cast<std::uint64_t>(n);
+    }
 }
 
 RecordCache::RecordCache(const std::string& path, int stride, std::size_t cacheBytes)

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "util/check.h"
+
 namespace hpray::partition {
 
 /// Appends bytes to a file through a buffer of `bufferBytes`. A full buffer is written by
@@ -34,6 +36,16 @@ class SpillWriter {
         }
         WriteAcross(data, bytes);
     }
+    /// Room for the next `bytes` of the file in the buffer (at most its size), for the
+    /// caller to fill before the next call.
+    char* Append(std::size_t bytes) {
+        if (bytes > capacity_ - used_) Ship();
+        HPRAY_CHECK_LE(bytes, capacity_ - used_);
+        char* p = buffer_.data() + used_;
+        used_ += bytes;
+        return p;
+    }
+    std::size_t BufferBytes() const { return capacity_; }
     void Flush();
     void Close();
     std::uint64_t Bytes() const { return written_ + used_; }
@@ -65,16 +77,28 @@ class SpillWriter {
 /// Reads a file sequentially through a buffer of `bufferBytes`.
 class SpillReader {
   public:
-    SpillReader(const std::string& path, std::size_t bufferBytes);
+    /// With `release`, the file's pages are given back to the system as they are read
+    /// (a spill read for the last time): the space it read lies in holes of the file.
+    SpillReader(const std::string& path, std::size_t bufferBytes, bool release = false);
     ~SpillReader();
     SpillReader(const SpillReader&) = delete;
     SpillReader& operator=(const SpillReader&) = delete;
 
     /// Copies the next `bytes` into dst; false at a clean end of file; throws InputError
     /// for a file that ends inside the request.
-    bool Read(void* dst, std::size_t bytes);
+    bool Read(void* dst, std::size_t bytes) {
+        const char* p = Take(bytes);
+        if (!p) return false;
+        std::memcpy(dst, p, bytes);
+        return true;
+    }
     /// A pointer to the next `bytes` (valid until the next call); nullptr at a clean end.
-    const char* Take(std::size_t bytes);
+    const char* Take(std::size_t bytes) {
+        if (end_ - begin_ < bytes && !Fill(bytes)) return nullptr;
+        const char* p = buffer_.data() + begin_;
+        begin_ += bytes;
+        return p;
+    }
 
   private:
     bool Fill(std::size_t need);
@@ -83,28 +107,46 @@ class SpillReader {
     std::vector<char> buffer_;
     std::size_t begin_ = 0, end_ = 0;
     bool eof_ = false;
+    bool release_ = false;
+    std::uint64_t offset_ = 0;    ///< file offset of the end of the buffered bytes
+    std::uint64_t released_ = 0;  ///< bytes at the start of the file given back
 };
 
-/// Read-only windows of a file mapped into memory (no copy out of the page cache), one at
-/// a time: mapping a window unmaps the previous one, so at most one window is resident
-/// through this object.
-class SpillMap {
+/// A spill file no longer read, whose space is given back to the system a piece at a time
+/// (holes punched from its start) so that files written meanwhile reuse its pages rather
+/// than the page cache growing; the file is removed on destruction.
+class SpillRelease {
   public:
-    explicit SpillMap(const std::string& path);
-    ~SpillMap();
-    SpillMap(const SpillMap&) = delete;
-    SpillMap& operator=(const SpillMap&) = delete;
+    explicit SpillRelease(const std::string& path);
+    ~SpillRelease();
+    SpillRelease(const SpillRelease&) = delete;
+    SpillRelease& operator=(const SpillRelease&) = delete;
 
-    /// The bytes [offset, offset + bytes) of the file, valid until the next Map or the
-    /// destructor. Throws InputError(path) when they cannot be mapped.
-    const char* Map(std::uint64_t offset, std::size_t bytes);
+    /// Gives back about the next `bytes` of the file (whole pages; nothing on a file
+    /// system without holes).
+    void Release(std::uint64_t bytes);
 
   private:
-    void Unmap();
     std::string path_;
     int fd_ = -1;
-    void* base_ = nullptr;
-    std::size_t length_ = 0;
+    std::uint64_t released_ = 0;
+};
+
+/// Random reads of a spill file (pread), for passes that skip parts of it.
+class SpillFile {
+  public:
+    explicit SpillFile(const std::string& path);
+    ~SpillFile();
+    SpillFile(const SpillFile&) = delete;
+    SpillFile& operator=(const SpillFile&) = delete;
+
+    /// Copies the bytes [offset, offset + bytes) of the file into dst; throws
+    /// InternalError when the file ends first, InputError(path) on a read error.
+    void Read(void* dst, std::uint64_t offset, std::size_t bytes);
+
+  private:
+    std::string path_;
+    int fd_ = -1;
 };
 
 /// Random access to records of `stride` doubles stored back to back in a file, through an
@@ -119,8 +161,16 @@ class RecordCache {
 
     /// Record `index`; the pointer stays valid until the next Get or Invalidate.
     const double* Get(std::int64_t index) {
-        if ((index >> blockShift_) == lastBlock_)
-            return last_ + (index & (recordsPerBlock_ - 1)) * stride_;
+        const std::int64_t b = index >> blockShift_;
+        const std::int64_t within = index & (recordsPerBlock_ - 1);
+        if (b == lastBlock_) return last_ + within * stride_;
+        if (static_cast<std::uint64_t>(b) < slotOf_.size() && slotOf_[b] >= 0) {
+            Slot& slot = slots_[slotOf_[b]];  // a cached block
+            slot.lastUse = ++clock_;
+            lastBlock_ = b;
+            last_ = slot.data.data();
+            return last_ + within * stride_;
+        }
         return Load(index);
     }
     /// Forgets every cached block (after the file grew).

@@ -551,6 +551,14 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
         constexpr std::int64_t kBatch = 4096;
         std::vector<std::int64_t> batchEnd(kBatch), batchType(kBatch), batchGhost(kBatch);
         std::int64_t batchFirst = 0, batchCount = 0;
+        // The batch's connectivity is decoded in one read too when its offsets ascend, it
+        // holds at most kBatchNodes values and the array has them all (otherwise cell by
+        // cell, which reports a broken array at the cell that finds it): values from
+        // batchNodeBase on.
+        constexpr std::int64_t kBatchNodes = std::int64_t(1) << 17;
+        std::vector<std::int64_t> batchNodes;
+        bool nodesBatched = false;
+        std::int64_t batchNodeBase = 0;
         for (std::int64_t c = 0; c < p.cells; ++c) {
             if (c == batchFirst + batchCount) {
                 batchFirst = c;
@@ -559,6 +567,20 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 offs.Read(batchEnd.data(), n);
                 types.Read(batchType.data(), n);
                 if (ghost) ghost->Read(batchGhost.data(), n);
+                std::int64_t last = previous;
+                bool ascending = true;
+                for (std::size_t i = 0; i < n && ascending; ++i) {
+                    ascending = batchEnd[i] >= last;
+                    last = batchEnd[i];
+                }
+                const std::int64_t values = last - previous;
+                nodesBatched = ascending && values <= kBatchNodes &&
+                               static_cast<std::uint64_t>(values) <= conn.Remaining();
+                if (nodesBatched) {
+                    batchNodes.resize(static_cast<std::size_t>(values));
+                    conn.Read(batchNodes.data(), batchNodes.size());
+                    batchNodeBase = previous;
+                }
             }
             const std::int64_t end = batchEnd[c - batchFirst];
             const std::int64_t type = batchType[c - batchFirst];
@@ -632,7 +654,7 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
             }
             if (cached.skip) {
                 // Consume the connectivity of a lower-dimensional cell.
-                std::int64_t left = count;
+                std::int64_t left = nodesBatched ? 0 : count;
                 while (left > 0) {
                     const std::int64_t n = std::min<std::int64_t>(left, kMaxCellNodes);
                     conn.Read(fileNodes.data(), static_cast<std::size_t>(n));
@@ -641,14 +663,19 @@ void StreamPiece(const StreamFile& sf, const PieceArrays& p, int index, StreamSt
                 ++st.stats.skippedCells;
                 continue;
             }
-            conn.Read(fileNodes.data(), static_cast<std::size_t>(count));
+            const std::int64_t* cellNodes = fileNodes.data();
+            if (nodesBatched) {
+                cellNodes = batchNodes.data() + (end - count - batchNodeBase);
+            } else {
+                conn.Read(fileNodes.data(), static_cast<std::size_t>(count));
+            }
             if (g & 1) {  // a duplicate cell of an earlier decomposition
                 ++st.stats.skippedCells;
                 continue;
             }
             const std::vector<int>& perm = *cached.perm;
             for (std::int64_t k = 0; k < count; ++k) {
-                const std::int64_t pt = fileNodes[perm[k]];
+                const std::int64_t pt = cellNodes[perm[k]];
                 if (pt < 0 || pt >= p.points)
                     Fail(f, p.connectivity->where,
                          "cell " + std::to_string(c) + " refers to point " +

@@ -1,6 +1,8 @@
 // Writing meshes as VTK XML UnstructuredGrid (.vtu), appended raw binary.
 #pragma once
 
+#include <cstddef>
+#include <functional>
 #include <string>
 
 #include "mesh/mesh.h"
@@ -22,7 +24,11 @@ std::string XmlEscape(const std::string& s);
 /// (for pieces of one .pvtu that declares it).
 /// `mesh.ghost`, when non-empty, is written as the cell array vtkGhostType (UInt8).
 /// The file is written to `path + ".tmp"` and renamed, so readers never see a partial
-/// file. Throws InputError(path) if it cannot be written.
-void WriteVtu(const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees = false);
+/// file. `written`, when given, sees every byte of the file, in order, as it is written
+/// (to checksum it without reading it back). Throws InputError(path) if it cannot be
+/// written.
+void WriteVtu(
+    const std::string& path, const Mesh& mesh, bool alwaysWriteDegrees = false,
+    const std::function<void(const char* data, std::size_t bytes)>& written = {});
 
 }  // namespace hpray

@@ -1587,6 +1587,31 @@ TEST(VtuWriter, CellsOfUnknownTypeAreWrittenAsTheLinearTypesOrAsBefore) {
     EXPECT_EQ(backB.cellFamily, curved.cellFamily);
 }
 
+TEST(VtuWriter, LargeMeshesAreWrittenChunkByChunkAndTheBytesSeen) {
+    // Enough cells (of kinds whose VTK node order differs from the internal one, and of
+    // Lagrange types, which need degrees) that the connectivity, types and degrees are
+    // produced in several chunks: the file reads back into the same mesh, and the bytes
+    // given to the observer are the file's, in order.
+    std::vector<CellKind> kinds;
+    const CellKind cycle[] = {{CellShape::Hex, 2, CellFamily::Lagrange},
+                              {CellShape::Tet, 1, CellFamily::Lagrange},
+                              {CellShape::Wedge, 2, CellFamily::Lagrange},
+                              {CellShape::Tet, 3, CellFamily::Lagrange}};
+    for (int c = 0; c < 60000; ++c) kinds.push_back(cycle[(c / 7) % 4]);
+    Mesh m = CellsOfKinds(kinds, {});
+    Field u;
+    u.name = "u";
+    for (std::int64_t p = 0; p < m.PointCount(); ++p) u.values.push_back(0.5 * p);
+    m.pointFields.push_back(u);
+    ASSERT_GT(m.connectivity.size(), 4u << 17);
+    const std::string path = (TempDir() / "xml_chunks.vtu").string();
+    std::string seen;
+    WriteVtu(path, m, false,
+             [&seen](const char* data, std::size_t bytes) { seen.append(data, bytes); });
+    EXPECT_EQ(seen, ReadBytes(path));
+    ExpectSameMesh(m, ReadVtkXml(path, {}));
+}
+
 TEST(VtuWriter, ReadersRecordTheFileCellTypes) {
     // XML, legacy and structured input: the type each cell was read as (voxels too);
     // structured grids have none.

@@ -32,6 +32,24 @@ TEST(CostModel, HullSurfaceAreasOfUnitCells) {
                 1e-14);
 }
 
+TEST(CostModel, LinearTetCostEqualsTheGeneralOne) {
+    // The partitioner's shortcut for order-1 tets gives the same doubles as the lookup by
+    // kind, on random tets of any size and orientation.
+    std::mt19937_64 rng(31);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int t = 0; t < 10000; ++t) {
+        const double scale = std::pow(10.0, (t % 13) - 6);
+        double xyz[12];
+        for (double& v : xyz) v = (t % 7) + scale * u(rng);
+        const CellCostInput general =
+            CellCostFromNodes(CellShape::Tet, 1, CellFamily::Lagrange, xyz);
+        const CellCostInput fast = LinearTetCost(xyz);
+        ASSERT_EQ(fast.area, general.area) << t;
+        ASSERT_EQ(fast.parts.setup, general.parts.setup);
+        ASSERT_EQ(fast.parts.perSegment, general.parts.perSegment);
+    }
+}
+
 TEST(CostModel, HullAreaOfHighOrderCellsUsesTheirCorners) {
     // cube-tets-1 of order 3: five tets filling the unit cube; the hulls of the four
     // corner tets have area 1.5 + sqrt(3)/2, the middle one 4 * sqrt(3)/2.

@@ -2,10 +2,13 @@
 // ownership and ghost coverage against an independent cell model, manifest validation,
 // checksums, and the front-to-back order of bricks.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <random>
@@ -396,12 +399,31 @@ TEST(Partition, OwnershipGhostsAndBoxesOnLinearAndCurvedMeshes) {
     }
 }
 
-/// One pass over `pts` in blocks of `block` centroids.
+/// One pass over `pts` in blocks of `block` centroids (every block, whatever the
+/// filter).
 partition::CentroidPass PassOver(const std::vector<partition::WeightedPoint>& pts,
                                  std::size_t block) {
-    return [&pts, block](const auto& visit) {
+    return [&pts, block](const auto& /*wanted*/, const auto& visit) {
         for (std::size_t i = 0; i < pts.size(); i += block)
             visit(pts.data() + i, std::min(block, pts.size() - i));
+    };
+}
+
+/// A pass over `pts` that leaves out the blocks of `blocks` the filter rejects (as the
+/// partitioner's pass does), adding the centroids it visits to `visited`.
+partition::CentroidPass FilteredPassOver(const std::vector<partition::WeightedPoint>& pts,
+                                         const partition::CentroidBlocks& blocks,
+                                         std::int64_t& visited) {
+    return [&pts, &blocks, &visited](const partition::BlockFilter& wanted,
+                                     const auto& visit) {
+        for (std::size_t b = 0; b < blocks.Blocks(); ++b) {
+            if (wanted && !wanted(blocks.BlockBox(b))) continue;
+            const std::size_t first = b << blocks.Shift();
+            const std::size_t count =
+                std::min(std::size_t(1) << blocks.Shift(), pts.size() - first);
+            visit(pts.data() + first, count);
+            visited += static_cast<std::int64_t>(count);
+        }
     };
 }
 
@@ -755,6 +777,173 @@ TEST(Partition, TreeBuilderGivesTheSameTreeOnOneThreadAndMany) {
             }
         }
     }
+}
+
+TEST(Partition, TreeBuilderSkipsBlocksOutsideTheSearchedSlabs) {
+    // Centroids in the order of a structured mesh (neighbours close to each other, ties
+    // on lattice planes in y and z, scattered in x) and in random order, with unequal
+    // costs. After the first pass of a level, a pass may leave out the blocks whose boxes
+    // miss every slab still searched: the tree is the same as with every pass over all
+    // centroids, and with spatially ordered centroids far fewer are visited.
+    std::mt19937 rng(23);
+    for (const bool ordered : {true, false}) {
+        std::vector<partition::WeightedPoint> pts;
+        for (int i = 0; i < 60; ++i)
+            for (int j = 0; j < 50; ++j)
+                for (int k = 0; k < 40; ++k) {
+                    const double jitter = (rng() % 1000) * 0.0009;
+                    pts.push_back({{i + jitter, j + 0.5, k + (i % 2) * 0.5},
+                                   1.0 + (rng() % 5) * 0.25});
+                }
+        if (!ordered) std::shuffle(pts.begin(), pts.end(), rng);
+        // Small boxes memory: blocks merge while they are added.
+        partition::CentroidBlocks blocks(std::size_t(24) << 7);
+        for (const auto& p : pts) blocks.Add(p.x);
+        EXPECT_GT(blocks.Shift(), 6);
+        Box root;
+        root.lo = {0, 0.5, 0};
+        root.hi = {59.9, 49.5, 39.5};
+        for (int n : {2, 5, 16, 33}) {
+            for (std::size_t limit : {std::size_t(64), std::size_t(4096)}) {
+                std::int64_t all = 0, some = 0;
+                const partition::CentroidPass full = [&](const partition::BlockFilter&,
+                                                         const auto& visit) {
+                    PassOver(pts, 4096)(nullptr, visit);
+                    all += static_cast<std::int64_t>(pts.size());
+                };
+                const KdTree a = partition::BuildKdTree(root, n, full, limit);
+                const KdTree b = partition::BuildKdTree(
+                    root, n, FilteredPassOver(pts, blocks, some), limit);
+                ASSERT_EQ(a.nodes.size(), b.nodes.size());
+                for (std::size_t k = 0; k < a.nodes.size(); ++k) {
+                    EXPECT_EQ(a.nodes[k].axis, b.nodes[k].axis) << n << " node " << k;
+                    EXPECT_EQ(a.nodes[k].split, b.nodes[k].split) << n << " node " << k;
+                    EXPECT_EQ(a.nodes[k].tieBreak, b.nodes[k].tieBreak) << n << " " << k;
+                    EXPECT_EQ(a.nodes[k].tie, b.nodes[k].tie) << n << " node " << k;
+                    EXPECT_EQ(a.nodes[k].leaf, b.nodes[k].leaf) << n << " node " << k;
+                }
+                EXPECT_LE(some, all);
+                if (ordered) {
+                    EXPECT_LT(some, all) << n << " leaves, " << limit;
+                }
+            }
+        }
+    }
+}
+
+TEST(Partition, CentroidBlocksHoldTheirCentroids) {
+    // Boxes of 64 centroids until the memory is full, then merged pairs: every centroid
+    // lies in its block's box (stored as floats rounded outwards), and the blocks cover
+    // the centroids added, the last one possibly partial.
+    std::mt19937_64 rng(29);
+    std::uniform_real_distribution<double> u(-1e3, 1e3);
+    for (const std::size_t count :
+         {std::size_t(1), std::size_t(64), std::size_t(100000)}) {
+        partition::CentroidBlocks blocks(std::size_t(24) * 100);
+        std::vector<std::array<double, 3>> xs(count);
+        for (auto& x : xs) {
+            x = {u(rng), u(rng) * 1e-7, 1.0 / 3.0 + u(rng) * 1e-12};
+            blocks.Add(x.data());
+        }
+        EXPECT_EQ(blocks.Count(), static_cast<std::int64_t>(count));
+        const std::size_t per = std::size_t(1) << blocks.Shift();
+        EXPECT_EQ(blocks.Blocks(), (count + per - 1) / per);
+        EXPECT_LE(blocks.Blocks(), 101u);
+        for (std::size_t i = 0; i < count; ++i) {
+            const Box box = blocks.BlockBox(i >> blocks.Shift());
+            for (int d = 0; d < 3; ++d) {
+                ASSERT_LE(box.lo[d], xs[i][d]) << count << " " << i;
+                ASSERT_GE(box.hi[d], xs[i][d]) << count << " " << i;
+            }
+        }
+    }
+}
+
+TEST(Partition, SpillReaderThatReleasesReadsTheSameBytes) {
+    // A spill read for the last time gives its pages back as it goes (holes punched
+    // behind the reader): the bytes read are those written, across many refills, and the
+    // file keeps its size but no longer its space.
+    ScratchDir dir("partition_spill_release");
+    const std::string path = dir / "s.bin";
+    const std::int64_t count = 3 << 20;  // 24 MiB of int64
+    {
+        partition::SpillWriter w(path, 1 << 16);
+        for (std::int64_t i = 0; i < count; ++i) {
+            if (i % 3 == 0) {
+                w.Write(&i, sizeof i);
+            } else {
+                char* out = w.Append(sizeof i);
+                std::memcpy(out, &i, sizeof i);
+            }
+        }
+    }
+    {
+        partition::SpillReader r(path, 1 << 20, /*release=*/true);
+        for (std::int64_t i = 0; i < count; ++i) {
+            std::int64_t v = -1;
+            ASSERT_TRUE(r.Read(&v, sizeof v)) << i;
+            ASSERT_EQ(v, i);
+        }
+        std::int64_t v;
+        EXPECT_FALSE(r.Read(&v, sizeof v));
+        EXPECT_EQ(std::filesystem::file_size(path), sizeof(std::int64_t) * count);
+        struct stat st {};
+        ASSERT_EQ(::stat(path.c_str(), &st), 0);
+        // Where the file system has holes (ext4, xfs, tmpfs), only the last few MiB read
+        // are still allocated (st_blocks counts 512-byte units).
+        if (st.st_blocks * 512 <
+            static_cast<std::int64_t>(sizeof(std::int64_t) * count)) {
+            EXPECT_LT(st.st_blocks * 512, 8 << 20);
+        }
+    }
+}
+
+TEST(Partition, SpillReleaseGivesBackSpaceAndRemovesTheFile) {
+    // A spill no longer read gives its space back a piece at a time (where the file
+    // system has holes) and is removed with its SpillRelease.
+    ScratchDir dir("partition_spill_space");
+    const std::string path = dir / "s.bin";
+    const std::size_t size = std::size_t(16) << 20;
+    {
+        partition::SpillWriter w(path, 1 << 20);
+        std::vector<char> bytes(size, 'x');
+        w.Write(bytes.data(), bytes.size());
+    }
+    auto allocated = [&] {
+        struct stat st {};
+        EXPECT_EQ(::stat(path.c_str(), &st), 0);
+        return static_cast<std::uint64_t>(st.st_blocks) * 512;
+    };
+    {
+        partition::SpillRelease release(path);
+        const std::uint64_t before = allocated();
+        release.Release(std::uint64_t(5) << 20);
+        release.Release(std::uint64_t(3) << 20);
+        EXPECT_EQ(std::filesystem::file_size(path), size);
+        if (before >= size) {  // a file system that allocates blocks and has holes
+            EXPECT_LE(allocated(), before - (std::uint64_t(8) << 20));
+        }
+    }
+    EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+TEST(Partition, Sha256OfPiecesEqualsTheFileChecksum) {
+    // Bytes given in pieces of any size (empty ones too) digest as the file holding them.
+    ScratchDir dir("partition_sha256");
+    std::mt19937 rng(37);
+    std::string bytes(3 << 20, '\0');
+    for (char& c : bytes) c = static_cast<char>(rng());
+    std::ofstream(dir / "f.bin", std::ios::binary) << bytes;
+    partition::Sha256 sha;
+    for (std::size_t at = 0; at < bytes.size();) {
+        const std::size_t n = std::min<std::size_t>(rng() % 100000, bytes.size() - at);
+        sha.Update(bytes.data() + at, n);
+        at += n;
+    }
+    EXPECT_EQ(sha.HexDigest(), partition::FileSha256(dir / "f.bin"));
+    partition::Sha256 empty;
+    EXPECT_EQ(empty.HexDigest(),
+              "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
 }
 
 TEST(Partition, RecordCacheReturnsTheStoredRecords) {
