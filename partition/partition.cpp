@@ -469,16 +469,19 @@ class ScanSink : public MeshSink {
     /// The most nodes of a cell.
     static constexpr int kMaxNodes = (kMaxOrder + 1) * (kMaxOrder + 1) * (kMaxOrder + 1);
 
-    /// FlushBatch's node bounds and centroid of an order-1 Lagrange tet (the most common
-    /// cell of large meshes), its four nodes unrolled: the same operations in the same
-    /// order. Its cost comes from LinearTetCosts.
-    static void LinearTetGeometry(Pending& c, const double* xyz) {
+    /// A cell's node bounds and centroid (the nodes' mean, clamped into their bounds)
+    /// from its nodeCount nodes; with N > 0 the count is N, known at compile time
+    /// (order-1 tets, the most common cells of large meshes: the loops unroll), the same
+    /// operations in the same order.
+    template <int N = 0>
+    static void NodeBounds(Pending& c, const double* xyz, int nodeCount) {
+        const int n = N > 0 ? N : nodeCount;
         double sum[3] = {0, 0, 0};
         for (int d = 0; d < 3; ++d) {
             c.lo[d] = std::numeric_limits<double>::infinity();
             c.hi[d] = -c.lo[d];
         }
-        for (int k = 0; k < 4; ++k)
+        for (int k = 0; k < n; ++k)
             for (int d = 0; d < 3; ++d) {
                 const double v = xyz[3 * k + d];
                 sum[d] += v;
@@ -486,7 +489,7 @@ class ScanSink : public MeshSink {
                 c.hi[d] = std::max(c.hi[d], v);
             }
         for (int d = 0; d < 3; ++d)
-            c.centroid[d] = std::clamp(sum[d] / 4, c.lo[d], c.hi[d]);
+            c.centroid[d] = std::clamp(sum[d] / n, c.lo[d], c.hi[d]);
     }
 
     /// The cells' geometry (node bounds, centroid, the Bernstein hull of curved cells)
@@ -516,26 +519,13 @@ class ScanSink : public MeshSink {
                     const auto family = static_cast<CellFamily>(c.r.family);
                     if (shape == CellShape::Tet && c.r.order == 1 &&
                         family == CellFamily::Lagrange) {
-                        LinearTetGeometry(c, xyz);
+                        NodeBounds<4>(c, xyz, 4);  // its cost: LinearTetCosts
                         tetXyz[nTets] = xyz;
                         tets[nTets] = &c;
                         if (++nTets == kTets) costTets();
                         continue;
                     }
-                    double sum[3] = {0, 0, 0};
-                    for (int d = 0; d < 3; ++d) {
-                        c.lo[d] = std::numeric_limits<double>::infinity();
-                        c.hi[d] = -c.lo[d];
-                    }
-                    for (int k = 0; k < nodeCount; ++k)
-                        for (int d = 0; d < 3; ++d) {
-                            const double v = xyz[3 * k + d];
-                            sum[d] += v;
-                            c.lo[d] = std::min(c.lo[d], v);
-                            c.hi[d] = std::max(c.hi[d], v);
-                        }
-                    for (int d = 0; d < 3; ++d)
-                        c.centroid[d] = std::clamp(sum[d] / nodeCount, c.lo[d], c.hi[d]);
+                    NodeBounds(c, xyz, nodeCount);
                     if (c.r.boxStored) {
                         // Curved cells may bulge beyond their nodes: the guaranteed
                         // Bernstein hull.
