@@ -758,6 +758,26 @@ WithAndWithout RenderWithAndWithoutSubCellBounds(const Mesh& mesh, const Scene& 
     return r;
 }
 
+// Over every pixel (i, j) of r's two images, p its index: the same pixels hit (fatal
+// otherwise), pixel(i, j, p); then on each hit the same depth to 1e-12 and hit(i, j, p).
+// `hits` counts the hits.
+template <class Pixel, class Hit>
+void ExpectSameHits(const WithAndWithout& r, int& hits, Pixel&& pixel, Hit&& hit) {
+    const Image &with = r.with, &without = r.without;
+    hits = 0;
+    for (int j = 0; j < with.height; ++j)
+        for (int i = 0; i < with.width; ++i) {
+            const std::size_t p = std::size_t(j) * with.width + i;
+            ASSERT_EQ(std::isfinite(with.z[p]), std::isfinite(without.z[p]))
+                << i << "," << j;
+            pixel(i, j, p);
+            if (!std::isfinite(with.z[p])) continue;
+            ++hits;
+            EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
+            hit(i, j, p);
+        }
+}
+
 // The sub-cell bounds rule out or shorten segments without changing what is found: the
 // plane x = C of the isoparametric field on strongly curved hexes, with the bounds and
 // without, gives the same hits to rounding, both on the analytic plane, while the bounds
@@ -783,21 +803,16 @@ isosurfaces:
     EXPECT_EQ(cWith.isoHits, cWithout.isoHits);
     EXPECT_EQ(cWith.rootFailures, 0);
     int hits = 0;
-    for (int j = 0; j < 48; ++j)
-        for (int i = 0; i < 48; ++i) {
-            const std::size_t p = std::size_t(j) * 48 + i;
-            ASSERT_EQ(std::isfinite(with.z[p]), std::isfinite(without.z[p]))
-                << i << "," << j;
-            EXPECT_EQ(with.isoId[p], without.isoId[p]);
-            if (!std::isfinite(with.z[p])) continue;
-            ++hits;
-            EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
+    ASSERT_NO_FATAL_FAILURE(ExpectSameHits(
+        r, hits,
+        [&](int, int, std::size_t p) { EXPECT_EQ(with.isoId[p], without.isoId[p]); },
+        [&](int i, int j, std::size_t p) {
             EXPECT_NEAR(with.r[p], without.r[p], 1e-12);
             // The first surface met is one of the two planes.
-            const CameraRay r = camera.PixelRay(i, j);
-            const double x = r.origin[0] + with.z[p] * r.direction[0];
+            const CameraRay ray = camera.PixelRay(i, j);
+            const double x = ray.origin[0] + with.z[p] * ray.direction[0];
             EXPECT_NEAR(std::min(std::abs(x - 0.37), std::abs(x - 0.81)), 0, 1e-10);
-        }
+        }));
     EXPECT_GT(hits, 300);
 }
 
@@ -815,27 +830,22 @@ TEST(IsoRender, SubTetrahedronBoundsCullSegmentsAndKeepEveryHit) {
     scene.isosurfaces[0].value = 0.25;  // R = 0.5
     const WithAndWithout r = RenderWithAndWithoutSubCellBounds(mesh, scene);
     const Camera camera(scene.camera);
-    const Image &with = r.with, &without = r.without;
+    const Image& with = r.with;
     const RenderCounters &cWith = r.cWith, &cWithout = r.cWithout;
     const double ruledOut = r.RuledOut();
     EXPECT_GT(ruledOut, 0.1 * cWithout.segments);
     EXPECT_LT(cWith.fieldEvaluations, cWithout.fieldEvaluations);
     EXPECT_EQ(cWith.isoHits, cWithout.isoHits);
     int hits = 0;
-    for (int j = 0; j < with.height; ++j)
-        for (int i = 0; i < with.width; ++i) {
-            const std::size_t p = std::size_t(j) * with.width + i;
-            ASSERT_EQ(std::isfinite(with.z[p]), std::isfinite(without.z[p]))
-                << i << "," << j;
-            if (!std::isfinite(with.z[p])) continue;
-            ++hits;
-            EXPECT_NEAR(with.z[p], without.z[p], 1e-12);
+    ASSERT_NO_FATAL_FAILURE(ExpectSameHits(
+        r, hits, [](int, int, std::size_t) {},
+        [&](int i, int j, std::size_t p) {
             bool grazing = false;
             const auto expect = RaySphere(camera.PixelRay(i, j), 0.5, grazing);
             if (!grazing && expect) {
                 EXPECT_NEAR(with.z[p], expect->t, 1e-9);
             }
-        }
+        }));
     EXPECT_GT(hits, 300);
 }
 
