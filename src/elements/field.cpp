@@ -22,6 +22,10 @@ double FieldValue(const CellGeometry& cell, const CellScalar& field, const doubl
     }
     if (cell.basis->kind == BasisKind::TetLagrange)
         return TetKernelsFor(cell.basis->order).value(field.nodal, ref);
+    if (cell.basis->order == 1 && cell.basis->kind == BasisKind::WedgeLagrange)
+        return LinearWedgeValue(field.nodal, ref);
+    if (cell.basis->order == 1 && cell.basis->kind == BasisKind::PyramidLagrange)
+        return LinearPyramidValue(field.nodal, ref);
     const int n = cell.basis->nodeCount;
     EvalBasis(*cell.basis, ref, ws.values.data(), nullptr);
     double v = 0.0;

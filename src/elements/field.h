@@ -17,6 +17,42 @@ struct CellScalar {
     int hexOrder = 0;
 };
 
+/// The field of a linear wedge (nodes in the internal order: the triangle's corners at
+/// ref[2] = 0, then at 1) at `ref`: the nodal sum with the basis values of
+/// basis.cpp's wedge at order 1, formed by the same operations in the same order, so
+/// bitwise the value of the table-driven evaluation (without its loops and dispatch).
+inline double LinearWedgeValue(const double* v, const double ref[3]) {
+    const double e = 1.0 - ref[0] - ref[1];
+    const double l0 = 1.0 - ref[2], l1 = ref[2];
+    double f = 0.0;
+    f += v[0] * (e * l0);
+    f += v[1] * (ref[0] * l0);
+    f += v[2] * (ref[1] * l0);
+    f += v[3] * (e * l1);
+    f += v[4] * (ref[0] * l1);
+    f += v[5] * (ref[1] * l1);
+    return f;
+}
+
+/// The same for the linear (rational) pyramid: base corners then apex, as basis.cpp's
+/// order-1 pyramid (collapsed coordinates a, b; the axis limit on the apex plane).
+inline double LinearPyramidValue(const double* v, const double ref[3]) {
+    const double u = 1.0 - ref[2];
+    double a = 0.5, b = 0.5;
+    if (u != 0.0) {
+        a = (ref[0] - 0.5 * ref[2]) / u;
+        b = (ref[1] - 0.5 * ref[2]) / u;
+    }
+    const double la0 = 1.0 - a, lb0 = 1.0 - b;
+    double f = 0.0;
+    f += v[0] * ((la0 * lb0) * u);
+    f += v[1] * ((a * lb0) * u);
+    f += v[2] * ((la0 * b) * u);
+    f += v[3] * ((a * b) * u);
+    f += v[4] * ref[2];
+    return f;
+}
+
 /// Field value at reference point `ref`.
 double FieldValue(const CellGeometry& cell, const CellScalar& field, const double ref[3],
                   EvalWorkspace& ws);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "elements/basis.h"
+#include "elements/field.h"
 #include "elements/geometry.h"
 #include "elements/hex_kernels.h"
 #include "elements/mesh_geometry.h"
@@ -98,6 +99,39 @@ TEST(TetKernels, EverySpecialisedKernelEqualsTheGenericPathBitwise) {
             k.map(xyz.data(), ref, w1, nullptr);
             for (int c = 0; c < 3; ++c) EXPECT_EQ(w1[c], w[c]) << "p " << p;
         }
+    }
+}
+
+// The linear wedge and pyramid values of field.h fuse the basis with the node sum:
+// bitwise what the generic path gives (EvalBasis into an array, then the sum over the
+// nodes in order), inside the cell, outside it, and on the pyramid's apex plane.
+TEST(LinearWedgePyramid, FusedValuesEqualTheGenericPathBitwise) {
+    std::mt19937_64 rng(29);
+    std::uniform_real_distribution<double> value(-2, 2), point(-0.3, 1.2);
+    for (const CellShape shape : {CellShape::Wedge, CellShape::Pyramid}) {
+        const BasisTable& basis = GetBasis(shape, 1, CellFamily::Lagrange);
+        const int n = basis.nodeCount;
+        ASSERT_EQ(n, shape == CellShape::Wedge ? 6 : 5);
+        std::vector<double> u(n), v(n);
+        int checked = 0;
+        for (int s = 0; s < 2000; ++s) {
+            for (double& x : u) x = value(rng);
+            double ref[3] = {point(rng), point(rng), point(rng)};
+            if (s % 100 == 0) ref[2] = 1.0;  // the pyramid's apex plane (a limit there)
+            if (s % 100 == 1) ref[0] = ref[1] = ref[2] = 0.0;
+            EvalBasis(basis, ref, v.data(), nullptr);
+            double f = 0;
+            for (int m = 0; m < n; ++m) f += u[m] * v[m];
+            const double fused = shape == CellShape::Wedge
+                                     ? LinearWedgeValue(u.data(), ref)
+                                     : LinearPyramidValue(u.data(), ref);
+            // Bitwise: also the sign of a zero.
+            EXPECT_EQ(std::signbit(fused), std::signbit(f));
+            EXPECT_EQ(fused, f)
+                << int(shape) << " at " << ref[0] << " " << ref[1] << " " << ref[2];
+            ++checked;
+        }
+        EXPECT_EQ(checked, 2000);
     }
 }
 
