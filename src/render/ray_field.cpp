@@ -596,6 +596,35 @@ void SegmentField::BeginCommon(const MeshGeometry& geometry, std::int64_t c, con
     }
 }
 
+bool SegmentField::RationalPole(double t0, double t1, double& pole, double& gap,
+                                double& residue) const {
+    if (linearTet_ || !affine_ || !scalar_.nodal || scalar_.hexOrder != 0 ||
+        cell_->basis->kind != BasisKind::PyramidLagrange || cell_->basis->order != 1)
+        return false;
+    // With u = 1 - t, R = r - t / 2 and S = s - t / 2 (all affine along the ray) the
+    // linear pyramid's field is v0 u + (v1 - v0) R + (v2 - v0) S + v4 t + k R S / u,
+    // k = v0 - v1 - v2 + v3 (LinearPyramidValue's basis expanded). R S / u = R(p) S(p) /
+    // (du/dx (x - p)) + a linear part, where u(p) = 0, so t = 1 and R(p) = r(p) - 1/2.
+    const double* v = scalar_.nodal;
+    const double twist = v[0] - v[1] - v[2] + v[3];
+    const double mid = 0.5 * (t0 + t1), half = 0.5 * (t1 - t0);
+    const double slope = -dref_[2] * half;  // du/dx
+    if (twist == 0 || slope == 0 || !(half > 0)) return false;
+    const double uMid = 1.0 - (ref0_[2] + mid * dref_[2]);
+    // The nearer end's u, computed directly: |p| - 1 = uMin / |slope| without the
+    // cancellation of uMid / |slope| - 1.
+    const double uMin =
+        std::min(1.0 - (ref0_[2] + t0 * dref_[2]), 1.0 - (ref0_[2] + t1 * dref_[2]));
+    if (!(uMin > 0) || !std::isfinite(uMid)) return false;
+    pole = -uMid / slope;
+    gap = uMin / std::abs(slope);
+    const double xp = pole;
+    const double rp = ref0_[0] + (mid + xp * half) * dref_[0];
+    const double sp = ref0_[1] + (mid + xp * half) * dref_[1];
+    residue = twist * (rp - 0.5) * (sp - 0.5) / slope;
+    return std::isfinite(pole) && std::isfinite(gap) && std::isfinite(residue);
+}
+
 void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {

@@ -186,6 +186,17 @@ public:
     /// linear part; every non-degenerate linear tetrahedron).
     bool Affine() const { return affine_; }
     int LineDegree() const { return lineDegree_; }
+    /// A linear pyramid with an affine map and a point field, whose basis is rational:
+    /// along the ray, with [t0, t1] mapped to x in [-1, 1], the field is
+    /// q(x) + residue / (x - pole) with q linear and |pole| > 1 (the pole is where the
+    /// line meets the apex plane, t = 1 in reference coordinates; the residue is the
+    /// bilinear base's twist times the product of how far that point lies off the apex in
+    /// r and s, over the slope of 1 - t in x). False for every other cell, and where the
+    /// field is a polynomial along the ray (no twist, or 1 - t constant along it), or the
+    /// segment reaches the apex plane. `gap` is |pole| - 1, computed without
+    /// cancellation.
+    bool RationalPole(double t0, double t1, double& pole, double& gap,
+                      double& residue) const;
 
     /// Mapping-inversion counters accumulated since the last TakeCounters.
     void AddCountersTo(RenderCounters& counters);

@@ -71,6 +71,9 @@ constexpr double kDegreeShare = 1e-5;
 /// Degrees an affine Lagrange hexahedron's series may be sampled at below its exact 3p:
 /// whole vectors of 4 samples for the line sampler.
 constexpr int kSampledDegrees[] = {3, 7, 11, 15, 19, 23, 27};
+/// Highest degree of the series of a linear pyramid's (rational) field along a ray; a
+/// segment that needs more (one passing near the apex plane) takes the general path.
+constexpr int kMaxRationalDegree = 32;
 
 /// Legendre coefficients from values at the equispaced nodes y_i = 2 i / p - 1 of
 /// [-1, 1]: the inverse of V_ij = P_j(y_i) (row-major, (p + 1)^2), by Gauss-Jordan with
@@ -699,6 +702,12 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
                     st.valueExit = p.p(seg.tExit);
                 }
             }
+        } else if (double pole, gap, residue;
+                   sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue) &&
+                   ProjectRational(f, seg, gap, residue)) {
+            // A linear pyramid: its rational field's series to below the rounding noise.
+            st.bySeries = true;
+            st.error = std::max(st.error, pieces_[f][0].eps);
         }
         allLinear = allLinear && st.linear;
         allSeries = allSeries && (st.linear || st.bySeries);
@@ -848,6 +857,12 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
         if (sampled) fieldSamples_ += n + 1;
     }
     if (!sampled) sf.SampleBatch(ts, n + 1, scratch_.data());
+    SeriesFromSamples(f, seg, n);
+}
+
+void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
+    const VolumeSetup& s = *setup_;
+    const double* ts = scratch_.data() + n + 1;
     double scale = 0;
     for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(scratch_[i]));
     sampleT_.assign(ts, ts + n + 1);
@@ -873,6 +888,51 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
         c.pop_back();
     }
     truncated_[f] = dropped;
+}
+
+bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
+                                       double residue) {
+    const VolumeSetup& s = *setup_;
+    // On the segment mapped to x in [-1, 1] the field is q(x) + C / (x - p) with q linear
+    // (SegmentField::RationalPole). The Chebyshev coefficients of 1 / (x - p), |p| > 1,
+    // are 2 rho^-k / sqrt(p^2 - 1) in magnitude (k >= 1), rho = |p| + sqrt(p^2 - 1): the
+    // truncation after degree n misses by at most K rho^-(n+1), K = 2 |C| / (sqrt(p^2 -
+    // 1) (1 - 1 / rho)), and the interpolant at the Legendre-Gauss-Lobatto nodes of
+    // degree n by at most kLebesgueBound times that (twice, for the rounding of this
+    // bound). The lowest degree whose miss is below the level of the trailing
+    // coefficients ProjectExact drops as noise.
+    const double root = std::sqrt(gap * (gap + 2));
+    const double rho = 1 + gap + root;
+    const double K = 2 * std::abs(residue) / (root * (1 - 1 / rho));
+    const Interval& range = (*s.ranges[f])[seg.cell];
+    const double target =
+        kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+    const double lead = 2 * kLebesgueBound * K;
+    int n = 2;
+    if (lead > target) {
+        if (!(rho > 1)) return false;
+        const double need = std::ceil(std::log(lead / target) / std::log(rho)) - 1;
+        if (!(need <= kMaxRationalDegree)) return false;
+        n = std::max(2, static_cast<int>(need));
+    }
+    double miss = lead * std::pow(rho, -(n + 1));
+    if (!(miss <= target)) {
+        // The logarithms' rounding left the degree one short.
+        ++n;
+        miss = lead * std::pow(rho, -(n + 1));
+        if (n > kMaxRationalDegree || !(miss <= target)) return false;
+    }
+    const LglRule& rule = LglNodes(n);
+    const double mid = 0.5 * (seg.tEnter + seg.tExit),
+                 half = 0.5 * (seg.tExit - seg.tEnter);
+    scratch_.resize(2 * (n + 1));
+    double* ts = scratch_.data() + n + 1;
+    for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
+    field_[f].SampleBatch(ts, n + 1, scratch_.data());
+    SeriesFromSamples(f, seg, n);
+    pieces_[f][0].eps += miss;
+    unresolved_[f] = miss;
+    return true;
 }
 
 void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {

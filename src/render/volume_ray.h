@@ -261,6 +261,15 @@ class VolumeRayMarcher {
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
     /// into pieces_[f].
     void ProjectExact(int f, const MeshGeometry& geometry, const Segment& seg);
+    /// The series of field f on the segment from the values at the n + 1 Legendre-Gauss-
+    /// Lobatto nodes in scratch_ (values, then the nodes' t): pieces_[f], its rounding
+    /// as eps, trailing coefficients below the noise dropped into truncated_[f].
+    void SeriesFromSamples(int f, const Segment& seg, int n);
+    /// A linear pyramid's field (SegmentField::RationalPole) as one series whose miss,
+    /// bounded from the pole, is below the noise ProjectExact drops: pieces_[f], with the
+    /// miss in its eps and unresolved_[f]. False (nothing set) where that needs a degree
+    /// above kMaxRationalDegree.
+    bool ProjectRational(int f, const Segment& seg, double gap, double residue);
 
     const VolumeSetup* setup_ = nullptr;
     Ray ray_;
