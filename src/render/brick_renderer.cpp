@@ -428,9 +428,11 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         marcher_.BeginRay(*setup.volume, ray, segments_.front().tEnter,
                           segments_.back().tExit);
     bool volumeSeen = false;
-    // A volume alone on linear tetrahedra: their segments in one call each.
-    const bool linearTets = facePoints && setup.isos.empty() && setup.slices.empty() &&
-                            !costSamples && !setup.isoCells;
+    // The volume on linear tetrahedra: their segments in one call each, except where an
+    // isosurface may cross one (its value in the cell's guaranteed range of its field).
+    const bool linearTets =
+        facePoints && setup.slices.empty() && !costSamples && !setup.isoCells;
+    const bool anyIso = !setup.isos.empty();
     for (std::size_t si = 0; si < segments_.size(); ++si) {
         const Segment& seg = segments_[si];
         // A clip plane through a face meets the ray a few ulps off the face: the sliver it
@@ -442,7 +444,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             recorder.Done(si);
             continue;
         }
-        if (linearTets) {
+        if (linearTets && !(anyIso && IsoSourceRelevant(setup, seg))) {
             using R = VolumeRayMarcher::LinearTetResult;
             const R r = marcher_.LinearTet(*setup.geometry, seg, ends_[si], composite);
             if (r == R::kEmpty) {
@@ -454,9 +456,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                 if (r == R::kStop) break;
                 continue;
             }
-            // What LinearTet queued comes first.
-            if (marcher_.FlushLinearTets(composite)) break;
         }
+        // What LinearTet queued comes first.
+        if (linearTets && marcher_.FlushLinearTets(composite)) break;
         // The sources of this segment: isosurfaces whose field's guaranteed range holds
         // their value, slice planes it owns, and the volume unless its transfer functions
         // map the cell's guaranteed ranges to nothing (empty-space skipping).

@@ -560,6 +560,53 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
     }
 }
 
+// With isosurfaces in the scene, linear tetrahedra whose cells no isovalue can cross
+// still take the lean path (queued pieces), and those an isosurface may cross the general
+// one, after the queue: the image is bitwise that of the general path for every segment
+// (which a slice plane forces, here one outside the data, which draws nothing).
+TEST(VolumeLinear, LeanPathBesideIsosurfacesEqualsTheGeneralPathBitwise) {
+    Mesh mesh =
+        testing::GridMesh(6, 0.25, [](int, int, int) { return testing::CubeCut::Tets5; });
+    Field u{"u", Association::Point, 1, {}};
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        const double* x = &mesh.points[3 * i];
+        u.values.push_back(x[0] + 2 * x[1] + 3 * x[2] + 0.3 * std::sin(7 * x[0]));
+    }
+    mesh.pointFields.push_back(std::move(u));
+    for (const char* opacity : {"0.4", "1.0"}) {
+        Scene scene = MakeScene(std::string(kLinearScene) + R"(
+isosurfaces:
+  - {field: u, value: 2.1, color: [0.9, 0.6, 0.2], opacity: )" +
+                                opacity + R"(}
+  - {field: u, value: 3.4, color: [0.2, 0.6, 0.9], opacity: 0.5}
+)");
+        scene.volume->extinctionField = "u";
+        RenderStats lean, general;
+        const Image a = RenderMeshJob(mesh, scene, lean);
+        scene.slices.push_back(MakeScene(R"(
+data: {mesh: "builtin:cube-tets-4"}
+slices:
+  - {point: [0, 0, 9], normal: [0, 0, 1], field: u, color_tf: [[0, 1, 1, 1]]}
+)")
+                                   .slices[0]);
+        const Image b = RenderMeshJob(mesh, scene, general);
+        ASSERT_EQ(a.PixelCount(), b.PixelCount());
+        int volume = 0;
+        for (std::size_t p = 0; p < a.PixelCount(); ++p) {
+            EXPECT_EQ(a.r[p], b.r[p]) << p;
+            EXPECT_EQ(a.g[p], b.g[p]) << p;
+            EXPECT_EQ(a.b[p], b.b[p]) << p;
+            EXPECT_EQ(a.a[p], b.a[p]) << p;
+            EXPECT_EQ(a.volError[p], b.volError[p]) << p;
+            EXPECT_EQ(a.z[p], b.z[p]) << p;
+            volume += a.a[p] > 0;
+        }
+        EXPECT_EQ(lean.counters.isoHits, general.counters.isoHits);
+        EXPECT_GT(lean.counters.isoHits, 50);
+        EXPECT_GT(volume, 200);
+    }
+}
+
 TEST(VolumeLinear, WilhelmsVanGelderOnTwoFieldsMatchesReference) {
     const Mesh mesh = CubeTetsTwoFields(4);
     Scene scene = MakeScene(kLinearScene);
