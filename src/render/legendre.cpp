@@ -1,6 +1,10 @@
 // Legendre–Gauss–Lobatto rules and Legendre series arithmetic.
 #include "render/legendre.h"
 
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -327,15 +331,43 @@ LegendreSeries InterpolateLgl(const double* values, int n, double a, double b) {
 }
 
 namespace {
+#if defined(__AVX2__) && defined(__FMA__)
+// ApplyTransform's sums for rows of V whole vectors, held in registers across the rows:
+// per lane the same fused multiply-adds in the same order.
+template <int V>
+void TransformRows(const double* m, int stride, const double* values, int n, double* c) {
+    __m256d acc[V];
+    for (int q = 0; q < V; ++q) acc[q] = _mm256_setzero_pd();
+    for (int i = 0; i <= n; ++i, m += stride) {
+        const __m256d v = _mm256_set1_pd(values[i]);
+        for (int q = 0; q < V; ++q)
+            acc[q] = _mm256_fmadd_pd(_mm256_loadu_pd(m + 4 * q), v, acc[q]);
+    }
+    for (int q = 0; q < V; ++q) _mm256_storeu_pd(c + 4 * q, acc[q]);
+}
+#endif
+
 // The series of degree n on [a, b] whose coefficients are the transform applied to the
-// values: c += value_i * row i of transformByNode (vectorised over k, the sums in a local
-// array the compiler keeps in registers; rows padded to whole vectors).
+// values: c += value_i * row i of transformByNode (vectorised over k; rows padded to
+// whole vectors, up to 8 of them summed in registers).
 void ApplyTransform(const std::vector<double>& transformByNode, int stride,
                     const double* values, int n, double a, double b, LegendreSeries& s) {
     s.a = a;
     s.b = b;
     double c[kMaxLegendreDegree + 4] = {};
     const double* m = transformByNode.data();
+#if defined(__AVX2__) && defined(__FMA__)
+    using Rows = void (*)(const double*, int, const double*, int, double*);
+    static constexpr Rows kRows[9] = {
+        nullptr,           &TransformRows<1>, &TransformRows<2>,
+        &TransformRows<3>, &TransformRows<4>, &TransformRows<5>,
+        &TransformRows<6>, &TransformRows<7>, &TransformRows<8>};
+    if (stride % 4 == 0 && stride / 4 <= 8) {
+        kRows[stride / 4](m, stride, values, n, c);
+        s.c.assign(c, c + n + 1);
+        return;
+    }
+#endif
     for (int i = 0; i <= n; ++i, m += stride) {
         const double v = values[i];
         for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);

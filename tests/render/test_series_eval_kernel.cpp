@@ -2,6 +2,7 @@
 // ones of render/legendre.h, bitwise, on random series, intervals and points.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -57,6 +58,31 @@ TEST(SeriesEvalKernel, RefusesSeriesOnDifferentIntervals) {
     q.b = 2;
     double t = 0.5, a = 0, b = 0;
     EXPECT_FALSE(EvalPairKernel(p, q, &t, 1, &a, &b));
+}
+
+// The interpolation transform of InterpolateLgl (register-blocked rows where the build
+// has AVX2) gives bitwise the sums of its definition, coefficient k = sum_i value_i times
+// row i of transformByNode, fused multiply-adds in the order of i, for every degree; and
+// its interpolant reproduces the values at the nodes.
+TEST(SeriesEvalKernel, LglTransformIsItsDefinitionBitwise) {
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> value(-3, 3);
+    for (int n = 1; n <= kMaxLegendreDegree; ++n) {
+        const LglRule& rule = LglNodes(n);
+        std::vector<double> v(n + 1);
+        for (double& x : v) x = value(rng);
+        LegendreSeries s;
+        InterpolateLgl(v.data(), n, -0.5, 2.0, s);
+        ASSERT_EQ(int(s.c.size()), n + 1);
+        for (int k = 0; k <= n; ++k) {
+            double c = 0;
+            for (int i = 0; i <= n; ++i)
+                c = std::fma(rule.transformByNode[i * rule.transformStride + k], v[i], c);
+            EXPECT_EQ(s.c[k], c) << "n " << n << " k " << k;
+        }
+        for (int i = 0; i <= n; ++i)
+            EXPECT_NEAR(s(-0.5 + 1.25 * (rule.nodes[i] + 1)), v[i], 1e-12) << n;
+    }
 }
 
 }  // namespace
