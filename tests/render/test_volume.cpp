@@ -466,11 +466,9 @@ TEST(VolumeLinear, GradientBoundOfATetrahedronHoldsTheTrueGradient) {
     EXPECT_GT(flat, 1000);
 }
 
-// The lean path of linear tetrahedra (VolumeRayMarcher::LinearTet, taken when one point
-// field drives a volume alone; its pieces queued and composited in batches) gives bitwise
-// the pixel of the general one (BeginSegment and Integrate per segment), stops where it
-// stops, and takes nearly every segment that holds something.
-TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
+// Linear tetrahedra of a jittered 6^3 grid with u = x + 2y + 3z + 0.3 sin(7x) at the
+// nodes.
+Mesh JitteredTetsWithWavyField() {
     Mesh mesh =
         testing::GridMesh(6, 0.25, [](int, int, int) { return testing::CubeCut::Tets5; });
     Field u{"u", Association::Point, 1, {}};
@@ -479,6 +477,15 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
         u.values.push_back(x[0] + 2 * x[1] + 3 * x[2] + 0.3 * std::sin(7 * x[0]));
     }
     mesh.pointFields.push_back(std::move(u));
+    return mesh;
+}
+
+// The lean path of linear tetrahedra (VolumeRayMarcher::LinearTet, taken when one point
+// field drives a volume alone; its pieces queued and composited in batches) gives bitwise
+// the pixel of the general one (BeginSegment and Integrate per segment), stops where it
+// stops, and takes nearly every segment that holds something.
+TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
+    const Mesh mesh = JitteredTetsWithWavyField();
     const MeshGeometry geometry = MeshGeometry::Build(mesh);
     const BrickTraverser traverser(Brick::WholeMesh(mesh));
     ASSERT_TRUE(traverser.FacePoints());
@@ -565,14 +572,7 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
 // one, after the queue: the image is bitwise that of the general path for every segment
 // (which a slice plane forces, here one outside the data, which draws nothing).
 TEST(VolumeLinear, LeanPathBesideIsosurfacesEqualsTheGeneralPathBitwise) {
-    Mesh mesh =
-        testing::GridMesh(6, 0.25, [](int, int, int) { return testing::CubeCut::Tets5; });
-    Field u{"u", Association::Point, 1, {}};
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
-        const double* x = &mesh.points[3 * i];
-        u.values.push_back(x[0] + 2 * x[1] + 3 * x[2] + 0.3 * std::sin(7 * x[0]));
-    }
-    mesh.pointFields.push_back(std::move(u));
+    const Mesh mesh = JitteredTetsWithWavyField();
     for (const char* opacity : {"0.4", "1.0"}) {
         Scene scene = MakeScene(std::string(kLinearScene) + R"(
 isosurfaces:
