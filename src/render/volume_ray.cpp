@@ -991,9 +991,18 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];
-    bool any = false;
-    forEachBreakpoint(range.lo, range.hi, [&](double) { any = true; });
-    if (!any) return;
+    // The same control points ascending, without repeats: those of the one list, merged
+    // once in the set-up, that this field drives.
+    const std::vector<double>& ascending =
+        f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
+               : s.extinctionTf.Scalars();
+    levels_.clear();
+    for (const double b : ascending) {
+        if (!(b < range.hi)) break;
+        if (b > range.lo && (levels_.empty() || levels_.back() != b))
+            levels_.push_back(b);
+    }
+    if (levels_.empty()) return;
     SegmentField& sf = field_[f];
     if (pieces_[f].empty()) {
         ProjectionOptions projection = s.projection;
@@ -1010,10 +1019,6 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         // The series is the field up to its rounding (the interpolant of a polynomial of
         // its degree): its crossings of all the breakpoints at once, found on it, which
         // costs no field evaluation.
-        levels_.clear();
-        forEachBreakpoint(range.lo, range.hi, [&](double b) { levels_.push_back(b); });
-        std::sort(levels_.begin(), levels_.end());
-        levels_.erase(std::unique(levels_.begin(), levels_.end()), levels_.end());
         const double tol =
             std::max(s.roots.rootTolerance * (seg.tExit - seg.tEnter),
                      4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
