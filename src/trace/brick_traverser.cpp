@@ -2191,10 +2191,10 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                     // and the next pending one entered where this one leaves.
                     if (!pending->exit.Valid()) pending->enter.v[0] = -1;
                     ends->emplace_back();
-                    ends->back().enter = (ends->end() - 2)->exit;
+                    ends->back().enter.SetFrom((ends->end() - 2)->exit);
                 }
             } else if (pending) {
-                pending->enter = pending->exit;
+                pending->enter.SetFrom(pending->exit);
             }
             tCur = tOut;
             if (tOut >= tHi) return true;

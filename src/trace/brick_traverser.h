@@ -97,21 +97,32 @@ struct TraceCounters {
 /// cornerError), off[2] along it (the rounding of t's sum; with a factor 4 eps on the
 /// sums of w_k |coordinate|).
 struct FacePoint {
-    std::int32_t v[3] = {-1, -1, -1};  ///< v[0] < 0: not available
-    double w[3] = {0, 0, 0};
-    double t = 0;
-    double off[3] = {0, 0, 0};
+    /// Not available. Every other member is set together with v (MakeFacePoint) and read
+    /// only when Valid: the walk makes two per segment, none of them zero-filled first.
+    FacePoint() { v[0] = -1; }
+    std::int32_t v[3];  ///< v[0] < 0: not available
+    double w[3];
+    double t;
+    double off[3];
     /// Bound of the error of each corner's x and y (ray frame) against the exact
     /// transformation of its world position.
-    double cornerError = 0;
+    double cornerError;
 
     bool Valid() const { return v[0] >= 0; }
+    /// Becomes `other`, or not available where it is not: copies only set members.
+    void SetFrom(const FacePoint& other) {
+        if (other.Valid())
+            *this = other;
+        else
+            v[0] = -1;
+    }
 };
 
 /// The face points where a segment's ray enters and leaves its cell (walked linear
 /// tetrahedra only; elsewhere not Valid). A segment clipped to a box or range starts or
 /// ends between them.
 struct SegmentEnds {
+    SegmentEnds() {}  // user-provided: a new element is not zero-filled (see FacePoint)
     FacePoint enter, exit;
 };
 
