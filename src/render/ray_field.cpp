@@ -609,13 +609,21 @@ bool SegmentField::RationalPole(double t0, double t1, double& pole, double& gap,
     const double twist = v[0] - v[1] - v[2] + v[3];
     const double mid = 0.5 * (t0 + t1), half = 0.5 * (t1 - t0);
     const double slope = -dref_[2] * half;  // du/dx
-    if (twist == 0 || slope == 0 || !(half > 0)) return false;
+    if (!(half > 0)) return false;
     const double uMid = 1.0 - (ref0_[2] + mid * dref_[2]);
     // The nearer end's u, computed directly: |p| - 1 = uMin / |slope| without the
     // cancellation of uMid / |slope| - 1.
     const double uMin =
         std::min(1.0 - (ref0_[2] + t0 * dref_[2]), 1.0 - (ref0_[2] + t1 * dref_[2]));
     if (!(uMin > 0) || !std::isfinite(uMid)) return false;
+    if (twist == 0 || slope == 0) {
+        // No rational part: the field is linear in the reference point (no twist), or
+        // 1 - t is constant along the line and R S / u a quadratic. A polynomial of
+        // degree at most 2 along the ray: the pole at infinity.
+        pole = gap = std::numeric_limits<double>::infinity();
+        residue = 0;
+        return true;
+    }
     pole = -uMid / slope;
     gap = uMin / std::abs(slope);
     const double xp = pole;

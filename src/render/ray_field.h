@@ -191,10 +191,10 @@ public:
     /// q(x) + residue / (x - pole) with q linear and |pole| > 1 (the pole is where the
     /// line meets the apex plane, t = 1 in reference coordinates; the residue is the
     /// bilinear base's twist times the product of how far that point lies off the apex in
-    /// r and s, over the slope of 1 - t in x). False for every other cell, and where the
-    /// field is a polynomial along the ray (no twist, or 1 - t constant along it), or the
-    /// segment reaches the apex plane. `gap` is |pole| - 1, computed without
-    /// cancellation.
+    /// r and s, over the slope of 1 - t in x). Where the field is a polynomial of degree
+    /// at most 2 along the ray (no twist, or 1 - t constant along it) the pole and gap
+    /// are infinite and the residue 0. False for every other cell, and where the segment
+    /// reaches the apex plane. `gap` is |pole| - 1, computed without cancellation.
     bool RationalPole(double t0, double t1, double& pole, double& gap,
                       double& residue) const;
 

@@ -903,7 +903,9 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
     // coefficients ProjectExact drops as noise.
     const double root = std::sqrt(gap * (gap + 2));
     const double rho = 1 + gap + root;
-    const double K = 2 * std::abs(residue) / (root * (1 - 1 / rho));
+    // No residue (a polynomial of degree <= 2 along the ray, the pole at infinity): K =
+    // 0.
+    const double K = residue == 0 ? 0.0 : 2 * std::abs(residue) / (root * (1 - 1 / rho));
     const Interval& range = (*s.ranges[f])[seg.cell];
     const double target =
         kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
@@ -915,7 +917,7 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
         if (!(need <= kMaxRationalDegree)) return false;
         n = std::max(2, static_cast<int>(need));
     }
-    double miss = lead * std::pow(rho, -(n + 1));
+    double miss = lead == 0 ? 0.0 : lead * std::pow(rho, -(n + 1));
     if (!(miss <= target)) {
         // The logarithms' rounding left the degree one short.
         ++n;
