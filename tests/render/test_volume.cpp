@@ -964,48 +964,58 @@ TEST(VolumePyramids, RationalPoleAndTheInterpolationBound) {
     const BrickTraverser traverser(Brick::WholeMesh(mesh));
     std::vector<Segment> segs;
     SegmentField sf;
-    int poles = 0, tight = 0;
-    for (int trial = 0; trial < 400; ++trial) {
-        const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
-                                            {gauss(rng), gauss(rng), gauss(rng)});
-        traverser.Trace(ray, 0, 1e30, segs);
-        for (const Segment& seg : segs) {
-            sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
-            double pole, gap, residue;
-            if (!sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue)) continue;
-            ++poles;
-            EXPECT_NEAR(std::abs(pole) - 1, gap, 1e-9 * std::abs(pole));
-            ASSERT_GT(gap, 0);
-            const double mid = 0.5 * (seg.tEnter + seg.tExit),
-                         half = 0.5 * (seg.tExit - seg.tEnter);
-            auto rest = [&](double x) {
-                return sf(mid + half * x) - residue / (x - pole);
-            };
-            // Linear: second differences vanish to rounding (relative to the terms).
-            const double scale = 1 + std::abs(residue) / gap;
-            for (double x : {-0.9, -0.3, 0.2, 0.7})
-                EXPECT_NEAR(rest(x - 0.1) - 2 * rest(x) + rest(x + 0.1), 0,
-                            1e-11 * scale);
-            // The interpolation miss against the bound, for a few degrees.
-            const double root = std::sqrt(gap * (gap + 2)), rho = 1 + gap + root;
-            const double K = 2 * std::abs(residue) / (root * (1 - 1 / rho));
-            for (int deg : {2, 5, 9, 16}) {
-                const LglRule& rule = LglNodes(deg);
-                std::vector<double> values(deg + 1);
-                for (int i = 0; i <= deg; ++i) values[i] = sf(mid + half * rule.nodes[i]);
-                LegendreSeries p;
-                InterpolateLgl(values.data(), deg, seg.tEnter, seg.tExit, p);
-                double miss = 0;
-                for (int k = 0; k <= 200; ++k) {
-                    const double t = seg.tEnter + (seg.tExit - seg.tEnter) * k / 200;
-                    miss = std::max(miss, std::abs(p(t) - sf(t)));
-                }
-                const double bound = 4 * K * std::pow(rho, -(deg + 1));
-                EXPECT_LE(miss, bound + 1e-13) << trial << " degree " << deg;
-                if (miss > 1e-3 * bound && bound > 1e-12) ++tight;
+    // visit(trial, segment) for the segments of `rays` random rays, sf begun on each.
+    auto forEachSegment = [&](int rays, auto&& visit) {
+        for (int trial = 0; trial < rays; ++trial) {
+            const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
+                                                {gauss(rng), gauss(rng), gauss(rng)});
+            traverser.Trace(ray, 0, 1e30, segs);
+            for (const Segment& seg : segs) {
+                sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
+                visit(trial, seg);
             }
         }
-    }
+    };
+    // The largest |p - f| at 201 points of the segment, p the interpolant of degree deg.
+    auto interpolationMiss = [&](const Segment& seg, int deg) {
+        const double mid = 0.5 * (seg.tEnter + seg.tExit),
+                     half = 0.5 * (seg.tExit - seg.tEnter);
+        const LglRule& rule = LglNodes(deg);
+        std::vector<double> values(deg + 1);
+        for (int i = 0; i <= deg; ++i) values[i] = sf(mid + half * rule.nodes[i]);
+        LegendreSeries p;
+        InterpolateLgl(values.data(), deg, seg.tEnter, seg.tExit, p);
+        double miss = 0;
+        for (int k = 0; k <= 200; ++k) {
+            const double t = seg.tEnter + (seg.tExit - seg.tEnter) * k / 200;
+            miss = std::max(miss, std::abs(p(t) - sf(t)));
+        }
+        return miss;
+    };
+    int poles = 0, tight = 0;
+    forEachSegment(400, [&](int trial, const Segment& seg) {
+        double pole, gap, residue;
+        if (!sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue)) return;
+        ++poles;
+        EXPECT_NEAR(std::abs(pole) - 1, gap, 1e-9 * std::abs(pole));
+        ASSERT_GT(gap, 0);
+        const double mid = 0.5 * (seg.tEnter + seg.tExit),
+                     half = 0.5 * (seg.tExit - seg.tEnter);
+        auto rest = [&](double x) { return sf(mid + half * x) - residue / (x - pole); };
+        // Linear: second differences vanish to rounding (relative to the terms).
+        const double scale = 1 + std::abs(residue) / gap;
+        for (double x : {-0.9, -0.3, 0.2, 0.7})
+            EXPECT_NEAR(rest(x - 0.1) - 2 * rest(x) + rest(x + 0.1), 0, 1e-11 * scale);
+        // The interpolation miss against the bound, for a few degrees.
+        const double root = std::sqrt(gap * (gap + 2)), rho = 1 + gap + root;
+        const double K = 2 * std::abs(residue) / (root * (1 - 1 / rho));
+        for (int deg : {2, 5, 9, 16}) {
+            const double miss = interpolationMiss(seg, deg);
+            const double bound = 4 * K * std::pow(rho, -(deg + 1));
+            EXPECT_LE(miss, bound + 1e-13) << trial << " degree " << deg;
+            if (miss > 1e-3 * bound && bound > 1e-12) ++tight;
+        }
+    });
     EXPECT_GT(poles, 300);
     EXPECT_GT(tight, 100);  // the bound is not vacuous: often within 1000x of the miss
 
@@ -1016,30 +1026,14 @@ TEST(VolumePyramids, RationalPoleAndTheInterpolationBound) {
         mesh.pointFields[0].values[i] = x[0] + 2 * x[1] - 3 * x[2];
     }
     int linear = 0;
-    for (int trial = 0; trial < 100; ++trial) {
-        const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
-                                            {gauss(rng), gauss(rng), gauss(rng)});
-        traverser.Trace(ray, 0, 1e30, segs);
-        for (const Segment& seg : segs) {
-            sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
-            double pole, gap, residue;
-            ASSERT_TRUE(sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue));
-            EXPECT_EQ(residue, 0);
-            EXPECT_TRUE(std::isinf(pole) && std::isinf(gap));
-            const double mid = 0.5 * (seg.tEnter + seg.tExit),
-                         half = 0.5 * (seg.tExit - seg.tEnter);
-            const LglRule& rule = LglNodes(2);
-            double values[3];
-            for (int i = 0; i <= 2; ++i) values[i] = sf(mid + half * rule.nodes[i]);
-            LegendreSeries p;
-            InterpolateLgl(values, 2, seg.tEnter, seg.tExit, p);
-            for (int k = 0; k <= 50; ++k) {
-                const double t = seg.tEnter + (seg.tExit - seg.tEnter) * k / 50;
-                EXPECT_NEAR(p(t), sf(t), 1e-14);
-            }
-            ++linear;
-        }
-    }
+    forEachSegment(100, [&](int trial, const Segment& seg) {
+        double pole, gap, residue;
+        ASSERT_TRUE(sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue)) << trial;
+        EXPECT_EQ(residue, 0);
+        EXPECT_TRUE(std::isinf(pole) && std::isinf(gap));
+        EXPECT_LE(interpolationMiss(seg, 2), 1e-14) << trial;
+        ++linear;
+    });
     EXPECT_GT(linear, 100);
 }
 
