@@ -444,7 +444,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             recorder.Done(si);
             continue;
         }
-        if (linearTets && !(anyIso && IsoSourceRelevant(setup, seg))) {
+        // Isosurfaces whose field's guaranteed range in the cell holds their value.
+        const bool isoHere = anyIso && IsoSourceRelevant(setup, seg);
+        if (linearTets && !isoHere) {
             using R = VolumeRayMarcher::LinearTetResult;
             const R r = marcher_.LinearTet(*setup.geometry, seg, ends_[si], composite);
             if (r == R::kEmpty) {
@@ -463,7 +465,6 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         // their value, slice planes it owns, and the volume unless its transfer functions
         // map the cell's guaranteed ranges to nothing (empty-space skipping).
         events_.clear();
-        const bool isoHere = IsoSourceRelevant(setup, seg);
         const bool sliceHere = SliceSource(setup, si, span, tMin, tMax);
         const bool volumeHere =
             hasVolume &&

@@ -903,8 +903,7 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
     // coefficients ProjectExact drops as noise.
     const double root = std::sqrt(gap * (gap + 2));
     const double rho = 1 + gap + root;
-    // No residue (a polynomial of degree <= 2 along the ray, the pole at infinity): K =
-    // 0.
+    // No residue (a polynomial of degree <= 2, the pole at infinity): nothing missed.
     const double K = residue == 0 ? 0.0 : 2 * std::abs(residue) / (root * (1 - 1 / rho));
     const Interval& range = (*s.ranges[f])[seg.cell];
     const double target =
