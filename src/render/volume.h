@@ -8,9 +8,35 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <vector>
 
 namespace hpray {
+
+/// At most kMax ascending values, padded with NaN (which no comparison counts): how many
+/// are <= s, or < s, by a fixed number of comparisons (two vectors of four where the
+/// build has them) instead of a loop whose branches go either way from call to call.
+struct ShortAscending {
+    static constexpr int kMax = 8;
+    bool valid = false;  ///< the list had at most kMax values
+    alignas(32) std::array<double, kMax> v{};
+    /// From an ascending list (valid only when it has at most kMax values).
+    void Set(const std::vector<double>& ascending) {
+        valid = ascending.size() <= std::size_t(kMax);
+        v.fill(std::numeric_limits<double>::quiet_NaN());
+        if (valid) std::copy(ascending.begin(), ascending.end(), v.begin());
+    }
+    int CountAtMost(double s) const {
+        int k = 0;
+        for (int i = 0; i < kMax; ++i) k += v[i] <= s;
+        return k;
+    }
+    int CountBelow(double s) const {
+        int k = 0;
+        for (int i = 0; i < kMax; ++i) k += v[i] < s;
+        return k;
+    }
+};
 
 /// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
 /// 3: colour), clamped to its first and last control values outside its control points.
@@ -25,6 +51,8 @@ class PiecewiseLinearTf {
     int Channels() const { return channels_; }
     int Size() const { return static_cast<int>(scalars_.size()); }
     const std::vector<double>& Scalars() const { return scalars_; }
+    /// Scalars() for fixed-length counts (valid for at most ShortAscending::kMax points).
+    const ShortAscending& ShortScalars() const { return short_; }
 
     /// The linear piece holding s: -1 left of the first control point, Size() - 1 at or
     /// right of the last, else k with scalars[k] <= s < scalars[k + 1]. NaN maps to -1.
@@ -64,6 +92,7 @@ class PiecewiseLinearTf {
     std::vector<double> values_;
     int channels_ = 1;
     std::vector<double> steepest_;  ///< SteepestOn(k) at k + 1
+    ShortAscending short_;          ///< the control points, for IntervalOf
 };
 
 // Called per ray piece: inline.
@@ -71,6 +100,7 @@ inline int PiecewiseLinearTf::IntervalOf(double s) const {
     // Short functions: the number of control points <= s, without branches (a search's
     // branches go either way from piece to piece along a ray). The same result: -1 below
     // the first point and for NaN, Size() - 1 from the last on.
+    if (short_.valid) return short_.CountAtMost(s) - 1;
     if (scalars_.size() <= 16) {
         int k = -1;
         for (const double x : scalars_) k += x <= s;

@@ -495,6 +495,7 @@ VolumeSetup MakeVolumeSetup(const Mesh& mesh, const Scene& scene, FieldCache& ca
     std::sort(s.breakpoints.begin(), s.breakpoints.end());
     s.breakpoints.erase(std::unique(s.breakpoints.begin(), s.breakpoints.end()),
                         s.breakpoints.end());
+    s.shortBreakpoints.Set(s.breakpoints);
     s.colorMax = std::max(0.0, s.colorTf.MaxValue());
     s.extinctionSlope = s.extinctionTf.MaxSlope();
     s.colorSlope = s.colorTf.MaxSlope();
@@ -950,7 +951,18 @@ void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
                : s.extinctionTf.Scalars();
     const double lo = std::min(st.valueEnter, st.valueExit);
     const double hi = std::max(st.valueEnter, st.valueExit);
-    for (const double b : breakpoints) {
+    const ShortAscending& few =
+        f == 0 ? (s.sameField ? s.shortBreakpoints : s.colorTf.ShortScalars())
+               : s.extinctionTf.ShortScalars();
+    // The breakpoints in (lo, hi) are those from the first one > lo to the last one <
+    // hi: found by counting where the list is short (mostly there are none).
+    std::size_t first = 0, last = breakpoints.size();
+    if (few.valid) {
+        first = std::size_t(few.CountAtMost(lo));
+        last = std::size_t(few.CountBelow(hi));
+    }
+    for (std::size_t i = first; i < last; ++i) {
+        const double b = breakpoints[i];
         if (b >= hi) break;
         if (!(b > lo)) continue;
         const double x = (b - st.valueEnter) / dv;

@@ -31,6 +31,7 @@ struct VolumeSetup {
     PiecewiseLinearTf extinctionTf;  ///< 1 channel: extinction per world unit
     /// The control points of both transfer functions, ascending, without repeats.
     std::vector<double> breakpoints;
+    ShortAscending shortBreakpoints;  ///< breakpoints, for fixed-length counts
     /// fields[0] drives colour, fields[1] extinction; sameField: both are fields[0].
     ScalarSelector fields[2];
     bool sameField = true;

@@ -64,6 +64,45 @@ TEST(VolumeTf, PiecewiseLinearClampedWithExactControlValues) {
     EXPECT_EQ(hi, 0.0);
 }
 
+// IntervalOf by its definition (control points <= s, minus one; NaN counts none) for
+// every list length around the fixed-count lookup's limit (ShortAscending::kMax), at the
+// control points, between them, beyond them, at infinities and NaN; and ShortAscending's
+// counts.
+TEST(VolumeTf, IntervalOfIsItsDefinitionForShortAndLongLists) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(-3.0, 3.0);
+    for (int n = 1; n <= 2 * ShortAscending::kMax + 3; ++n) {
+        std::vector<double> points;
+        double x = -2.5;
+        for (int k = 0; k < n; ++k) points.push_back(x += 0.1 + 0.3 * (k % 3));
+        const PiecewiseLinearTf tf(points, std::vector<double>(points.size(), 1.0), 1);
+        ShortAscending few;
+        few.Set(points);
+        EXPECT_EQ(few.valid, n <= ShortAscending::kMax);
+        std::vector<double> probes = {std::nan(""),
+                                      -std::numeric_limits<double>::infinity(),
+                                      std::numeric_limits<double>::infinity()};
+        for (double p : points) {
+            probes.push_back(p);
+            probes.push_back(std::nextafter(p, -10.0));
+            probes.push_back(std::nextafter(p, 10.0));
+        }
+        for (int k = 0; k < 50; ++k) probes.push_back(unit(rng));
+        for (double s : probes) {
+            int atMost = 0, below = 0;
+            for (double p : points) {
+                atMost += p <= s;
+                below += p < s;
+            }
+            EXPECT_EQ(tf.IntervalOf(s), atMost - 1) << "n " << n << " s " << s;
+            if (few.valid) {
+                EXPECT_EQ(few.CountAtMost(s), atMost) << "n " << n << " s " << s;
+                EXPECT_EQ(few.CountBelow(s), below) << "n " << n << " s " << s;
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // Closed form of a linear piece.
 
