@@ -433,7 +433,23 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
     const bool linearTets =
         facePoints && setup.slices.empty() && !costSamples && !setup.isoCells;
     const bool anyIso = !setup.isos.empty();
+    // Without isosurfaces, runs of such segments go in one call each; the segment that
+    // ends a run (one LinearTet does not take) takes the general path below.
+    const bool runs = linearTets && !anyIso;
+    std::size_t runFrom = 0;  // where the next run may start
     for (std::size_t si = 0; si < segments_.size(); ++si) {
+        bool lean = linearTets;
+        if (runs && si >= runFrom) {
+            const VolumeRayMarcher::LinearTetRunResult r = marcher_.LinearTetRun(
+                *setup.geometry, segments_.data(), ends_.data(), si, segments_.size(),
+                setup.sliverLength, tMin, tMax, composite);
+            counters.segmentsCulled += r.culled;
+            volumeSeen |= r.seen;
+            if (r.stop || r.next == segments_.size()) break;
+            si = r.next;
+            runFrom = si + 1;
+            lean = false;
+        }
         const Segment& seg = segments_[si];
         // A clip plane through a face meets the ray a few ulps off the face: the sliver it
         // leaves in the next cell (shorter than 1e-12 of the mesh size) holds nothing
@@ -446,7 +462,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         }
         // Isosurfaces whose field's guaranteed range in the cell holds their value.
         const bool isoHere = anyIso && IsoSourceRelevant(setup, seg);
-        if (linearTets && !isoHere) {
+        if (lean && !isoHere) {
             using R = VolumeRayMarcher::LinearTetResult;
             const R r = marcher_.LinearTet(*setup.geometry, seg, ends_[si], composite);
             if (r == R::kEmpty) {

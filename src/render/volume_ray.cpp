@@ -1589,6 +1589,37 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
     return FlushLinearTets(composite) ? LinearTetResult::kStop : LinearTetResult::kGoOn;
 }
 
+[[gnu::flatten]] VolumeRayMarcher::LinearTetRunResult VolumeRayMarcher::LinearTetRun(
+    const MeshGeometry& geometry, const Segment* segs, const SegmentEnds* ends,
+    std::size_t first, std::size_t last, double sliverLength, double tMin, double tMax,
+    RayComposite& composite) {
+    LinearTetRunResult r{last, false, false, 0.0};
+    for (std::size_t k = first; k < last; ++k) {
+        const Segment& seg = segs[k];
+        if (seg.tExit - seg.tEnter <= sliverLength &&
+            (seg.tEnter == tMin || seg.tExit == tMax)) {
+            r.culled += 1;
+            continue;
+        }
+        switch (LinearTet(geometry, seg, ends[k], composite)) {
+            case LinearTetResult::kEmpty:
+                r.culled += 1;
+                break;
+            case LinearTetResult::kGoOn:
+                r.seen = true;
+                break;
+            case LinearTetResult::kStop:
+                r.seen = r.stop = true;
+                r.next = k + 1;
+                return r;
+            case LinearTetResult::kOther:
+                r.next = k;
+                return r;
+        }
+    }
+    return r;
+}
+
 bool VolumeRayMarcher::Integrate(double a, double b, RayComposite& composite,
                                  RenderCounters& counters) {
     if (!(b > a)) return Terminate(b, composite);

@@ -180,6 +180,20 @@ class VolumeRayMarcher {
     /// those two calls (bitwise the same pixel), without their general cases.
     LinearTetResult LinearTet(const MeshGeometry& geometry, const Segment& seg,
                               const SegmentEnds& ends, RayComposite& composite);
+    /// LinearTet on the segments first, first + 1, ... (< last) of the ray in one loop,
+    /// as long as each is such a segment and the ray goes on. Slivers at the span's ends
+    /// (shorter than `sliverLength`, starting at tMin or ending at tMax: see
+    /// RayIntegrator::Integrate) and empty cells are skipped and counted in `culled`.
+    struct LinearTetRunResult {
+        std::size_t next;  ///< the first segment not taken (kOther), or last
+        bool stop;         ///< LinearTet said kStop for segment next - 1
+        bool seen;         ///< some segment was integrated
+        double culled;
+    };
+    LinearTetRunResult LinearTetRun(const MeshGeometry& geometry, const Segment* segs,
+                                    const SegmentEnds* ends, std::size_t first,
+                                    std::size_t last, double sliverLength, double tMin,
+                                    double tMax, RayComposite& composite);
     /// LinearTet queues the pieces of its segments and composites them in batches; this
     /// composites what is queued. Call it before any other segment is integrated and
     /// before FinishRay. True when the ray may stop (as Integrate's true); the rest of

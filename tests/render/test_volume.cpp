@@ -524,7 +524,12 @@ Mesh JitteredTetsWithWavyField() {
 // the pixel of the general one (BeginSegment and Integrate per segment), stops where it
 // stops, and takes nearly every segment that holds something.
 TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
-    const Mesh mesh = JitteredTetsWithWavyField();
+    Mesh mesh = JitteredTetsWithWavyField();
+    // A copy of u under another name: extinction from it is the same volume, which the
+    // lean path does not take (two fields) except in constant and empty cells.
+    Field w = mesh.pointFields[0];
+    w.name = "w";
+    mesh.pointFields.push_back(std::move(w));
     const MeshGeometry geometry = MeshGeometry::Build(mesh);
     const BrickTraverser traverser(Brick::WholeMesh(mesh));
     ASSERT_TRUE(traverser.FacePoints());
@@ -534,20 +539,25 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
     scene.volume->extinctionTf = {{0.5, 0.0}, {1.0, 0.0}, {1.5, 2.0},
                                   {2.2, 2.0}, {3.0, 9.0}, {4.0, 0.5}};
     using R = VolumeRayMarcher::LinearTetResult;
-    // The third pass: extinction 1e4 times higher, so that rays stop early.
-    for (int pass = 0; pass < 3; ++pass) {
+    // The third pass: extinction 1e4 times higher, so that rays stop early. The fourth:
+    // extinction from w, so that lean and general segments alternate along the rays.
+    for (int pass = 0; pass < 4; ++pass) {
         scene.volume->glow =
             pass == 1 ? GlowModel::WilhelmsVanGelder : GlowModel::WilliamsMax;
         if (pass == 2)
             for (auto& p : scene.volume->extinctionTf) p.extinction *= 1e4;
+        if (pass == 3) {
+            for (auto& p : scene.volume->extinctionTf) p.extinction *= 1e-4;
+            scene.volume->extinctionField = "w";
+        }
         const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
         ASSERT_TRUE(setup.volume.has_value());
         const Camera camera(scene.camera);
-        VolumeRayMarcher lean, general;
+        VolumeRayMarcher lean, general, runner;
         RenderCounters counters;
         std::vector<Segment> segments;
         std::vector<SegmentEnds> ends;
-        int taken = 0, other = 0, rays = 0, stopped = 0;
+        int taken = 0, other = 0, rays = 0, stopped = 0, runs = 0;
         for (int j = 0; j < 24; ++j)
             for (int i = 0; i < 28; ++i) {
                 const CameraRay cr = camera.PixelRay(i, j);
@@ -596,8 +606,43 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
                 for (int c = 0; c < 4; ++c) EXPECT_EQ(rgbaLean[c], rgbaGeneral[c]);
                 for (int c = 0; c < 3; ++c) EXPECT_EQ(a.error[c], b.error[c]);
                 EXPECT_EQ(a.transmittance, b.transmittance);
+                // Runs of segments in one call (LinearTetRun, as the renderer takes them
+                // without isosurfaces), the segment ending a run the general way.
+                double rgbaRun[4] = {0, 0, 0, 0};
+                RayComposite c;
+                c.rgba = rgbaRun;
+                runner.BeginRay(*setup.volume, ray, segments.front().tEnter,
+                                segments.back().tExit);
+                bool stopC = false;
+                for (std::size_t k = 0; k < segments.size() && !stopC;) {
+                    const auto r =
+                        runner.LinearTetRun(geometry, segments.data(), ends.data(), k,
+                                            segments.size(), 0.0, 0.0, 1e30, c);
+                    ++runs;
+                    stopC = r.stop;
+                    if (stopC || r.next == segments.size()) break;
+                    k = r.next;
+                    stopC = runner.FlushLinearTets(c);
+                    if (!stopC && runner.BeginSegment(mesh, geometry, segments[k],
+                                                      counters, &ends[k]))
+                        stopC = runner.Integrate(segments[k].tEnter, segments[k].tExit, c,
+                                                 counters);
+                    ++k;
+                }
+                if (!stopC) stopC = runner.FlushLinearTets(c);
+                ASSERT_EQ(stopC, stopB) << i << "," << j;
+                runner.FinishRay(c);
+                for (int q = 0; q < 4; ++q) EXPECT_EQ(rgbaRun[q], rgbaGeneral[q]);
+                for (int q = 0; q < 3; ++q) EXPECT_EQ(c.error[q], b.error[q]);
+                EXPECT_EQ(c.transmittance, b.transmittance);
             }
         EXPECT_GT(rays, 250);
+        EXPECT_LT(runs, rays + other + 1);  // a run per ray, and one after each other
+        if (pass == 3) {
+            EXPECT_GT(other, 5 * rays);
+            EXPECT_GT(taken, 10);
+            continue;
+        }
         EXPECT_GT(taken, (pass == 2 ? 1 : 5) * rays);
         EXPECT_LT(other, taken / 100 + 1);
         if (pass == 2) {
