@@ -11,6 +11,10 @@
 #include <limits>
 #include <vector>
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 namespace hpray {
 
 /// At most kMax ascending values, padded with NaN (which no comparison counts): how many
@@ -27,15 +31,36 @@ struct ShortAscending {
         if (valid) std::copy(ascending.begin(), ascending.end(), v.begin());
     }
     int CountAtMost(double s) const {
+#if defined(__AVX2__)
+        const __m256d x = _mm256_set1_pd(s);
+        return Count(_mm256_cmp_pd(_mm256_loadu_pd(v.data()), x, _CMP_LE_OQ),
+                     _mm256_cmp_pd(_mm256_loadu_pd(v.data() + 4), x, _CMP_LE_OQ));
+#else
         int k = 0;
         for (int i = 0; i < kMax; ++i) k += v[i] <= s;
         return k;
+#endif
     }
     int CountBelow(double s) const {
+#if defined(__AVX2__)
+        const __m256d x = _mm256_set1_pd(s);
+        return Count(_mm256_cmp_pd(_mm256_loadu_pd(v.data()), x, _CMP_LT_OQ),
+                     _mm256_cmp_pd(_mm256_loadu_pd(v.data() + 4), x, _CMP_LT_OQ));
+#else
         int k = 0;
         for (int i = 0; i < kMax; ++i) k += v[i] < s;
         return k;
+#endif
     }
+
+  private:
+#if defined(__AVX2__)
+    static_assert(kMax == 8);
+    static int Count(__m256d lo, __m256d hi) {
+        return __builtin_popcount(unsigned(_mm256_movemask_pd(lo)) |
+                                  unsigned(_mm256_movemask_pd(hi)) << 4);
+    }
+#endif
 };
 
 /// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
