@@ -25,6 +25,7 @@
 #include "trace/bilinear_patch.h"
 #include "trace/curved_face.h"
 #include "trace/face_map.h"
+#include "trace/face_point.h"
 #include "trace/ray_frame.h"
 #include "util/check.h"
 #include "util/error.h"
@@ -34,6 +35,7 @@ namespace {
 
 using trace::CrossTriangle;
 using trace::FaceBasis;
+using trace::MakeFacePoint;
 using trace::RayFrame;
 using trace::ShearedPoint;
 using trace::TriangleCrossing;
@@ -137,41 +139,6 @@ thread_local Scratch tScratch;
 double Now() {
     using Clock = std::chrono::steady_clock;
     return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
-}
-
-// The face point of a crossing x of triangle (a, b, c) (sheared corners of the face's
-// canonical representation, whose point ids are `ids`); dirKz = |ray direction| along the
-// frame's z axis (|a_kz| = |z| dirKz for a corner's offset a from the ray origin).
-[[gnu::always_inline]] inline void MakeFacePoint(
-    const std::int32_t* ids, const ShearedPoint& a, const ShearedPoint& b,
-    const ShearedPoint& c, const TriangleCrossing& x, double dirKz, FacePoint& fp) {
-    constexpr double kU = 0.5 * std::numeric_limits<double>::epsilon();
-    constexpr double kEps = std::numeric_limits<double>::epsilon();
-    const ShearedPoint* p[3] = {&a, &b, &c};
-    double err = 0;
-    for (int k = 0; k < 3; ++k) {
-        fp.v[k] = ids[k];
-        fp.w[k] = x.bary[k];
-        // The offset's rounding (|a_d| each, |a_kx| <= |x| + |a_kz| as |sx| <= 1), the
-        // shear's fused multiply-add and its result's rounding.
-        err = std::max(
-            err, std::abs(p[k]->x) + std::abs(p[k]->y) + 2 * std::abs(p[k]->z) * dirKz);
-    }
-    fp.cornerError = 4 * kU * err;
-    fp.t = x.t;
-    // The point's distance from the ray: the first two sums (the third is t up to its
-    // rounding) plus their rounding and the corners' errors.
-    double dx = 0, dy = 0, ax = 0, ay = 0, az = 0;
-    for (int m = 0; m < 3; ++m) {
-        dx += fp.w[m] * p[m]->x;
-        dy += fp.w[m] * p[m]->y;
-        ax += fp.w[m] * std::abs(p[m]->x);
-        ay += fp.w[m] * std::abs(p[m]->y);
-        az += fp.w[m] * std::abs(p[m]->z);
-    }
-    fp.off[0] = std::abs(dx) + 4 * kEps * ax + fp.cornerError;
-    fp.off[1] = std::abs(dy) + 4 * kEps * ay + fp.cornerError;
-    fp.off[2] = 4 * kEps * az;
 }
 
 inline double Dist2(const double* a, const double* b) {

@@ -12,6 +12,7 @@
 #include "trace/bilinear_patch.h"
 #include "trace/curved_face.h"
 #include "trace/face_map.h"
+#include "trace/face_point.h"
 #include "trace/ray_frame.h"
 
 namespace hpray::trace {
@@ -120,6 +121,55 @@ TEST(RayFrame, FanAroundAVertexIsHitExactlyOnce) {
                                    frame.Transform(ring[(k + 1) % m].data()), x);
         EXPECT_EQ(count, 1) << i;
     }
+}
+
+// MakeFacePoint against its definition written out in scalar arithmetic (the build may
+// vectorise the sums): bitwise the same point, weights and bounds, on random crossings
+// of triangles of every scale and sign (and corners exactly on the ray's axes).
+TEST(FacePoint, MakeFacePointIsItsDefinitionBitwise) {
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0), mag(-12.0, 4.0);
+    const double kU = 0.5 * std::numeric_limits<double>::epsilon();
+    const double kEps = std::numeric_limits<double>::epsilon();
+    int checked = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        ShearedPoint p[3];
+        const double scale = std::pow(10.0, mag(rng));
+        for (auto& q : p) {
+            q.x = trial % 7 == 0 ? 0.0 : scale * unit(rng);
+            q.y = trial % 11 == 0 ? -0.0 : scale * unit(rng);
+            q.z = scale * unit(rng);
+        }
+        TriangleCrossing x;
+        if (!CrossTriangle(p[0], p[1], p[2], x)) continue;
+        const std::int32_t ids[3] = {trial, trial + 1, trial + 2};
+        const double dirKz = 0.5 + 0.5 * std::abs(unit(rng));
+        FacePoint fp;
+        MakeFacePoint(ids, p[0], p[1], p[2], x, dirKz, fp);
+        double err = 0, dx = 0, dy = 0, ax = 0, ay = 0, az = 0;
+        for (int k = 0; k < 3; ++k) {
+            err = std::max(
+                err, std::abs(p[k].x) + std::abs(p[k].y) + 2 * std::abs(p[k].z) * dirKz);
+            dx += x.bary[k] * p[k].x;
+            dy += x.bary[k] * p[k].y;
+            ax += x.bary[k] * std::abs(p[k].x);
+            ay += x.bary[k] * std::abs(p[k].y);
+            az += x.bary[k] * std::abs(p[k].z);
+        }
+        const double cornerError = 4 * kU * err;
+        ASSERT_TRUE(fp.Valid());
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_EQ(fp.v[k], ids[k]);
+            EXPECT_EQ(fp.w[k], x.bary[k]);
+        }
+        EXPECT_EQ(fp.t, x.t);
+        EXPECT_EQ(fp.cornerError, cornerError);
+        EXPECT_EQ(fp.off[0], std::abs(dx) + 4 * kEps * ax + cornerError) << trial;
+        EXPECT_EQ(fp.off[1], std::abs(dy) + 4 * kEps * ay + cornerError) << trial;
+        EXPECT_EQ(fp.off[2], 4 * kEps * az) << trial;
+        ++checked;
+    }
+    EXPECT_GT(checked, 1000);
 }
 
 TEST(BilinearPatch, RootsLieOnPatchAndRay) {
