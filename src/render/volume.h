@@ -30,37 +30,26 @@ struct ShortAscending {
         v.fill(std::numeric_limits<double>::quiet_NaN());
         if (valid) std::copy(ascending.begin(), ascending.end(), v.begin());
     }
-    int CountAtMost(double s) const {
-#if defined(__AVX2__)
-        const __m256d x = _mm256_set1_pd(s);
-        return Count(_mm256_cmp_pd(_mm256_loadu_pd(v.data()), x, _CMP_LE_OQ),
-                     _mm256_cmp_pd(_mm256_loadu_pd(v.data() + 4), x, _CMP_LE_OQ));
-#else
-        int k = 0;
-        for (int i = 0; i < kMax; ++i) k += v[i] <= s;
-        return k;
-#endif
-    }
-    int CountBelow(double s) const {
-#if defined(__AVX2__)
-        const __m256d x = _mm256_set1_pd(s);
-        return Count(_mm256_cmp_pd(_mm256_loadu_pd(v.data()), x, _CMP_LT_OQ),
-                     _mm256_cmp_pd(_mm256_loadu_pd(v.data() + 4), x, _CMP_LT_OQ));
-#else
-        int k = 0;
-        for (int i = 0; i < kMax; ++i) k += v[i] < s;
-        return k;
-#endif
-    }
+    int CountAtMost(double s) const { return Count<true>(s); }
+    int CountBelow(double s) const { return Count<false>(s); }
 
   private:
+    template <bool kOrEqual>
+    int Count(double s) const {
 #if defined(__AVX2__)
-    static_assert(kMax == 8);
-    static int Count(__m256d lo, __m256d hi) {
+        static_assert(kMax == 8);
+        constexpr int kCompare = kOrEqual ? _CMP_LE_OQ : _CMP_LT_OQ;
+        const __m256d x = _mm256_set1_pd(s);
+        const __m256d lo = _mm256_cmp_pd(_mm256_loadu_pd(v.data()), x, kCompare);
+        const __m256d hi = _mm256_cmp_pd(_mm256_loadu_pd(v.data() + 4), x, kCompare);
         return __builtin_popcount(unsigned(_mm256_movemask_pd(lo)) |
                                   unsigned(_mm256_movemask_pd(hi)) << 4);
-    }
+#else
+        int k = 0;
+        for (int i = 0; i < kMax; ++i) k += kOrEqual ? v[i] <= s : v[i] < s;
+        return k;
 #endif
+    }
 };
 
 /// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
