@@ -190,8 +190,9 @@ bool BeginLinearPiece(double tau0, double tau1, double length, LinearPieceIntegr
 }
 
 /// The end of IntegrateLinearPiece from the moments m.
-void FinishLinearPiece(const PieceStart& start, const double m[3],
-                       LinearPieceIntegrals& q) {
+[[gnu::always_inline]] inline void FinishLinearPiece(const PieceStart& start,
+                                                     const double m[3],
+                                                     LinearPieceIntegrals& q) {
     q.mean = std::clamp(m[0], 0.0, 1.0);
     q.firstMoment = std::clamp(m[1], 0.0, q.mean);
     // P = integral x (alpha + 2 beta x) T dx; by parts P = I0 - T(1), which cancels only
