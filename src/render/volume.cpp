@@ -12,6 +12,7 @@
 #include <boost/math/quadrature/gauss.hpp>
 #include <boost/math/quadrature/gauss_kronrod.hpp>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "render/legendre.h"
@@ -274,8 +275,10 @@ void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3])
 
 }  // namespace
 
-void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
-                           const double* length, LinearPieceIntegrals* out) {
+/// IntegrateLinearPieces on the inputs of piece i that in(i, tau0, tau1, length) gives.
+template <typename Inputs>
+[[gnu::always_inline]] inline void IntegrateLinearPiecesOf(int n, Inputs in,
+                                                           LinearPieceIntegrals* out) {
     int lane[4], lanes = 0;
     double alpha[4], beta[4], m[4][3];
     PieceStart start[4];
@@ -289,7 +292,9 @@ void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
         LinearPieceIntegrals& q = out[i];
         q = LinearPieceIntegrals{};
         PieceStart ps;
-        if (BeginLinearPiece(tau0[i], tau1[i], length[i], q, ps)) {
+        double tau0, tau1, length;
+        in(i, tau0, tau1, length);
+        if (BeginLinearPiece(tau0, tau1, length, q, ps)) {
             lane[lanes] = i;
             start[lanes] = ps;
             alpha[lanes] = ps.alpha;
@@ -308,6 +313,32 @@ void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
     } else if (lanes > 1) {
         runLanes();
     }
+}
+
+void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
+                           const double* length, LinearPieceIntegrals* out) {
+    IntegrateLinearPiecesOf(
+        n,
+        [&](int i, double& a, double& b, double& l) {
+            a = tau0[i];
+            b = tau1[i];
+            l = length[i];
+        },
+        out);
+}
+
+void IntegrateLinearPieces(int n, const unsigned char* base, std::size_t stride,
+                           std::size_t tau0At, std::size_t tau1At, std::size_t lengthAt,
+                           LinearPieceIntegrals* out) {
+    IntegrateLinearPiecesOf(
+        n,
+        [&](int i, double& a, double& b, double& l) {
+            const unsigned char* piece = base + std::size_t(i) * stride;
+            std::memcpy(&a, piece + tau0At, sizeof a);
+            std::memcpy(&b, piece + tau1At, sizeof b);
+            std::memcpy(&l, piece + lengthAt, sizeof l);
+        },
+        out);
 }
 
 LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {

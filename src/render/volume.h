@@ -212,6 +212,11 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
 /// four pieces at once.
 void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
                            const double* length, LinearPieceIntegrals* out);
+/// The same with piece i's inputs in an array of structures: the doubles at byte offsets
+/// tau0At, tau1At and lengthAt of the stride bytes from base + i * stride.
+void IntegrateLinearPieces(int n, const unsigned char* base, std::size_t stride,
+                           std::size_t tau0At, std::size_t tau1At, std::size_t lengthAt,
+                           LinearPieceIntegrals* out);
 
 /// Williams-Max emission of a linear piece: integral kappa tau T for chromaticity going
 /// linearly from kappa0 to kappa1 (per channel).

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 
 #include "render/hex_line_sampler.h"
@@ -1193,17 +1194,12 @@ void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
     if (n == 0) return false;
     // The closed forms of all queued pieces at once, then each composited in order with
     // Terminate after it, as Integrate does.
-    pieceTau_[0].resize(n);
-    pieceTau_[1].resize(n);
-    pieceLength_.resize(n);
-    pieceIntegrals_.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        pieceTau_[0][i] = queue_[i].tau0;
-        pieceTau_[1][i] = queue_[i].tau1;
-        pieceLength_[i] = queue_[i].length;
-    }
-    IntegrateLinearPieces(static_cast<int>(n), pieceTau_[0].data(), pieceTau_[1].data(),
-                          pieceLength_.data(), pieceIntegrals_.data());
+    if (pieceIntegrals_.size() < n) pieceIntegrals_.resize(n);
+    // The inputs read from the queue in place.
+    IntegrateLinearPieces(
+        static_cast<int>(n), reinterpret_cast<const unsigned char*>(queue_.data()),
+        sizeof(QueuedPiece), offsetof(QueuedPiece, tau0), offsetof(QueuedPiece, tau1),
+        offsetof(QueuedPiece, length), pieceIntegrals_.data());
     bool stop = false;
     for (std::size_t i = 0; i < n && !stop; ++i) {
         CompositeLinearPiece(queue_[i], pieceIntegrals_[i], composite);

@@ -258,7 +258,6 @@ class VolumeRayMarcher {
     static constexpr std::size_t kQueuedPieces = 8;
     std::vector<QueuedPiece> queue_;  ///< the first queued_ are queued
     std::size_t queued_ = 0;
-    std::vector<double> pieceTau_[2], pieceLength_;
     std::vector<LinearPieceIntegrals> pieceIntegrals_;
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);

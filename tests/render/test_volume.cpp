@@ -8,6 +8,7 @@
 
 #include <boost/math/quadrature/gauss.hpp>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <random>
 
@@ -251,18 +252,30 @@ TEST(VolumeClosedForm, BatchedPiecesEqualSinglePiecesBitwise) {
             tau1[i] = i % 5 == 2 ? 0.0 : std::pow(10.0, -3 + 6 * uni(rng));
             length[i] = std::pow(10.0, -3 + 3 * uni(rng));
         }
-        std::vector<LinearPieceIntegrals> batch(n);
+        std::vector<LinearPieceIntegrals> batch(n), strided(n);
         IntegrateLinearPieces(n, tau0.data(), tau1.data(), length.data(), batch.data());
+        // The same inputs in an array of structures, in another order than the arguments.
+        struct Piece {
+            double length, pad, tau1, tau0;
+            int flag;
+        };
+        std::vector<Piece> pieces(n);
+        for (int i = 0; i < n; ++i) pieces[i] = {length[i], -1.0, tau1[i], tau0[i], i};
+        IntegrateLinearPieces(n, reinterpret_cast<const unsigned char*>(pieces.data()),
+                              sizeof(Piece), offsetof(Piece, tau0), offsetof(Piece, tau1),
+                              offsetof(Piece, length), strided.data());
         int taylor = 0;
         for (int i = 0; i < n; ++i) {
             const LinearPieceIntegrals q =
                 IntegrateLinearPiece(tau0[i], tau1[i], length[i]);
             taylor += length[i] * (tau0[i] + std::abs(tau1[i] - tau0[i]) / 2) <= 1;
-            EXPECT_EQ(batch[i].transmittance, q.transmittance) << n << " " << i;
-            EXPECT_EQ(batch[i].opacity, q.opacity) << n << " " << i;
-            EXPECT_EQ(batch[i].mean, q.mean) << n << " " << i;
-            EXPECT_EQ(batch[i].firstMoment, q.firstMoment) << n << " " << i;
-            EXPECT_EQ(batch[i].farWeight, q.farWeight) << n << " " << i;
+            for (const LinearPieceIntegrals* b : {&batch[i], &strided[i]}) {
+                EXPECT_EQ(b->transmittance, q.transmittance) << n << " " << i;
+                EXPECT_EQ(b->opacity, q.opacity) << n << " " << i;
+                EXPECT_EQ(b->mean, q.mean) << n << " " << i;
+                EXPECT_EQ(b->firstMoment, q.firstMoment) << n << " " << i;
+                EXPECT_EQ(b->farWeight, q.farWeight) << n << " " << i;
+            }
         }
         if (n == 64) {
             EXPECT_GT(taylor, 8);
