@@ -30,6 +30,7 @@ PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars,
     for (std::size_t k = 1; k < scalars_.size(); ++k)
         HPRAY_CHECK(scalars_[k - 1] < scalars_[k]);
     short_.Set(scalars_);
+    size_ = static_cast<int>(scalars_.size());
     // Piece k sits at index k + 1: the clamped pieces -1 and Size() - 1 have slope 0.
     steepest_.assign(scalars_.size() + 1, 0.0);
     for (int k = 0; k + 1 < Size(); ++k) {

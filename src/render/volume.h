@@ -63,7 +63,7 @@ class PiecewiseLinearTf {
                       int channels);
 
     int Channels() const { return channels_; }
-    int Size() const { return static_cast<int>(scalars_.size()); }
+    int Size() const { return size_; }
     const std::vector<double>& Scalars() const { return scalars_; }
     /// Scalars() for fixed-length counts (valid for at most ShortAscending::kMax points).
     const ShortAscending& ShortScalars() const { return short_; }
@@ -107,6 +107,7 @@ class PiecewiseLinearTf {
     int channels_ = 1;
     std::vector<double> steepest_;  ///< SteepestOn(k) at k + 1
     ShortAscending short_;          ///< the control points, for IntervalOf
+    int size_ = 0;                  ///< scalars_.size(), read per ray piece
 };
 
 // Called per ray piece: inline.
