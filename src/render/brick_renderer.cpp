@@ -451,11 +451,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             lean = false;
         }
         const Segment& seg = segments_[si];
-        // A clip plane through a face meets the ray a few ulps off the face: the sliver it
-        // leaves in the next cell (shorter than 1e-12 of the mesh size) holds nothing
-        // visible, but projecting the field on it would cost as much as a whole segment.
-        if (seg.tExit - seg.tEnter <= setup.sliverLength &&
-            (seg.tEnter == tMin || seg.tExit == tMax)) {
+        // A clip plane through a face meets the ray a few ulps off the face: the sliver
+        // it leaves in the next cell is skipped.
+        if (IsSpanEndSliver(seg, setup.sliverLength, tMin, tMax)) {
             counters.segmentsCulled += 1;
             recorder.Done(si);
             continue;

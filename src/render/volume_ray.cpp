@@ -1592,8 +1592,7 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
     LinearTetRunResult r{last, false, false, 0.0};
     for (std::size_t k = first; k < last; ++k) {
         const Segment& seg = segs[k];
-        if (seg.tExit - seg.tEnter <= sliverLength &&
-            (seg.tEnter == tMin || seg.tExit == tMax)) {
+        if (IsSpanEndSliver(seg, sliverLength, tMin, tMax)) {
             r.culled += 1;
             continue;
         }

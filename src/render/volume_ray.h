@@ -145,6 +145,16 @@ struct RayComposite {
     }
 };
 
+/// A sliver that a clip plane through a face leaves at an end of the ray's span [tMin,
+/// tMax]: a segment at most sliverLength long that starts at tMin or ends at tMax. It
+/// holds nothing visible (sliverLength is about 1e-12 of the mesh size) but would cost as
+/// much as a whole segment, so the renderer skips it.
+inline bool IsSpanEndSliver(const Segment& seg, double sliverLength, double tMin,
+                            double tMax) {
+    return seg.tExit - seg.tEnter <= sliverLength &&
+           (seg.tEnter == tMin || seg.tExit == tMax);
+}
+
 /// Per-thread volume integrator: reused across rays and segments without allocation once
 /// its buffers have grown.
 class VolumeRayMarcher {
@@ -182,8 +192,7 @@ class VolumeRayMarcher {
                               const SegmentEnds& ends, RayComposite& composite);
     /// LinearTet on the segments first, first + 1, ... (< last) of the ray in one loop,
     /// as long as each is such a segment and the ray goes on. Slivers at the span's ends
-    /// (shorter than `sliverLength`, starting at tMin or ending at tMax: see
-    /// RayIntegrator::Integrate) and empty cells are skipped and counted in `culled`.
+    /// (IsSpanEndSliver) and empty cells are skipped and counted in `culled`.
     struct LinearTetRunResult {
         std::size_t next;  ///< the first segment not taken (kOther), or last
         bool stop;         ///< LinearTet said kStop for segment next - 1
