@@ -92,6 +92,28 @@ bool SeedCorners(const FaceRec& rec, int side, int corner[3]) {
     return true;
 }
 
+// A tetrahedron's face records in its own terms. Number its corners L0, L1, L2 = the
+// corners of its first face record (cellFaces order) in that record's order, and L3 =
+// the corner off that face. Then the code holds, 2 bits each: at bit 2 L, which of the
+// cell's faces lies opposite corner L; at bit 8 + 6 (k - 1) + 2 q (k = 1..3, q = 0..2),
+// the local corner of face k's record corner q (face 0's are L0, L1, L2 by definition);
+// at bit 26, which record corner of face 1 is L3; bit 31 marks a valid code (0: none).
+namespace tetcode {
+constexpr std::uint32_t kValid = 1u << 31;
+inline int FaceOpposite(std::uint32_t code, int corner) {
+    return code >> (2 * corner) & 3;
+}
+/// The record corners' local corners of all four faces, 6 bits a face from bit 0 (face
+/// 0's are 0, 1, 2).
+inline std::uint32_t Corners(std::uint32_t code) {
+    return (code & 0x3ffff00) >> 2 | 0x24;
+}
+inline int LocalCorner(std::uint32_t corners, int face, int q) {
+    return corners >> (6 * face + 2 * q) & 3;
+}
+inline int CornerL3(std::uint32_t code) { return code >> 26 & 3; }
+}  // namespace tetcode
+
 struct CurvedRec {
     std::int64_t nodeStart = 0;  // into curvedNodes: the node lattice, j-major
     std::int64_t netStart = 0;   // into curvedNet (points): the Bernstein control net
@@ -384,6 +406,11 @@ struct BrickTraverser::Impl {
     // Every cell is a tetrahedron whose four faces are planar triangles (cell c's faces
     // at cellFaces[4 c]).
     bool planarTetsOnly = false;
+    // Per cell, for tetrahedra with four triangular faces and four distinct corners
+    // (else 0): how the corners of its face records relate, so that a walk step needs no
+    // search by vertex id (see TetCode).
+    std::vector<std::uint32_t> tetCodes;
+    void BuildTetCodes();
     bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
                       Crossing& exit) const;
     void Tessellation(std::int32_t f,
@@ -508,6 +535,7 @@ void BrickTraverser::Impl::Build() {
             tets = faces[f].kind == FaceKind::Triangle;
         planarTetsOnly = tets;
     }
+    BuildTetCodes();
     const double t1 = Now();
     BuildScene();
     const double t2 = Now();
@@ -519,11 +547,66 @@ void BrickTraverser::Impl::Build() {
                           faces.capacity() * sizeof(FaceRec) +
                           cellFaceOffset.capacity() * sizeof(std::int64_t) +
                           cellFaces.capacity() * sizeof(std::int32_t) +
+                          tetCodes.capacity() * sizeof(std::uint32_t) +
                           curved.capacity() * sizeof(CurvedRec) +
                           curvedNodes.capacity() * sizeof(std::int32_t) +
                           curvedNet.capacity() * sizeof(double) +
                           boundaryFaces.capacity() * sizeof(std::int32_t) +
                           boundaryBoxes.capacity() * sizeof(float);
+}
+
+void BrickTraverser::Impl::BuildTetCodes() {
+    const Mesh& mesh = *brick.mesh;
+    const std::int64_t n = mesh.CellCount();
+    tetCodes.assign(static_cast<std::size_t>(n), 0);
+    tbb::parallel_for(
+        tbb::blocked_range<std::int64_t>(0, n, 16384),
+        [&](const tbb::blocked_range<std::int64_t>& range) {
+            for (std::int64_t c = range.begin(); c < range.end(); ++c) {
+                if (mesh.cellShape[c] != CellShape::Tet ||
+                    cellFaceOffset[c + 1] - cellFaceOffset[c] != 4)
+                    continue;
+                const std::int32_t* cf = &cellFaces[cellFaceOffset[c]];
+                bool ok = true;
+                for (int k = 0; k < 4; ++k)
+                    ok = ok && cf[k] >= 0 && faces[cf[k]].kind == FaceKind::Triangle;
+                if (!ok) continue;
+                std::int32_t corner[4] = {faces[cf[0]].v[0], faces[cf[0]].v[1],
+                                          faces[cf[0]].v[2], -1};
+                const auto local = [&](std::int32_t v) {
+                    for (int l = 0; l < 4; ++l)
+                        if (corner[l] == v) return l;
+                    return -1;
+                };
+                std::uint32_t code = 0;
+                for (int q = 0; q < 3 && ok; ++q) {
+                    const std::int32_t v = faces[cf[1]].v[q];
+                    if (local(v) >= 0) continue;
+                    ok = corner[3] < 0;  // exactly one corner of face 1 is off face 0
+                    corner[3] = v;
+                    code |= std::uint32_t(q) << 26;
+                }
+                ok = ok && corner[3] >= 0 && corner[0] != corner[1] &&
+                     corner[1] != corner[2] && corner[0] != corner[2];
+                int facing[4] = {-1, -1, -1, 0};
+                for (int k = 1; k < 4 && ok; ++k) {
+                    int seen = 0;
+                    for (int q = 0; q < 3 && ok; ++q) {
+                        const int l = local(faces[cf[k]].v[q]);
+                        ok = l >= 0 && !(seen >> l & 1);
+                        if (!ok) break;
+                        seen |= 1 << l;
+                        code |= std::uint32_t(l) << (8 + 6 * (k - 1) + 2 * q);
+                    }
+                    const int opposite = ok ? __builtin_ctz(~seen & 15) : 0;
+                    ok = ok && facing[opposite] < 0;
+                    if (ok) facing[opposite] = k;
+                }
+                if (!ok) continue;
+                for (int l = 0; l < 4; ++l) code |= std::uint32_t(facing[l]) << (2 * l);
+                tetCodes[static_cast<std::size_t>(c)] = code | tetcode::kValid;
+            }
+        });
 }
 
 void BrickTraverser::Impl::BuildTopology() {
@@ -1903,7 +1986,10 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
 // the face opposite B when m_A = s and m_C = -s, the face opposite C when m_B = s and m_A
 // = -s. So one transform and three signs decide the step, with the same outcome as
 // CrossTriangle on every face, and the crossing is computed from the same sheared
-// corners in the same order: bitwise the same exit.
+// corners in the same order: bitwise the same exit. Which face is opposite which corner,
+// and where each record corner sits among A, B, C and D, come from the cell's tet code
+// (built once, see BuildTetCodes), not from comparing vertex ids, whose branches the
+// processor cannot predict.
 bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
                                          std::int32_t entryFace, const RayFrame& frame,
                                          Crossing& exit, FacePoint* exitPoint,
@@ -1920,18 +2006,23 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         if (lastFace) *lastFace = {f, x.side, {rec.v[0], rec.v[1], rec.v[2]}, {a, b, d}};
         return true;
     };
-    const std::int32_t* e = lastFace ? lastFace->v : nullptr;
-    const auto onEntry = [e](std::int32_t v) {
-        return v == e[0] || v == e[1] || v == e[2];
-    };
-    const FaceRec& other = faces[cf[cf[0] == entryFace ? 1 : 0]];
-    // The corner off the entry face (none where the corners are not distinct).
-    const std::int32_t d = !e                     ? -1
-                           : !onEntry(other.v[0]) ? other.v[0]
-                           : !onEntry(other.v[1]) ? other.v[1]
-                           : !onEntry(other.v[2]) ? other.v[2]
-                                                  : -1;
-    if (lastFace && lastFace->face == entryFace && d >= 0) {
+    // Which corners of the record lie where (see TetCode): the exit face and its
+    // corners' places among the entry corners and d by table, not by vertex ids.
+    const std::uint32_t code = tetCodes[c];
+    const int kin = cf[0] == entryFace   ? 0
+                    : cf[1] == entryFace ? 1
+                    : cf[2] == entryFace ? 2
+                    : cf[3] == entryFace ? 3
+                                         : -1;
+    if (lastFace && lastFace->face == entryFace && (code & tetcode::kValid) && kin >= 0) {
+        using tetcode::LocalCorner;
+        // Local corners of the entry record's corners (lastFace->p's order), and d.
+        const std::uint32_t corners = tetcode::Corners(code);
+        const int in[3] = {LocalCorner(corners, kin, 0), LocalCorner(corners, kin, 1),
+                           LocalCorner(corners, kin, 2)};
+        const int dl = kin == 0 ? 3 : 6 - in[0] - in[1] - in[2];
+        const std::int32_t d =
+            kin == 0 ? faces[cf[1]].v[tetcode::CornerL3(code)] : faces[cf[0]].v[dl];
         const int s = lastFace->side;
         const ShearedPoint pd = frame.Transform(P(d));
         const int m[3] = {EdgeSign(lastFace->p[0], pd), EdgeSign(lastFace->p[1], pd),
@@ -1943,31 +2034,28 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
                       : m[1] == s && m[0] == -s ? 2
                                                 : -1;
         if (o < 0) return false;
-        const int o1 = o == 2 ? 0 : o + 1, o2 = o == 0 ? 2 : o - 1;
-        for (int k = 0; k < 4; ++k) {
-            const std::int32_t f = cf[k];
-            if (f == entryFace) continue;
-            const FaceRec& rec = faces[f];
-            if (rec.v[0] == e[o] || rec.v[1] == e[o] || rec.v[2] == e[o]) continue;
-            // Corner index: 0, 1, 2 on the entry face, 3 for d.
-            int l[3];
-            for (int q = 0; q < 3; ++q) {
-                const std::int32_t v = rec.v[q];
-                l[q] = v == d ? 3 : v == e[o1] ? o1 : v == e[o2] ? o2 : -1;
-            }
-            if ((l[0] | l[1] | l[2]) < 0 || l[0] == l[1] || l[1] == l[2] || l[0] == l[2])
-                break;  // not the corners of one tetrahedron: face by face below
-            // EdgeSign of the face's edge (corner l[1], corner l[2]), from s and m.
-            const int sa = l[2] == 3                            ? m[l[1]]
-                           : l[1] == 3                          ? -m[l[2]]
-                           : l[2] == (l[1] == 2 ? 0 : l[1] + 1) ? s
-                                                                : -s;
-            const ShearedPoint& a = l[0] == 3 ? pd : lastFace->p[l[0]];
-            const ShearedPoint& b = l[1] == 3 ? pd : lastFace->p[l[1]];
-            const ShearedPoint& dd = l[2] == 3 ? pd : lastFace->p[l[2]];
-            trace::FinishCrossing(a, b, dd, sa, x);
-            return found(f, rec, a, b, dd);
-        }
+        // Corner index: 0, 1, 2 on the entry face, 3 for d.
+        int at[4];
+        at[in[0]] = 0;
+        at[in[1]] = 1;
+        at[in[2]] = 2;
+        at[dl] = 3;
+        const int kout = tetcode::FaceOpposite(code, in[o]);
+        const std::int32_t f = cf[kout];
+        const FaceRec& rec = faces[f];
+        const int l[3] = {at[LocalCorner(corners, kout, 0)],
+                          at[LocalCorner(corners, kout, 1)],
+                          at[LocalCorner(corners, kout, 2)]};
+        // EdgeSign of the face's edge (corner l[1], corner l[2]), from s and m.
+        const int sa = l[2] == 3                            ? m[l[1]]
+                       : l[1] == 3                          ? -m[l[2]]
+                       : l[2] == (l[1] == 2 ? 0 : l[1] + 1) ? s
+                                                            : -s;
+        const ShearedPoint& a = l[0] == 3 ? pd : lastFace->p[l[0]];
+        const ShearedPoint& b = l[1] == 3 ? pd : lastFace->p[l[1]];
+        const ShearedPoint& dd = l[2] == 3 ? pd : lastFace->p[l[2]];
+        trace::FinishCrossing(a, b, dd, sa, x);
+        return found(f, rec, a, b, dd);
     }
     // Face by face: the walk's first cell, or corners that are not those of one
     // tetrahedron.

@@ -37,6 +37,7 @@ struct RayFrame {
     int kx = 0, ky = 1, kz = 2;
     double sx = 0, sy = 0, sz = 1;
     double invDir[3] = {0, 0, 1};  ///< 1 / dir (infinite where dir is 0), for slab tests
+    double ox = 0, oy = 0, oz = 0;  ///< org[kx], org[ky], org[kz]
 
     explicit RayFrame(const Ray& ray) {
         for (int a = 0; a < 3; ++a) {
@@ -55,17 +56,20 @@ struct RayFrame {
         sx = dir[kx] / dir[kz];
         sy = dir[ky] / dir[kz];
         sz = 1.0 / dir[kz];
+        ox = org[kx];
+        oy = org[ky];
+        oz = org[kz];
     }
 
     /// Bitwise the same in every translation unit whatever its -ffp-contract setting: on
     /// targets with FMA the shear is an explicit fused multiply-add (nothing left for the
     /// compiler to fuse differently), elsewhere nothing can be fused.
     ShearedPoint Transform(const double* p) const {
-        const double a[3] = {p[0] - org[0], p[1] - org[1], p[2] - org[2]};
+        const double ax = p[kx] - ox, ay = p[ky] - oy, az = p[kz] - oz;
 #if defined(__FMA__) || defined(__ARM_FEATURE_FMA)
-        return {std::fma(-sx, a[kz], a[kx]), std::fma(-sy, a[kz], a[ky]), sz * a[kz]};
+        return {std::fma(-sx, az, ax), std::fma(-sy, az, ay), sz * az};
 #else
-        return {a[kx] - sx * a[kz], a[ky] - sy * a[kz], sz * a[kz]};
+        return {ax - sx * az, ay - sy * az, sz * az};
 #endif
     }
 };
