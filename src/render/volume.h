@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <vector>
 
@@ -32,6 +33,11 @@ struct ShortAscending {
     }
     int CountAtMost(double s) const { return Count<true>(s); }
     int CountBelow(double s) const { return Count<false>(s); }
+#if defined(__AVX2__)
+    /// CountAtMost and CountBelow of four values at once, as 64-bit lanes.
+    __m256i CountAtMost4(__m256d s) const { return Count4<_CMP_LE_OQ>(s); }
+    __m256i CountBelow4(__m256d s) const { return Count4<_CMP_LT_OQ>(s); }
+#endif
 
   private:
     template <bool kOrEqual>
@@ -50,6 +56,17 @@ struct ShortAscending {
         return k;
 #endif
     }
+#if defined(__AVX2__)
+    template <int kCompare>
+    __m256i Count4(__m256d s) const {
+        // A true comparison is all ones, -1 as an integer: subtracting it counts one.
+        __m256i count = _mm256_setzero_si256();
+        for (int i = 0; i < kMax; ++i)
+            count = _mm256_sub_epi64(count, _mm256_castpd_si256(_mm256_cmp_pd(
+                                                _mm256_set1_pd(v[i]), s, kCompare)));
+        return count;
+    }
+#endif
 };
 
 /// A piecewise-linear function of one scalar with `channels` outputs (1: extinction,
@@ -80,6 +97,26 @@ class PiecewiseLinearTf {
     void EvalOn3(int k, double s, double& r, double& g, double& b) const;
     /// EvalOn of a function of 1 channel: bitwise EvalOn.
     double EvalOn1(int k, double s) const;
+#if defined(__AVX2__)
+    /// Four lanes at once, each bitwise the scalar function: IntervalOf (ShortScalars()
+    /// valid only) as 64-bit lanes; EvalOn3 (3 channels only) and EvalOn1 (1 channel
+    /// only) of the lanes' pieces k at two values sA and sB each; SteepestOn.
+    __m256i IntervalOf4(__m256d s) const {
+        return _mm256_sub_epi64(short_.CountAtMost4(s), _mm256_set1_epi64x(1));
+    }
+    void EvalOn3x4(__m256i k, __m256d sA, __m256d sB, __m256d outA[3],
+                   __m256d outB[3]) const {
+        EvalOnX4<3>(k, sA, sB, outA, outB);
+    }
+    void EvalOn1x4(__m256i k, __m256d sA, __m256d sB, __m256d& outA,
+                   __m256d& outB) const {
+        EvalOnX4<1>(k, sA, sB, &outA, &outB);
+    }
+    __m256d SteepestOn4(__m256i k) const {
+        return _mm256_i64gather_pd(steepest_.data(),
+                                   _mm256_add_epi64(k, _mm256_set1_epi64x(1)), 8);
+    }
+#endif
     /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
     /// pieces): `offset`, `slope` get Channels() values.
     void AffineOn(int k, double* offset, double* slope) const;
@@ -102,6 +139,10 @@ class PiecewiseLinearTf {
     double MaxSlope() const;
 
   private:
+#if defined(__AVX2__)
+    template <int C>
+    void EvalOnX4(__m256i k, __m256d sA, __m256d sB, __m256d* outA, __m256d* outB) const;
+#endif
     std::vector<double> scalars_;
     std::vector<double> values_;
     int channels_ = 1;
@@ -158,6 +199,51 @@ inline void PiecewiseLinearTf::EvalOn3(int k, double s, double& r, double& g,
     g = (1 - w) * v0[1] + w * v0[4];
     b = (1 - w) * v0[2] + w * v0[5];
 }
+
+#if defined(__AVX2__)
+template <int C>
+inline void PiecewiseLinearTf::EvalOnX4(__m256i k, __m256d sA, __m256d sB, __m256d* outA,
+                                        __m256d* outB) const {
+    const int n = Size();
+    const __m256i below = _mm256_cmpgt_epi64(_mm256_setzero_si256(), k);     // k < 0
+    const __m256i above = _mm256_cmpgt_epi64(k, _mm256_set1_epi64x(n - 2));  // k >= n - 1
+    // The clamped pieces' constants: the first or the last control values.
+    const double* last = values_.data() + std::size_t(n - 1) * C;
+    __m256d fixed[C];
+    for (int c = 0; c < C; ++c)
+        fixed[c] = _mm256_blendv_pd(_mm256_set1_pd(values_[c]), _mm256_set1_pd(last[c]),
+                                    _mm256_castsi256_pd(above));
+    if (n < 2) {
+        for (int c = 0; c < C; ++c) outA[c] = outB[c] = fixed[c];
+        return;
+    }
+    // Inner pieces: as EvalOn, (1 - w) v_k + w v_{k+1}, w = (s - s_k) / (s_{k+1} - s_k)
+    // (lanes of clamped pieces read piece 0 and take the constants instead).
+    const __m256i clampedLanes = _mm256_or_si256(below, above);
+    const __m256i inner = _mm256_andnot_si256(clampedLanes, k);
+    const __m256d clamped = _mm256_castsi256_pd(clampedLanes);
+    const __m256d s0 = _mm256_i64gather_pd(scalars_.data(), inner, 8);
+    const __m256d s1 = _mm256_i64gather_pd(scalars_.data() + 1, inner, 8);
+    const __m256d width = _mm256_sub_pd(s1, s0);
+    const __m256d one = _mm256_set1_pd(1.0);
+    const __m256d wA = _mm256_div_pd(_mm256_sub_pd(sA, s0), width);
+    const __m256d wB = _mm256_div_pd(_mm256_sub_pd(sB, s0), width);
+    const __m256d oneMinusWA = _mm256_sub_pd(one, wA),
+                  oneMinusWB = _mm256_sub_pd(one, wB);
+    const __m256i at =
+        C == 1 ? inner : _mm256_add_epi64(inner, _mm256_add_epi64(inner, inner));
+    for (int c = 0; c < C; ++c) {
+        const __m256d v0 = _mm256_i64gather_pd(values_.data() + c, at, 8);
+        const __m256d v1 = _mm256_i64gather_pd(values_.data() + C + c, at, 8);
+        outA[c] = _mm256_blendv_pd(
+            _mm256_add_pd(_mm256_mul_pd(oneMinusWA, v0), _mm256_mul_pd(wA, v1)), fixed[c],
+            clamped);
+        outB[c] = _mm256_blendv_pd(
+            _mm256_add_pd(_mm256_mul_pd(oneMinusWB, v0), _mm256_mul_pd(wB, v1)), fixed[c],
+            clamped);
+    }
+}
+#endif
 
 inline double PiecewiseLinearTf::EvalOn1(int k, double s) const {
     const int n = Size();

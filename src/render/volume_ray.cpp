@@ -573,19 +573,23 @@ void VolumeRayMarcher::FinishRay(RayComposite& composite) const {
 void VolumeRayMarcher::AddFieldError(double length, double depth, double tauMin, double T,
                                      double colorError, double tauError,
                                      RayComposite& composite) const {
+    const double own = FieldErrorOwn(length, depth, tauMin, colorError, tauError);
+    for (double& e : composite.error) e += T * own;
+    // Everything behind is attenuated by the depth error (see RayComposite::AddColor).
+    composite.depthError += length * tauError;
+}
+
+double VolumeRayMarcher::FieldErrorOwn(double length, double depth, double tauMin,
+                                       double colorError, double tauError) const {
     const VolumeSetup& s = *setup_;
     // Emission happens within lambda of the piece's start: integral_0^l exp(-phi) <=
     // lambda. First-order effects of a colour error dc and an extinction error dtau:
     // Williams-Max dc (1 - e^-D) + 2 kappa_max dtau lambda; Wilhelms-Van Gelder
     // dc lambda + g_max dtau lambda^2.
     const double lambda = tauMin * length > 1 ? 1 / tauMin : length;
-    const double own =
-        s.glow == GlowModel::WilliamsMax
-            ? colorError * std::min(1.0, depth) + 2 * s.colorMax * tauError * lambda
-            : (colorError + s.colorMax * tauError * lambda) * lambda;
-    for (double& e : composite.error) e += T * own;
-    // Everything behind is attenuated by the depth error (see RayComposite::AddColor).
-    composite.depthError += length * tauError;
+    return s.glow == GlowModel::WilliamsMax
+               ? colorError * std::min(1.0, depth) + 2 * s.colorMax * tauError * lambda
+               : (colorError + s.colorMax * tauError * lambda) * lambda;
 }
 
 bool VolumeRayMarcher::LinearFromFacePoints(int f, const SegmentEnds& ends) {
@@ -1126,6 +1130,10 @@ void VolumeRayMarcher::CompositeLinearPiece(const QueuedPiece& piece,
     const double length = piece.length, tau0 = piece.tau0, tau1 = piece.tau1;
     const double T = composite.transmittance;
     const bool wm = s.glow == GlowModel::WilliamsMax;
+    // The error terms in the order AddColor and AddFieldError add them, summed in
+    // registers and stored once: stores of single channels that a wider load of the
+    // next term reads back cannot be forwarded, and stall it.
+    double error[3] = {composite.error[0], composite.error[1], composite.error[2]};
     double rgb[3];
     for (int c = 0; c < 3; ++c) {
         const double e = wm ? WilliamsMaxEmission(q, piece.c0[c], piece.c1[c])
@@ -1133,13 +1141,23 @@ void VolumeRayMarcher::CompositeLinearPiece(const QueuedPiece& piece,
         rgb[c] = T * e;
         // Rounding of the closed form (a few ulps; see IntegrateLinearPiece) and of the
         // compositing.
-        composite.error[c] += 16 * kEps * rgb[c];
+        error[c] += 16 * kEps * rgb[c];
     }
-    // The piece's own colour first: the depth errors below affect only what lies behind.
-    composite.AddColor(rgb);
-    if (piece.varying)
-        AddFieldError(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1), T,
-                      piece.colorError, piece.tauError, composite);
+    // The piece's own colour first (RayComposite::AddColor): the depth errors below
+    // affect only what lies behind.
+    for (int c = 0; c < 3; ++c) {
+        composite.rgba[c] += rgb[c];
+        error[c] += std::abs(rgb[c]) * composite.depthError;
+    }
+    if (piece.varying) {
+        // AddFieldError.
+        const double own =
+            FieldErrorOwn(length, 0.5 * length * (tau0 + tau1), std::min(tau0, tau1),
+                          piece.colorError, piece.tauError);
+        for (double& e : error) e += T * own;
+        composite.depthError += length * piece.tauError;
+    }
+    for (int c = 0; c < 3; ++c) composite.error[c] = error[c];
     composite.rgba[3] += T * q.opacity;
     composite.transmittance = T * q.transmittance;
     composite.depthError += 4 * kEps * length * 0.5 * (tau0 + tau1);
@@ -1585,12 +1603,196 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
     return FlushLinearTets(composite) ? LinearTetResult::kStop : LinearTetResult::kGoOn;
 }
 
+#if defined(__AVX2__)
+namespace {
+
+/// Lane j of four doubles.
+inline double Lane(__m256d v, int j) {
+    alignas(32) double a[4];
+    _mm256_store_pd(a, v);
+    return a[j];
+}
+
+/// std::max(a, b) and std::min(a, b) lane by lane, NaN included: (a < b) ? b : a and
+/// (b < a) ? b : a (MAXPD and MINPD return their second operand where either is NaN).
+inline __m256d Max(__m256d a, __m256d b) { return _mm256_max_pd(b, a); }
+inline __m256d Min(__m256d a, __m256d b) { return _mm256_min_pd(b, a); }
+inline __m256d Abs(__m256d a) { return _mm256_andnot_pd(_mm256_set1_pd(-0.0), a); }
+
+}  // namespace
+
+int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
+                                     const SegmentEnds* ends, double sliverLength,
+                                     double tMin, double tMax, RayComposite& composite) {
+    const VolumeSetup& s = *setup_;
+    if (!linearTetField_ || !s.sameField || !s.colorTf.ShortScalars().valid ||
+        !s.extinctionTf.ShortScalars().valid || s.colorTf.Channels() != 3 ||
+        s.extinctionTf.Channels() != 1 || !s.gradientBound[0] ||
+        s.gradientBound[0]->empty() || !s.pointValues[0])
+        return -1;
+    // LinearTet's conditions for one piece by LinearFromFacePoints, lane by lane.
+    double gradient[4];
+    for (int j = 0; j < 4; ++j) {
+        const Segment& seg = segs[j];
+        if (IsSpanEndSliver(seg, sliverLength, tMin, tMax) ||
+            s.cellKind[seg.cell] != VolumeSetup::kVarying || !ends[j].enter.Valid() ||
+            !ends[j].exit.Valid() || !geometry.IsDerived(seg.cell))
+            return -1;
+        gradient[j] = (*s.gradientBound[0])[seg.cell];
+        if (!(gradient[j] >= 0)) return -1;
+    }
+    const double* u = s.pointValues[0];
+    // LinearFromFacePoints: the face points' sums and the bound of their error.
+    // From registers (a vector load of four scalar stores just made would wait for them).
+    const __m256d g = _mm256_setr_pd(gradient[0], gradient[1], gradient[2], gradient[3]);
+    const __m256d grad0 = _mm256_mul_pd(g, _mm256_set1_pd(frameGradient_[0]));
+    const __m256d grad1 = _mm256_mul_pd(g, _mm256_set1_pd(frameGradient_[1]));
+    const __m256d grad2 = _mm256_mul_pd(g, _mm256_set1_pd(frameGradient_[2]));
+    __m256d value[2], t[2], error = _mm256_setzero_pd();
+    for (int e = 0; e < 2; ++e) {
+        const FacePoint* q[4];
+        for (int j = 0; j < 4; ++j) q[j] = e == 0 ? &ends[j].enter : &ends[j].exit;
+        auto field = [&](int m) {
+            return _mm256_setr_pd(u[q[0]->v[m]], u[q[1]->v[m]], u[q[2]->v[m]],
+                                  u[q[3]->v[m]]);
+        };
+        auto member = [&](auto get) {
+            return _mm256_setr_pd(get(*q[0]), get(*q[1]), get(*q[2]), get(*q[3]));
+        };
+        const __m256d u0 = field(0), u1 = field(1), u2 = field(2);
+        const __m256d w0 = member([](const FacePoint& p) { return p.w[0]; });
+        const __m256d w1 = member([](const FacePoint& p) { return p.w[1]; });
+        const __m256d w2 = member([](const FacePoint& p) { return p.w[2]; });
+        const __m256d au = Max(Max(Abs(u0), Abs(u1)), Abs(u2));
+        value[e] =
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w0, u0), _mm256_mul_pd(w1, u1)),
+                          _mm256_mul_pd(w2, u2));
+        const __m256d rounding = _mm256_mul_pd(_mm256_set1_pd(4 * kEps), au);
+        const __m256d off0 = member([](const FacePoint& p) { return p.off[0]; });
+        const __m256d off1 = member([](const FacePoint& p) { return p.off[1]; });
+        const __m256d off2 = member([](const FacePoint& p) { return p.off[2]; });
+        const __m256d off = _mm256_add_pd(
+            _mm256_add_pd(_mm256_mul_pd(grad0, off0), _mm256_mul_pd(grad1, off1)),
+            _mm256_mul_pd(grad2, off2));
+        error =
+            Max(error, _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(2.0), off), rounding));
+        t[e] = member([](const FacePoint& p) { return p.t; });
+    }
+    const __m256d tEnter =
+        _mm256_setr_pd(segs[0].tEnter, segs[1].tEnter, segs[2].tEnter, segs[3].tEnter);
+    const __m256d tExit =
+        _mm256_setr_pd(segs[0].tExit, segs[1].tExit, segs[2].tExit, segs[3].tExit);
+    const __m256d slope =
+        _mm256_div_pd(_mm256_sub_pd(value[1], value[0]), _mm256_sub_pd(t[1], t[0]));
+    const __m256d valueEnter = _mm256_blendv_pd(
+        _mm256_add_pd(value[0], _mm256_mul_pd(slope, _mm256_sub_pd(tEnter, t[0]))),
+        value[0], _mm256_cmp_pd(tEnter, t[0], _CMP_EQ_OQ));
+    const __m256d valueExit = _mm256_blendv_pd(
+        _mm256_add_pd(value[0], _mm256_mul_pd(slope, _mm256_sub_pd(tExit, t[0]))),
+        value[1], _mm256_cmp_pd(tExit, t[1], _CMP_EQ_OQ));
+    const __m256d fieldError =
+        _mm256_add_pd(_mm256_set1_pd(8 * kEps * s.fieldScale[0]), error);
+    // LinearCrossings: only a breakpoint strictly between the end values can split a
+    // segment into more pieces; a group where one lies so goes segment by segment.
+    const __m256d lo = Min(valueEnter, valueExit), hi = Max(valueEnter, valueExit);
+    __m256d inside = _mm256_setzero_pd();
+    for (const double b : s.breakpoints) {
+        const __m256d bv = _mm256_set1_pd(b);
+        inside = _mm256_or_pd(inside, _mm256_and_pd(_mm256_cmp_pd(lo, bv, _CMP_LT_OQ),
+                                                    _mm256_cmp_pd(bv, hi, _CMP_LT_OQ)));
+    }
+    if (_mm256_movemask_pd(inside) != 0) return -1;
+    // QueueLinearTetPiece over the whole segment: the field at its middle picks each
+    // transfer function's piece (FieldAt: the ends exactly, else interpolated).
+    const __m256d mid = _mm256_mul_pd(_mm256_set1_pd(0.5), _mm256_add_pd(tEnter, tExit));
+    const __m256d x =
+        _mm256_div_pd(_mm256_sub_pd(mid, tEnter), _mm256_sub_pd(tExit, tEnter));
+    __m256d middle =
+        _mm256_add_pd(_mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(1.0), x), valueEnter),
+                      _mm256_mul_pd(x, valueExit));
+    middle = _mm256_blendv_pd(middle, valueExit, _mm256_cmp_pd(mid, tExit, _CMP_EQ_OQ));
+    middle = _mm256_blendv_pd(middle, valueEnter, _mm256_cmp_pd(mid, tEnter, _CMP_EQ_OQ));
+    const __m256i kc = s.colorTf.IntervalOf4(middle);
+    const __m256i ke = s.extinctionTf.IntervalOf4(middle);
+    __m256d c0[3], c1[3], tau0, tau1;
+    s.colorTf.EvalOn3x4(kc, valueEnter, valueExit, c0, c1);
+    s.extinctionTf.EvalOn1x4(ke, valueEnter, valueExit, tau0, tau1);
+    const __m256d zero = _mm256_setzero_pd();
+    alignas(32) double out[13][4];
+    _mm256_store_pd(out[0], Max(zero, tau0));
+    _mm256_store_pd(out[1], Max(zero, tau1));
+    for (int c = 0; c < 3; ++c) {
+        _mm256_store_pd(out[2 + c], Max(zero, c0[c]));
+        _mm256_store_pd(out[5 + c], Max(zero, c1[c]));
+    }
+    _mm256_store_pd(out[8], _mm256_mul_pd(s.colorTf.SteepestOn4(kc), fieldError));
+    _mm256_store_pd(out[9], _mm256_mul_pd(s.extinctionTf.SteepestOn4(ke), fieldError));
+    _mm256_store_pd(out[10], valueEnter);
+    _mm256_store_pd(out[11], valueExit);
+    _mm256_store_pd(out[12], fieldError);
+    // LinearTet's state as after the last segment; the caches of face point sums and
+    // transfer-function values (which only save work) are dropped.
+    seg_ = segs[3];
+    FieldState& st = state_[0];
+    st.constant = st.bySeries = false;
+    st.linear = true;
+    st.valueEnter = out[10][3];
+    st.valueExit = out[11][3];
+    st.error = out[12][3];
+    kind_ = VolumeSetup::kVarying;
+    fieldCount_ = 1;
+    mode_ = Mode::kClosed;
+    crossings_.clear();
+    faceSums_[0].t = std::numeric_limits<double>::quiet_NaN();
+    lastColor_.piece = lastExtinction_.piece = -2;
+    groupedSegments_ += 4;
+    for (int j = 0; j < 4; ++j) {
+        if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
+        QueuedPiece& piece = queue_[queued_++];
+        piece.p0 = segs[j].tEnter;
+        piece.p1 = segs[j].tExit;
+        piece.length = piece.p1 - piece.p0;
+        piece.varying = true;
+        piece.tau0 = out[0][j];
+        piece.tau1 = out[1][j];
+        for (int c = 0; c < 3; ++c) {
+            piece.c0[c] = out[2 + c][j];
+            piece.c1[c] = out[5 + c][j];
+        }
+        piece.colorError = out[8][j];
+        piece.tauError = out[9][j];
+        if (queued_ >= kQueuedPieces && FlushLinearTets(composite)) return j;
+    }
+    return 4;
+}
+#else
+int VolumeRayMarcher::LinearTetGroup(const MeshGeometry&, const Segment*,
+                                     const SegmentEnds*, double, double, double,
+                                     RayComposite&) {
+    return -1;
+}
+#endif
+
 [[gnu::flatten]] VolumeRayMarcher::LinearTetRunResult VolumeRayMarcher::LinearTetRun(
     const MeshGeometry& geometry, const Segment* segs, const SegmentEnds* ends,
     std::size_t first, std::size_t last, double sliverLength, double tMin, double tMax,
     RayComposite& composite) {
     LinearTetRunResult r{last, false, false, 0.0};
     for (std::size_t k = first; k < last; ++k) {
+        if (k + 4 <= last) {
+            const int taken = LinearTetGroup(geometry, segs + k, ends + k, sliverLength,
+                                             tMin, tMax, composite);
+            if (taken >= 0) {
+                r.seen = true;
+                if (taken < 4) {
+                    r.stop = true;
+                    r.next = k + std::size_t(taken) + 1;
+                    return r;
+                }
+                k += 3;
+                continue;
+            }
+        }
         const Segment& seg = segs[k];
         if (IsSpanEndSliver(seg, sliverLength, tMin, tMax)) {
             r.culled += 1;

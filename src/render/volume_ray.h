@@ -203,6 +203,8 @@ class VolumeRayMarcher {
                                     const SegmentEnds* ends, std::size_t first,
                                     std::size_t last, double sliverLength, double tMin,
                                     double tMax, RayComposite& composite);
+    /// Segments LinearTetRun took four at a time (LinearTetGroup), since construction.
+    std::int64_t GroupedSegments() const { return groupedSegments_; }
     /// LinearTet queues the pieces of its segments and composites them in batches; this
     /// composites what is queued. Call it before any other segment is integrated and
     /// before FinishRay. True when the ray may stop (as Integrate's true); the rest of
@@ -235,6 +237,9 @@ class VolumeRayMarcher {
     /// `depth` at transmittance T, extinction >= tauMin on it: the field errors through
     /// the transfer functions' slopes (`colorSlope`, `tauSlope`: |d value / d field| on
     /// the piece), into the colour error and the depth error.
+    /// AddFieldError's term of each channel's error, before the transmittance T.
+    double FieldErrorOwn(double length, double depth, double tauMin, double colorError,
+                         double tauError) const;
     void AddFieldError(double length, double depth, double tauMin, double T,
                        double colorSlope, double tauSlope, RayComposite& composite) const;
     /// Records the emission density at the ray's ends (for FinishRay).
@@ -263,6 +268,17 @@ class VolumeRayMarcher {
     /// terms, transmittance, the ray's end emissions.
     void CompositeLinearPiece(const QueuedPiece& piece, const LinearPieceIntegrals& q,
                               RayComposite& composite);
+    /// Four consecutive segments of a run (segs[0..3], ends[0..3]) as LinearTet takes
+    /// them, in SIMD lanes where the build has AVX2, each lane bitwise LinearTet: where
+    /// every one is a varying linear tetrahedron (no sliver) with valid face points and
+    /// a gradient bound, whose field passes no breakpoint of the transfer functions (one
+    /// piece each). -1 (and nothing done) where one is not; else the pieces are queued in
+    /// order, composited as LinearTet composites them, and the result is the lane after
+    /// whose piece the ray stopped (0..3), or 4.
+    int LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
+                       const SegmentEnds* ends, double sliverLength, double tMin,
+                       double tMax, RayComposite& composite);
+    std::int64_t groupedSegments_ = 0;
     /// Queued pieces beyond which LinearTet composites.
     static constexpr std::size_t kQueuedPieces = 8;
     std::vector<QueuedPiece> queue_;  ///< the first queued_ are queued

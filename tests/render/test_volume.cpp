@@ -6,6 +6,7 @@
 // against the analytic chord, clipping, slices and thread invariance.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <boost/math/quadrature/gauss.hpp>
 #include <cmath>
 #include <cstddef>
@@ -103,6 +104,93 @@ TEST(VolumeTf, IntervalOfIsItsDefinitionForShortAndLongLists) {
         }
     }
 }
+
+#if defined(__AVX2__)
+// The four-lane transfer-function lookups by their scalar definitions, bitwise: for
+// functions of 1 to 8 control points with 1 and 3 channels, at control points, their
+// neighbours, between and beyond them, at infinities and NaN, in lanes that mix clamped
+// and inner pieces.
+TEST(VolumeTf, FourLaneLookupsAreTheScalarOnesBitwise) {
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> unit(-3.0, 3.0);
+    auto same = [](double a, double b) {
+        return std::memcmp(&a, &b, sizeof a) == 0 || (std::isnan(a) && std::isnan(b));
+    };
+    int checked = 0;
+    for (int n = 1; n <= ShortAscending::kMax; ++n) {
+        for (int channels : {1, 3}) {
+            std::vector<double> points, values;
+            double x = -2.5;
+            for (int k = 0; k < n; ++k) points.push_back(x += 0.1 + 0.37 * (k % 3));
+            for (int k = 0; k < n * channels; ++k) values.push_back(unit(rng));
+            const PiecewiseLinearTf tf(points, values, channels);
+            std::vector<double> probes = {std::nan(""),
+                                          -std::numeric_limits<double>::infinity(),
+                                          std::numeric_limits<double>::infinity()};
+            for (double p : points) {
+                probes.push_back(p);
+                probes.push_back(std::nextafter(p, -10.0));
+                probes.push_back(std::nextafter(p, 10.0));
+            }
+            for (int k = 0; k < 60; ++k) probes.push_back(unit(rng));
+            std::shuffle(probes.begin(), probes.end(), rng);
+            for (std::size_t i = 0; i + 8 <= probes.size(); i += 4) {
+                // Lane j looks up piece k of probe i + j (from its own interval, or a
+                // neighbour's: EvalOn extends a piece beyond it) at probes i + j and i +
+                // 4 + j.
+                alignas(32) double s[4], a[4], b[4];
+                alignas(32) std::int64_t piece[4];
+                for (int j = 0; j < 4; ++j) {
+                    s[j] = probes[i + j];
+                    a[j] = probes[i + j];
+                    b[j] = probes[i + 4 + j];
+                }
+                const __m256i k4 = tf.IntervalOf4(_mm256_load_pd(s));
+                _mm256_store_si256(reinterpret_cast<__m256i*>(piece), k4);
+                for (int j = 0; j < 4; ++j)
+                    ASSERT_EQ(piece[j], tf.IntervalOf(s[j]))
+                        << "n " << n << " s " << s[j];
+                for (int j = 0; j < 4; ++j)
+                    if (j % 2 == 1)
+                        piece[j] = std::min<std::int64_t>(piece[j] + 1, n - 1);
+                const __m256i k =
+                    _mm256_load_si256(reinterpret_cast<const __m256i*>(piece));
+                alignas(32) double outA[3][4], outB[3][4], steep[4];
+                _mm256_store_pd(steep, tf.SteepestOn4(k));
+                if (channels == 3) {
+                    __m256d va[3], vb[3];
+                    tf.EvalOn3x4(k, _mm256_load_pd(a), _mm256_load_pd(b), va, vb);
+                    for (int c = 0; c < 3; ++c) {
+                        _mm256_store_pd(outA[c], va[c]);
+                        _mm256_store_pd(outB[c], vb[c]);
+                    }
+                } else {
+                    __m256d va, vb;
+                    tf.EvalOn1x4(k, _mm256_load_pd(a), _mm256_load_pd(b), va, vb);
+                    _mm256_store_pd(outA[0], va);
+                    _mm256_store_pd(outB[0], vb);
+                }
+                for (int j = 0; j < 4; ++j) {
+                    const int kj = static_cast<int>(piece[j]);
+                    EXPECT_TRUE(same(steep[j], tf.SteepestOn(kj)));
+                    double ra[3], rb[3];
+                    tf.EvalOn(kj, a[j], ra);
+                    tf.EvalOn(kj, b[j], rb);
+                    for (int c = 0; c < channels; ++c) {
+                        EXPECT_TRUE(same(outA[c][j], ra[c]))
+                            << "n " << n << " piece " << kj << " s " << a[j] << ": "
+                            << outA[c][j] << " against " << ra[c];
+                        EXPECT_TRUE(same(outB[c][j], rb[c]))
+                            << "n " << n << " piece " << kj << " s " << b[j];
+                        ++checked;
+                    }
+                }
+            }
+        }
+    }
+    EXPECT_GT(checked, 2000);
+}
+#endif
 
 // ---------------------------------------------------------------------------------------
 // Closed form of a linear piece.
@@ -651,6 +739,12 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
             }
         EXPECT_GT(rays, 250);
         EXPECT_LT(runs, rays + other + 1);  // a run per ray, and one after each other
+#if defined(__AVX2__)
+        // Runs took segments four at a time (LinearTetGroup) where they could.
+        if (pass != 3) {
+            EXPECT_GT(runner.GroupedSegments(), rays);
+        }
+#endif
         if (pass == 3) {
             EXPECT_GT(other, 5 * rays);
             EXPECT_GT(taken, 10);
