@@ -34,9 +34,8 @@ struct ShortAscending {
     int CountAtMost(double s) const { return Count<true>(s); }
     int CountBelow(double s) const { return Count<false>(s); }
 #if defined(__AVX2__)
-    /// CountAtMost and CountBelow of four values at once, as 64-bit lanes.
+    /// CountAtMost of four values at once, as 64-bit lanes.
     __m256i CountAtMost4(__m256d s) const { return Count4<_CMP_LE_OQ>(s); }
-    __m256i CountBelow4(__m256d s) const { return Count4<_CMP_LT_OQ>(s); }
 #endif
 
   private:
