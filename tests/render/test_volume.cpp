@@ -66,6 +66,22 @@ TEST(VolumeTf, PiecewiseLinearClampedWithExactControlValues) {
     EXPECT_EQ(hi, 0.0);
 }
 
+// Values to look a transfer function up at: NaN, both infinities, each control point and
+// its neighbours, and `random` values from `unit`.
+std::vector<double> TfProbes(const std::vector<double>& points, int random,
+                             std::mt19937& rng,
+                             std::uniform_real_distribution<double>& unit) {
+    std::vector<double> probes = {std::nan(""), -std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity()};
+    for (double p : points) {
+        probes.push_back(p);
+        probes.push_back(std::nextafter(p, -10.0));
+        probes.push_back(std::nextafter(p, 10.0));
+    }
+    for (int k = 0; k < random; ++k) probes.push_back(unit(rng));
+    return probes;
+}
+
 // IntervalOf by its definition (control points <= s, minus one; NaN counts none) for
 // every list length around the fixed-count lookup's limit (ShortAscending::kMax), at the
 // control points, between them, beyond them, at infinities and NaN; and ShortAscending's
@@ -81,15 +97,7 @@ TEST(VolumeTf, IntervalOfIsItsDefinitionForShortAndLongLists) {
         ShortAscending few;
         few.Set(points);
         EXPECT_EQ(few.valid, n <= ShortAscending::kMax);
-        std::vector<double> probes = {std::nan(""),
-                                      -std::numeric_limits<double>::infinity(),
-                                      std::numeric_limits<double>::infinity()};
-        for (double p : points) {
-            probes.push_back(p);
-            probes.push_back(std::nextafter(p, -10.0));
-            probes.push_back(std::nextafter(p, 10.0));
-        }
-        for (int k = 0; k < 50; ++k) probes.push_back(unit(rng));
+        const std::vector<double> probes = TfProbes(points, 50, rng, unit);
         for (double s : probes) {
             int atMost = 0, below = 0;
             for (double p : points) {
@@ -124,15 +132,7 @@ TEST(VolumeTf, FourLaneLookupsAreTheScalarOnesBitwise) {
             for (int k = 0; k < n; ++k) points.push_back(x += 0.1 + 0.37 * (k % 3));
             for (int k = 0; k < n * channels; ++k) values.push_back(unit(rng));
             const PiecewiseLinearTf tf(points, values, channels);
-            std::vector<double> probes = {std::nan(""),
-                                          -std::numeric_limits<double>::infinity(),
-                                          std::numeric_limits<double>::infinity()};
-            for (double p : points) {
-                probes.push_back(p);
-                probes.push_back(std::nextafter(p, -10.0));
-                probes.push_back(std::nextafter(p, 10.0));
-            }
-            for (int k = 0; k < 60; ++k) probes.push_back(unit(rng));
+            std::vector<double> probes = TfProbes(points, 60, rng, unit);
             std::shuffle(probes.begin(), probes.end(), rng);
             for (std::size_t i = 0; i + 8 <= probes.size(); i += 4) {
                 // Lane j looks up piece k of probe i + j (from its own interval, or a
