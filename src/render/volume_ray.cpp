@@ -532,6 +532,9 @@ void VolumeRayMarcher::BeginRay(const VolumeSetup& setup, const Ray& ray, double
     linearTetField_ = setup.sameField && setup.pointValues[0] &&
                       setup.fields[0].field->association != Association::Cell &&
                       setup.gradientBound[0] && !setup.gradientBound[0]->empty();
+    groupable_ = linearTetField_ && setup.colorTf.ShortScalars().valid &&
+                 setup.extinctionTf.ShortScalars().valid &&
+                 setup.colorTf.Channels() == 3 && setup.extinctionTf.Channels() == 1;
     if ((setup.gradientBound[0] && !setup.gradientBound[0]->empty()) ||
         (setup.gradientBound[1] && !setup.gradientBound[1]->empty())) {
         // In the frame (x, y, z) = (a_kx - sx a_kz, a_ky - sy a_kz, sz a_kz) of world
@@ -1606,13 +1609,6 @@ bool VolumeRayMarcher::Terminate(double t, RayComposite& composite) {
 #if defined(__AVX2__)
 namespace {
 
-/// Lane j of four doubles.
-inline double Lane(__m256d v, int j) {
-    alignas(32) double a[4];
-    _mm256_store_pd(a, v);
-    return a[j];
-}
-
 /// std::max(a, b) and std::min(a, b) lane by lane, NaN included: (a < b) ? b : a and
 /// (b < a) ? b : a (MAXPD and MINPD return their second operand where either is NaN).
 inline __m256d Max(__m256d a, __m256d b) { return _mm256_max_pd(b, a); }
@@ -1625,11 +1621,7 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
                                      const SegmentEnds* ends, double sliverLength,
                                      double tMin, double tMax, RayComposite& composite) {
     const VolumeSetup& s = *setup_;
-    if (!linearTetField_ || !s.sameField || !s.colorTf.ShortScalars().valid ||
-        !s.extinctionTf.ShortScalars().valid || s.colorTf.Channels() != 3 ||
-        s.extinctionTf.Channels() != 1 || !s.gradientBound[0] ||
-        s.gradientBound[0]->empty() || !s.pointValues[0])
-        return -1;
+    if (!groupable_) return -1;
     // LinearTet's conditions for one piece by LinearFromFacePoints, lane by lane.
     double gradient[4];
     for (int j = 0; j < 4; ++j) {

@@ -237,11 +237,11 @@ class VolumeRayMarcher {
     /// `depth` at transmittance T, extinction >= tauMin on it: the field errors through
     /// the transfer functions' slopes (`colorSlope`, `tauSlope`: |d value / d field| on
     /// the piece), into the colour error and the depth error.
+    void AddFieldError(double length, double depth, double tauMin, double T,
+                       double colorSlope, double tauSlope, RayComposite& composite) const;
     /// AddFieldError's term of each channel's error, before the transmittance T.
     double FieldErrorOwn(double length, double depth, double tauMin, double colorError,
                          double tauError) const;
-    void AddFieldError(double length, double depth, double tauMin, double T,
-                       double colorSlope, double tauSlope, RayComposite& composite) const;
     /// Records the emission density at the ray's ends (for FinishRay).
     void RecordEnds(double p0, double p1, double tau0, const double e0[3], double tau1,
                     const double e1[3], double transmittanceAtP1);
@@ -350,6 +350,9 @@ class VolumeRayMarcher {
     int fieldCount_ = 1;
     /// LinearTet applies: one point field, with per-point values, drives both.
     bool linearTetField_ = false;
+    /// LinearTetGroup applies: linearTetField_, and transfer functions of at most
+    /// ShortAscending::kMax points with 3 colour channels and 1 extinction channel.
+    bool groupable_ = false;
     /// Bounds of |d field / d x|, |d / d y|, |d / d z| in the ray frame per unit of a
     /// tetrahedron's VolumeSetup::gradientBound (trace/ray_frame.h: x and y are world
     /// axes sheared along z, z a scaled world axis).

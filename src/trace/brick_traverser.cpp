@@ -318,7 +318,6 @@ bool Canonicalize(const std::int32_t* ids, int n, std::int32_t* out, Less less) 
 struct TetWalkFace {
     std::int32_t face = -1;
     int side = 0;  ///< the crossing's side: the sign of each of the face's edges
-    std::int32_t v[3] = {-1, -1, -1};
     ShearedPoint p[3];
 };
 
@@ -408,7 +407,7 @@ struct BrickTraverser::Impl {
     bool planarTetsOnly = false;
     // Per cell, for tetrahedra with four triangular faces and four distinct corners
     // (else 0): how the corners of its face records relate, so that a walk step needs no
-    // search by vertex id (see TetCode).
+    // search by vertex id (see tetcode).
     std::vector<std::uint32_t> tetCodes;
     void BuildTetCodes();
     bool TolerantExit(std::int64_t c, double tIn, const RayFrame& frame,
@@ -2003,10 +2002,10 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         exit = cand;
         if (exitPoint && meshPointIds)
             MakeFacePoint(rec.v, a, b, d, x, std::abs(frame.dir[frame.kz]), *exitPoint);
-        if (lastFace) *lastFace = {f, x.side, {rec.v[0], rec.v[1], rec.v[2]}, {a, b, d}};
+        if (lastFace) *lastFace = {f, x.side, {a, b, d}};
         return true;
     };
-    // Which corners of the record lie where (see TetCode): the exit face and its
+    // Which corners of the record lie where (see tetcode): the exit face and its
     // corners' places among the entry corners and d by table, not by vertex ids.
     const std::uint32_t code = tetCodes[c];
     const int kin = cf[0] == entryFace   ? 0
@@ -2057,8 +2056,8 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         trace::FinishCrossing(a, b, dd, sa, x);
         return found(f, rec, a, b, dd);
     }
-    // Face by face: the walk's first cell, or corners that are not those of one
-    // tetrahedron.
+    // Face by face: the walk's first cell, or a cell without a tet code (corners that
+    // are not those of one tetrahedron).
     for (int k = 0; k < 4; ++k) {
         const std::int32_t f = cf[k];
         if (f == entryFace) continue;
