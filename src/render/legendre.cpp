@@ -389,13 +389,20 @@ void InterpolateChebyshevLobatto(const double* values, int n, double a, double b
 
 LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,
                         std::vector<double>& scratch) {
+    LegendreSeries out;
+    Restrict(p, lo, hi, scratch, out);
+    return out;
+}
+
+void Restrict(const LegendreSeries& p, double lo, double hi, std::vector<double>& scratch,
+              LegendreSeries& out) {
     const int n = std::max(p.Degree(), 1);
     const LglRule& rule = LglNodes(n);
     scratch.resize(2 * (n + 1));
     double* ts = scratch.data() + n + 1;
     for (int i = 0; i <= n; ++i) ts[i] = 0.5 * (lo + hi) + 0.5 * (hi - lo) * rule.nodes[i];
     p.EvalMany(ts, n + 1, scratch.data());
-    return InterpolateLgl(scratch.data(), n, lo, hi);
+    InterpolateLgl(scratch.data(), n, lo, hi, out);
 }
 
 }  // namespace hpray

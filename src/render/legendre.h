@@ -104,5 +104,8 @@ void InterpolateChebyshevLobatto(const double* values, int n, double a, double b
 /// nodes of [lo, hi]. `scratch` is caller-owned and resized as needed.
 LegendreSeries Restrict(const LegendreSeries& p, double lo, double hi,
                         std::vector<double>& scratch);
+/// The same into `out` (reusing its storage; `out` must not be `p`).
+void Restrict(const LegendreSeries& p, double lo, double hi, std::vector<double>& scratch,
+              LegendreSeries& out);
 
 }  // namespace hpray

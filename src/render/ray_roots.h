@@ -384,29 +384,80 @@ inline bool TightBracket(const LegendreSeries& p, double C, double eps, double l
     return false;
 }
 
+/// A window of IsolateRoots: the series on it and what is known of it.
+struct IsolateWindow {
+    LegendreSeries q;
+    double vlo = 0, vhi = 0;  // q(lo) - C, q(hi) - C
+    bool monotone = false;    // proven: q' keeps one sign on the interval
+    int depth = 0;
+};
+
+/// IsolateRoots' storage, kept per thread from call to call: the series of its windows
+/// keep their capacity, so a call allocates nothing once the thread has run a few.
+struct IsolateStorage {
+    std::vector<IsolateWindow> windows;  ///< a stack: the first `size` are in use
+    std::size_t size = 0;
+    IsolateWindow current;
+    LegendreSeries derivative, second;
+    bool busy = false;  ///< a call on this thread is running (a visit may call again)
+
+    IsolateWindow& Push(double vlo, double vhi, bool monotone, int depth) {
+        if (size == windows.size()) windows.emplace_back();
+        IsolateWindow& w = windows[size++];
+        w.vlo = vlo;
+        w.vhi = vhi;
+        w.monotone = monotone;
+        w.depth = depth;
+        return w;
+    }
+    /// Moves the top window into `current` (the series' storage swapped, not copied).
+    void Pop() {
+        IsolateWindow& w = windows[--size];
+        std::swap(current.q.c, w.q.c);
+        current.q.a = w.q.a;
+        current.q.b = w.q.b;
+        current.vlo = w.vlo;
+        current.vhi = w.vhi;
+        current.monotone = w.monotone;
+        current.depth = w.depth;
+    }
+};
+
 template <typename Visit>
 void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth,
                   std::vector<double>& scratch, Visit&& visit) {
-    struct Work {
-        LegendreSeries q;
-        double vlo, vhi;  // q(lo) - C, q(hi) - C
-        bool monotone;    // proven: q' keeps one sign on the interval
-        int depth;
-    };
-    std::vector<Work> stack;
-    stack.push_back({p, p(p.a) - C, p(p.b) - C, false, 0});
+    static thread_local IsolateStorage shared;
+    IsolateStorage local;
+    IsolateStorage& store = shared.busy ? local : shared;
+    struct Release {
+        IsolateStorage& store;
+        ~Release() {
+            store.busy = false;
+            store.size = 0;
+        }
+    } release{store};
+    store.busy = true;
+    store.size = 0;
+    {
+        IsolateWindow& first = store.Push(p(p.a) - C, p(p.b) - C, false, 0);
+        first.q.a = p.a;
+        first.q.b = p.b;
+        first.q.c.assign(p.c.begin(), p.c.end());
+    }
     // Windows examined before the rest is given up as one unresolved window: a bound on
     // the work whatever the series (the flat test below handles the known cause).
     constexpr int kMaxWindows = 20000;
     int windows = 0;
     double flatEnd = std::numeric_limits<double>::quiet_NaN();
-    while (!stack.empty()) {
-        Work w = std::move(stack.back());
-        stack.pop_back();
+    IsolateWindow& w = store.current;
+    LegendreSeries& d = store.derivative;
+    while (store.size > 0) {
+        store.Pop();
         const double lo = w.q.a, hi = w.q.b;
         if (++windows > kMaxWindows) {
             double end = hi;
-            for (const Work& rest : stack) end = std::max(end, rest.q.b);
+            for (std::size_t k = 0; k < store.size; ++k)
+                end = std::max(end, store.windows[k].q.b);
             visit(lo, end, 4, 0.5 * (lo + end));
             return;
         }
@@ -423,10 +474,9 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
             if (!continues && visit(lo, hi, 2, lo)) return;
             continue;
         }
-        LegendreSeries d;
         bool monotone = w.monotone;
         if (!monotone) {
-            d = w.q.Derivative();
+            w.q.Derivative(d);
             monotone = TailExcluded(d, 0.0) > 0;
         }
         if (monotone) {
@@ -445,7 +495,7 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
         // unimodal: split at its extremum t*, where a tangency would be.
         const double dlo = d(lo), dhi = d(hi);
         if ((dlo < 0) != (dhi < 0) && dlo != 0 && dhi != 0 &&
-            TailExcluded(d.Derivative(), 0.0) > 0) {
+            (d.Derivative(store.second), TailExcluded(store.second, 0.0) > 0)) {
             const double ts = PolishSeriesRoot(d, lo, hi, dlo, dhi, minWidth);
             const double vs = w.q(ts) - C;
             if (std::abs(vs) <= eps && (w.vlo < 0) == (w.vhi < 0) && std::abs(w.vlo) > eps &&
@@ -454,8 +504,10 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
                 continue;
             }
             if (ts > lo && ts < hi) {
-                stack.push_back({Restrict(w.q, ts, hi, scratch), vs, w.vhi, true, w.depth + 1});
-                stack.push_back({Restrict(w.q, lo, ts, scratch), w.vlo, vs, true, w.depth + 1});
+                Restrict(w.q, ts, hi, scratch,
+                         store.Push(vs, w.vhi, true, w.depth + 1).q);
+                Restrict(w.q, lo, ts, scratch,
+                         store.Push(w.vlo, vs, true, w.depth + 1).q);
                 continue;
             }
         }
@@ -465,8 +517,8 @@ void IsolateRoots(const LegendreSeries& p, double C, double eps, double minWidth
         }
         const double mid = 0.5 * (lo + hi);
         const double vmid = w.q(mid) - C;
-        stack.push_back({Restrict(w.q, mid, hi, scratch), vmid, w.vhi, false, w.depth + 1});
-        stack.push_back({Restrict(w.q, lo, mid, scratch), w.vlo, vmid, false, w.depth + 1});
+        Restrict(w.q, mid, hi, scratch, store.Push(vmid, w.vhi, false, w.depth + 1).q);
+        Restrict(w.q, lo, mid, scratch, store.Push(w.vlo, vmid, false, w.depth + 1).q);
     }
 }
 
