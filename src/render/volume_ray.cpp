@@ -1738,6 +1738,103 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
     faceSums_[0].t = std::numeric_limits<double>::quiet_NaN();
     lastColor_.piece = lastExtinction_.piece = -2;
     groupedSegments_ += 4;
+    // Composited here, not queued, unless a piece lies at an end of the ray (RecordEnds):
+    // what waits in the queue first, then the four closed forms (IntegrateLinearPieces,
+    // bitwise per piece however they are grouped) and CompositeLinearPiece's terms of
+    // each piece in lanes, its running sums in order. Each piece bitwise as queued.
+    const __m256d length = _mm256_sub_pd(tExit, tEnter);
+    const __m256d atEnd =
+        _mm256_or_pd(_mm256_cmp_pd(tEnter, _mm256_set1_pd(tStart_), _CMP_EQ_OQ),
+                     _mm256_cmp_pd(tExit, _mm256_set1_pd(tEnd_), _CMP_EQ_OQ));
+    if (_mm256_movemask_pd(atEnd) == 0) {
+        if (queued_ > 0 && FlushLinearTets(composite)) return 0;
+        alignas(32) double lengths[4];
+        _mm256_store_pd(lengths, length);
+        LinearPieceIntegrals q[4];
+        IntegrateLinearPieces(4, out[0], out[1], lengths, q);
+        auto member = [&](auto get) {
+            return _mm256_setr_pd(get(q[0]), get(q[1]), get(q[2]), get(q[3]));
+        };
+        const __m256d t0 = _mm256_load_pd(out[0]), t1 = _mm256_load_pd(out[1]);
+        const __m256d colorError = _mm256_load_pd(out[8]),
+                      tauError = _mm256_load_pd(out[9]);
+        // The emission of each channel (WilliamsMaxEmission, GlowEmission).
+        alignas(32) double emission[3][4];
+        const bool wm = s.glow == GlowModel::WilliamsMax;
+        if (wm) {
+            const __m256d opacity =
+                member([](const LinearPieceIntegrals& v) { return v.opacity; });
+            const __m256d far =
+                member([](const LinearPieceIntegrals& v) { return v.farWeight; });
+            const __m256d near = _mm256_sub_pd(opacity, far);
+            for (int c = 0; c < 3; ++c)
+                _mm256_store_pd(
+                    emission[c],
+                    _mm256_add_pd(_mm256_mul_pd(_mm256_load_pd(out[2 + c]), near),
+                                  _mm256_mul_pd(_mm256_load_pd(out[5 + c]), far)));
+        } else {
+            const __m256d mean =
+                member([](const LinearPieceIntegrals& v) { return v.mean; });
+            const __m256d first =
+                member([](const LinearPieceIntegrals& v) { return v.firstMoment; });
+            const __m256d rest = _mm256_sub_pd(mean, first);
+            for (int c = 0; c < 3; ++c)
+                _mm256_store_pd(
+                    emission[c],
+                    _mm256_mul_pd(
+                        length,
+                        _mm256_add_pd(_mm256_mul_pd(_mm256_load_pd(out[2 + c]), rest),
+                                      _mm256_mul_pd(_mm256_load_pd(out[5 + c]), first))));
+        }
+        // FieldErrorOwn(length, 0.5 length (tau0 + tau1), min(tau0, tau1), ...).
+        const __m256d sum = _mm256_add_pd(t0, t1);
+        const __m256d depth =
+            _mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(0.5), length), sum);
+        const __m256d tauMin = Min(t0, t1);
+        const __m256d lambda =
+            _mm256_blendv_pd(length, _mm256_div_pd(_mm256_set1_pd(1.0), tauMin),
+                             _mm256_cmp_pd(_mm256_mul_pd(tauMin, length),
+                                           _mm256_set1_pd(1.0), _CMP_GT_OQ));
+        const __m256d glowTau = _mm256_mul_pd(
+            _mm256_mul_pd(_mm256_set1_pd(wm ? 2 * s.colorMax : s.colorMax), tauError),
+            lambda);
+        const __m256d own =
+            wm ? _mm256_add_pd(_mm256_mul_pd(colorError, Min(_mm256_set1_pd(1.0), depth)),
+                               glowTau)
+               : _mm256_mul_pd(_mm256_add_pd(colorError, glowTau), lambda);
+        // The depth error's two terms: the field's, and the closed form's rounding.
+        const __m256d fieldDepth = _mm256_mul_pd(length, tauError);
+        const __m256d roundingDepth =
+            _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(_mm256_set1_pd(4 * kEps), length),
+                                        _mm256_set1_pd(0.5)),
+                          sum);
+        alignas(32) double owns[4], fieldDepths[4], roundingDepths[4];
+        _mm256_store_pd(owns, own);
+        _mm256_store_pd(fieldDepths, fieldDepth);
+        _mm256_store_pd(roundingDepths, roundingDepth);
+        double error[3] = {composite.error[0], composite.error[1], composite.error[2]};
+        for (int j = 0; j < 4; ++j) {
+            const double T = composite.transmittance;
+            double rgb[3];
+            for (int c = 0; c < 3; ++c) {
+                rgb[c] = T * emission[c][j];
+                error[c] += 16 * kEps * rgb[c];
+            }
+            for (int c = 0; c < 3; ++c) {
+                composite.rgba[c] += rgb[c];
+                error[c] += std::abs(rgb[c]) * composite.depthError;
+            }
+            for (double& e : error) e += T * owns[j];
+            composite.depthError += fieldDepths[j];
+            for (int c = 0; c < 3; ++c) composite.error[c] = error[c];
+            composite.rgba[3] += T * q[j].opacity;
+            composite.transmittance = T * q[j].transmittance;
+            composite.depthError += roundingDepths[j];
+            // (Terminate changes the error only where it stops.)
+            if (Terminate(segs[j].tExit, composite)) return j;
+        }
+        return 4;
+    }
     for (int j = 0; j < 4; ++j) {
         if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
         QueuedPiece& piece = queue_[queued_++];
