@@ -33,11 +33,14 @@ PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars,
     size_ = static_cast<int>(scalars_.size());
     // Piece k sits at index k + 1: the clamped pieces -1 and Size() - 1 have slope 0.
     steepest_.assign(scalars_.size() + 1, 0.0);
-    for (int k = 0; k + 1 < Size(); ++k) {
-        std::vector<double> o(channels_), sl(channels_);
-        AffineOn(k, o.data(), sl.data());
+    affineOffset_.assign((scalars_.size() + 1) * channels_, 0.0);
+    affineSlope_.assign((scalars_.size() + 1) * channels_, 0.0);
+    for (int k = -1; k < Size(); ++k) {
+        double* o = affineOffset_.data() + std::size_t(k + 1) * channels_;
+        double* sl = affineSlope_.data() + std::size_t(k + 1) * channels_;
+        ComputeAffineOn(k, o, sl);
         double m = 0;
-        for (double x : sl) m = std::max(m, std::abs(x));
+        for (int c = 0; c < channels_; ++c) m = std::max(m, std::abs(sl[c]));
         steepest_[k + 1] = m;
     }
 }

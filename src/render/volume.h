@@ -146,6 +146,11 @@ class PiecewiseLinearTf {
     std::vector<double> values_;
     int channels_ = 1;
     std::vector<double> steepest_;  ///< SteepestOn(k) at k + 1
+    /// AffineOn(k)'s offsets and slopes, Channels() each, at (k + 1) * Channels():
+    /// computed once (a division per channel and piece) instead of on every call.
+    std::vector<double> affineOffset_, affineSlope_;
+    /// AffineOn computed from the control points (the tables' source).
+    void ComputeAffineOn(int k, double* offset, double* slope) const;
     ShortAscending short_;          ///< the control points, for IntervalOf
     int size_ = 0;                  ///< scalars_.size(), read per ray piece
 };
@@ -252,6 +257,16 @@ inline double PiecewiseLinearTf::EvalOn1(int k, double s) const {
 }
 
 inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
+    const int n = Size();
+    const std::size_t at = std::size_t(std::clamp(k, -1, n - 1) + 1) * channels_;
+    for (int c = 0; c < channels_; ++c) {
+        offset[c] = affineOffset_[at + c];
+        slope[c] = affineSlope_[at + c];
+    }
+}
+
+inline void PiecewiseLinearTf::ComputeAffineOn(int k, double* offset,
+                                               double* slope) const {
     const int n = Size();
     if (k < 0 || k >= n - 1) {
         const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
