@@ -1617,21 +1617,35 @@ inline __m256d Abs(__m256d a) { return _mm256_andnot_pd(_mm256_set1_pd(-0.0), a)
 
 }  // namespace
 
-int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
-                                     const SegmentEnds* ends, double sliverLength,
-                                     double tMin, double tMax, RayComposite& composite) {
+VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
+    const MeshGeometry& geometry, const Segment* segs, const SegmentEnds* ends,
+    double sliverLength, double tMin, double tMax, RayComposite& composite) {
     const VolumeSetup& s = *setup_;
-    if (!groupable_) return -1;
-    // LinearTet's conditions for one piece by LinearFromFacePoints, lane by lane.
+    if (!groupable_) return {0, false};
+    // LinearTet's conditions for one piece by LinearFromFacePoints, lane by lane: the
+    // group is the segments before the first that fails them.
     double gradient[4];
+    int lanes = 4;
     for (int j = 0; j < 4; ++j) {
         const Segment& seg = segs[j];
         if (IsSpanEndSliver(seg, sliverLength, tMin, tMax) ||
             s.cellKind[seg.cell] != VolumeSetup::kVarying || !ends[j].enter.Valid() ||
-            !ends[j].exit.Valid() || !geometry.IsDerived(seg.cell))
-            return -1;
+            !ends[j].exit.Valid() || !geometry.IsDerived(seg.cell)) {
+            lanes = j;
+            break;
+        }
         gradient[j] = (*s.gradientBound[0])[seg.cell];
-        if (!(gradient[j] >= 0)) return -1;
+        if (!(gradient[j] >= 0)) {
+            lanes = j;
+            break;
+        }
+    }
+    if (lanes == 0) return {0, false};
+    // Lanes past the group repeat its first segment (their results are not used).
+    int src[4];
+    for (int j = 0; j < 4; ++j) {
+        src[j] = j < lanes ? j : 0;
+        gradient[j] = gradient[src[j]];
     }
     const double* u = s.pointValues[0];
     // LinearFromFacePoints: the face points' sums and the bound of their error.
@@ -1643,7 +1657,8 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
     __m256d value[2], t[2], error = _mm256_setzero_pd();
     for (int e = 0; e < 2; ++e) {
         const FacePoint* q[4];
-        for (int j = 0; j < 4; ++j) q[j] = e == 0 ? &ends[j].enter : &ends[j].exit;
+        for (int j = 0; j < 4; ++j)
+            q[j] = e == 0 ? &ends[src[j]].enter : &ends[src[j]].exit;
         auto field = [&](int m) {
             return _mm256_setr_pd(u[q[0]->v[m]], u[q[1]->v[m]], u[q[2]->v[m]],
                                   u[q[3]->v[m]]);
@@ -1670,10 +1685,10 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
             Max(error, _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(2.0), off), rounding));
         t[e] = member([](const FacePoint& p) { return p.t; });
     }
-    const __m256d tEnter =
-        _mm256_setr_pd(segs[0].tEnter, segs[1].tEnter, segs[2].tEnter, segs[3].tEnter);
-    const __m256d tExit =
-        _mm256_setr_pd(segs[0].tExit, segs[1].tExit, segs[2].tExit, segs[3].tExit);
+    const __m256d tEnter = _mm256_setr_pd(segs[src[0]].tEnter, segs[src[1]].tEnter,
+                                          segs[src[2]].tEnter, segs[src[3]].tEnter);
+    const __m256d tExit = _mm256_setr_pd(segs[src[0]].tExit, segs[src[1]].tExit,
+                                         segs[src[2]].tExit, segs[src[3]].tExit);
     const __m256d slope =
         _mm256_div_pd(_mm256_sub_pd(value[1], value[0]), _mm256_sub_pd(t[1], t[0]));
     const __m256d valueEnter = _mm256_blendv_pd(
@@ -1685,7 +1700,8 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
     const __m256d fieldError =
         _mm256_add_pd(_mm256_set1_pd(8 * kEps * s.fieldScale[0]), error);
     // LinearCrossings: only a breakpoint strictly between the end values can split a
-    // segment into more pieces; a group where one lies so goes segment by segment.
+    // segment into more pieces; the group ends before the first segment where one lies
+    // so.
     const __m256d lo = Min(valueEnter, valueExit), hi = Max(valueEnter, valueExit);
     __m256d inside = _mm256_setzero_pd();
     for (const double b : s.breakpoints) {
@@ -1693,7 +1709,10 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
         inside = _mm256_or_pd(inside, _mm256_and_pd(_mm256_cmp_pd(lo, bv, _CMP_LT_OQ),
                                                     _mm256_cmp_pd(bv, hi, _CMP_LT_OQ)));
     }
-    if (_mm256_movemask_pd(inside) != 0) return -1;
+    if (const int split = _mm256_movemask_pd(inside); split != 0) {
+        lanes = std::min(lanes, __builtin_ctz(static_cast<unsigned>(split)));
+        if (lanes == 0) return {0, false};
+    }
     // QueueLinearTetPiece over the whole segment: the field at its middle picks each
     // transfer function's piece (FieldAt: the ends exactly, else interpolated).
     const __m256d mid = _mm256_mul_pd(_mm256_set1_pd(0.5), _mm256_add_pd(tEnter, tExit));
@@ -1724,20 +1743,21 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
     _mm256_store_pd(out[12], fieldError);
     // LinearTet's state as after the last segment; the caches of face point sums and
     // transfer-function values (which only save work) are dropped.
-    seg_ = segs[3];
+    const int last = lanes - 1;
+    seg_ = segs[last];
     FieldState& st = state_[0];
     st.constant = st.bySeries = false;
     st.linear = true;
-    st.valueEnter = out[10][3];
-    st.valueExit = out[11][3];
-    st.error = out[12][3];
+    st.valueEnter = out[10][last];
+    st.valueExit = out[11][last];
+    st.error = out[12][last];
     kind_ = VolumeSetup::kVarying;
     fieldCount_ = 1;
     mode_ = Mode::kClosed;
     crossings_.clear();
     faceSums_[0].t = std::numeric_limits<double>::quiet_NaN();
     lastColor_.piece = lastExtinction_.piece = -2;
-    groupedSegments_ += 4;
+    groupedSegments_ += lanes;
     // Composited here, not queued, unless a piece lies at an end of the ray (RecordEnds):
     // what waits in the queue first, then the four closed forms (IntegrateLinearPieces,
     // bitwise per piece however they are grouped) and CompositeLinearPiece's terms of
@@ -1746,12 +1766,12 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
     const __m256d atEnd =
         _mm256_or_pd(_mm256_cmp_pd(tEnter, _mm256_set1_pd(tStart_), _CMP_EQ_OQ),
                      _mm256_cmp_pd(tExit, _mm256_set1_pd(tEnd_), _CMP_EQ_OQ));
-    if (_mm256_movemask_pd(atEnd) == 0) {
-        if (queued_ > 0 && FlushLinearTets(composite)) return 0;
+    if ((_mm256_movemask_pd(atEnd) & ((1 << lanes) - 1)) == 0) {
+        if (queued_ > 0 && FlushLinearTets(composite)) return {0, true};
         alignas(32) double lengths[4];
         _mm256_store_pd(lengths, length);
         LinearPieceIntegrals q[4];
-        IntegrateLinearPieces(4, out[0], out[1], lengths, q);
+        IntegrateLinearPieces(lanes, out[0], out[1], lengths, q);
         auto member = [&](auto get) {
             return _mm256_setr_pd(get(q[0]), get(q[1]), get(q[2]), get(q[3]));
         };
@@ -1813,7 +1833,7 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
         _mm256_store_pd(fieldDepths, fieldDepth);
         _mm256_store_pd(roundingDepths, roundingDepth);
         double error[3] = {composite.error[0], composite.error[1], composite.error[2]};
-        for (int j = 0; j < 4; ++j) {
+        for (int j = 0; j < lanes; ++j) {
             const double T = composite.transmittance;
             double rgb[3];
             for (int c = 0; c < 3; ++c) {
@@ -1831,11 +1851,11 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
             composite.transmittance = T * q[j].transmittance;
             composite.depthError += roundingDepths[j];
             // (Terminate changes the error only where it stops.)
-            if (Terminate(segs[j].tExit, composite)) return j;
+            if (Terminate(segs[j].tExit, composite)) return {j + 1, true};
         }
-        return 4;
+        return {lanes, false};
     }
-    for (int j = 0; j < 4; ++j) {
+    for (int j = 0; j < lanes; ++j) {
         if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
         QueuedPiece& piece = queue_[queued_++];
         piece.p0 = segs[j].tEnter;
@@ -1850,15 +1870,17 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry& geometry, const Segment
         }
         piece.colorError = out[8][j];
         piece.tauError = out[9][j];
-        if (queued_ >= kQueuedPieces && FlushLinearTets(composite)) return j;
+        if (queued_ >= kQueuedPieces && FlushLinearTets(composite)) return {j + 1, true};
     }
-    return 4;
+    return {lanes, false};
 }
 #else
-int VolumeRayMarcher::LinearTetGroup(const MeshGeometry&, const Segment*,
-                                     const SegmentEnds*, double, double, double,
-                                     RayComposite&) {
-    return -1;
+VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(const MeshGeometry&,
+                                                               const Segment*,
+                                                               const SegmentEnds*, double,
+                                                               double, double,
+                                                               RayComposite&) {
+    return {0, false};
 }
 #endif
 
@@ -1867,18 +1889,21 @@ int VolumeRayMarcher::LinearTetGroup(const MeshGeometry&, const Segment*,
     std::size_t first, std::size_t last, double sliverLength, double tMin, double tMax,
     RayComposite& composite) {
     LinearTetRunResult r{last, false, false, 0.0};
+    // A segment that ended a group is known not to start one.
+    std::size_t ungroupable = last;
     for (std::size_t k = first; k < last; ++k) {
-        if (k + 4 <= last) {
-            const int taken = LinearTetGroup(geometry, segs + k, ends + k, sliverLength,
-                                             tMin, tMax, composite);
-            if (taken >= 0) {
+        if (k + 4 <= last && k != ungroupable) {
+            const GroupResult g = LinearTetGroup(geometry, segs + k, ends + k,
+                                                 sliverLength, tMin, tMax, composite);
+            if (g.stop) {
+                r.seen = r.stop = true;
+                r.next = k + std::size_t(g.taken);
+                return r;
+            }
+            if (g.taken > 0) {
                 r.seen = true;
-                if (taken < 4) {
-                    r.stop = true;
-                    r.next = k + std::size_t(taken) + 1;
-                    return r;
-                }
-                k += 3;
+                k += std::size_t(g.taken) - 1;
+                if (g.taken < 4) ungroupable = k + 1;
                 continue;
             }
         }

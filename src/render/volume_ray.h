@@ -203,7 +203,8 @@ class VolumeRayMarcher {
                                     const SegmentEnds* ends, std::size_t first,
                                     std::size_t last, double sliverLength, double tMin,
                                     double tMax, RayComposite& composite);
-    /// Segments LinearTetRun took four at a time (LinearTetGroup), since construction.
+    /// Segments LinearTetRun took in groups of up to four (LinearTetGroup), since
+    /// construction.
     std::int64_t GroupedSegments() const { return groupedSegments_; }
     /// LinearTet queues the pieces of its segments and composites them in batches; this
     /// composites what is queued. Call it before any other segment is integrated and
@@ -268,16 +269,21 @@ class VolumeRayMarcher {
     /// terms, transmittance, the ray's end emissions.
     void CompositeLinearPiece(const QueuedPiece& piece, const LinearPieceIntegrals& q,
                               RayComposite& composite);
-    /// Four consecutive segments of a run (segs[0..3], ends[0..3]) as LinearTet takes
-    /// them, in SIMD lanes where the build has AVX2, each lane bitwise LinearTet: where
-    /// every one is a varying linear tetrahedron (no sliver) with valid face points and
-    /// a gradient bound, whose field passes no breakpoint of the transfer functions (one
-    /// piece each). -1 (and nothing done) where one is not; else the pieces are queued in
-    /// order, composited as LinearTet composites them, and the result is the lane after
-    /// whose piece the ray stopped (0..3), or 4.
-    int LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
-                       const SegmentEnds* ends, double sliverLength, double tMin,
-                       double tMax, RayComposite& composite);
+    /// What LinearTetGroup did: the segments it took (0: nothing done), and whether the
+    /// ray stopped (after segment taken - 1, or at 0 before any of them).
+    struct GroupResult {
+        int taken;
+        bool stop;
+    };
+    /// Up to four consecutive segments of a run (segs[0..3], ends[0..3]) as LinearTet
+    /// takes them, in SIMD lanes where the build has AVX2, each lane bitwise LinearTet:
+    /// the segments before the first that is not a varying linear tetrahedron (no
+    /// sliver) with valid face points and a gradient bound whose field passes no
+    /// breakpoint of the transfer functions (one piece each). Their pieces are
+    /// composited in order as LinearTet composites them.
+    GroupResult LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
+                               const SegmentEnds* ends, double sliverLength, double tMin,
+                               double tMax, RayComposite& composite);
     std::int64_t groupedSegments_ = 0;
     /// Queued pieces beyond which LinearTet composites.
     static constexpr std::size_t kQueuedPieces = 8;
