@@ -433,16 +433,24 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
     const bool linearTets =
         facePoints && setup.slices.empty() && !costSamples && !setup.isoCells;
     const bool anyIso = !setup.isos.empty();
-    // Without isosurfaces, runs of such segments go in one call each; the segment that
-    // ends a run (one LinearTet does not take) takes the general path below.
-    const bool runs = linearTets && !anyIso;
+    // Runs of such segments go in one call each; the segment that ends a run (one
+    // LinearTet does not take, or one where an isosurface may lie) takes the general path
+    // below.
+    VolumeRayMarcher::IsoCells isoCells;
+    const bool runs = linearTets && setup.isos.size() <= VolumeRayMarcher::IsoCells::kMax;
+    if (runs) {
+        for (const BrickSetup::Iso& iso : setup.isos) {
+            isoCells.ranges[isoCells.count] = setup.cellRanges[iso.field]->data();
+            isoCells.values[isoCells.count++] = iso.value;
+        }
+    }
     std::size_t runFrom = 0;  // where the next run may start
     for (std::size_t si = 0; si < segments_.size(); ++si) {
         bool lean = linearTets;
         if (runs && si >= runFrom) {
             const VolumeRayMarcher::LinearTetRunResult r = marcher_.LinearTetRun(
                 *setup.geometry, segments_.data(), ends_.data(), si, segments_.size(),
-                setup.sliverLength, tMin, tMax, composite);
+                setup.sliverLength, tMin, tMax, anyIso ? &isoCells : nullptr, composite);
             counters.segmentsCulled += r.culled;
             volumeSeen |= r.seen;
             if (r.stop || r.next == segments_.size()) break;

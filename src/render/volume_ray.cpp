@@ -1619,7 +1619,8 @@ inline __m256d Abs(__m256d a) { return _mm256_andnot_pd(_mm256_set1_pd(-0.0), a)
 
 VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
     const MeshGeometry& geometry, const Segment* segs, const SegmentEnds* ends,
-    double sliverLength, double tMin, double tMax, RayComposite& composite) {
+    double sliverLength, double tMin, double tMax, const IsoCells* isoCells,
+    RayComposite& composite) {
     const VolumeSetup& s = *setup_;
     if (!groupable_) return {0, false};
     // LinearTet's conditions for one piece by LinearFromFacePoints, lane by lane: the
@@ -1630,7 +1631,8 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
         const Segment& seg = segs[j];
         if (IsSpanEndSliver(seg, sliverLength, tMin, tMax) ||
             s.cellKind[seg.cell] != VolumeSetup::kVarying || !ends[j].enter.Valid() ||
-            !ends[j].exit.Valid() || !geometry.IsDerived(seg.cell)) {
+            !ends[j].exit.Valid() || !geometry.IsDerived(seg.cell) ||
+            (isoCells && isoCells->Holds(seg.cell))) {
             lanes = j;
             break;
         }
@@ -1875,11 +1877,9 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
     return {lanes, false};
 }
 #else
-VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(const MeshGeometry&,
-                                                               const Segment*,
-                                                               const SegmentEnds*, double,
-                                                               double, double,
-                                                               RayComposite&) {
+VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
+    const MeshGeometry&, const Segment*, const SegmentEnds*, double, double, double,
+    const IsoCells*, RayComposite&) {
     return {0, false};
 }
 #endif
@@ -1887,14 +1887,15 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(const MeshGeometr
 [[gnu::flatten]] VolumeRayMarcher::LinearTetRunResult VolumeRayMarcher::LinearTetRun(
     const MeshGeometry& geometry, const Segment* segs, const SegmentEnds* ends,
     std::size_t first, std::size_t last, double sliverLength, double tMin, double tMax,
-    RayComposite& composite) {
+    const IsoCells* isoCells, RayComposite& composite) {
     LinearTetRunResult r{last, false, false, 0.0};
     // A segment that ended a group is known not to start one.
     std::size_t ungroupable = last;
     for (std::size_t k = first; k < last; ++k) {
         if (k + 4 <= last && k != ungroupable) {
-            const GroupResult g = LinearTetGroup(geometry, segs + k, ends + k,
-                                                 sliverLength, tMin, tMax, composite);
+            const GroupResult g =
+                LinearTetGroup(geometry, segs + k, ends + k, sliverLength, tMin, tMax,
+                               isoCells, composite);
             if (g.stop) {
                 r.seen = r.stop = true;
                 r.next = k + std::size_t(g.taken);
@@ -1911,6 +1912,11 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(const MeshGeometr
         if (IsSpanEndSliver(seg, sliverLength, tMin, tMax)) {
             r.culled += 1;
             continue;
+        }
+        // An isosurface may lie here: the general path takes the segment.
+        if (isoCells && isoCells->Holds(seg.cell)) {
+            r.next = k;
+            return r;
         }
         switch (LinearTet(geometry, seg, ends[k], composite)) {
             case LinearTetResult::kEmpty:

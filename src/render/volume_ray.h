@@ -190,9 +190,25 @@ class VolumeRayMarcher {
     /// those two calls (bitwise the same pixel), without their general cases.
     LinearTetResult LinearTet(const MeshGeometry& geometry, const Segment& seg,
                               const SegmentEnds& ends, RayComposite& composite);
+    /// The cells where an isosurface may lie: its field's guaranteed range in the cell
+    /// holds its value (the renderer's test for a segment's isosurface sources).
+    struct IsoCells {
+        static constexpr int kMax = 8;
+        int count = 0;
+        const Interval* ranges[kMax] = {};  ///< per isosurface, its field's cell ranges
+        double values[kMax] = {};
+        bool Holds(std::int64_t cell) const {
+            for (int k = 0; k < count; ++k) {
+                const Interval& r = ranges[k][cell];
+                if (values[k] >= r.lo && values[k] <= r.hi) return true;
+            }
+            return false;
+        }
+    };
     /// LinearTet on the segments first, first + 1, ... (< last) of the ray in one loop,
-    /// as long as each is such a segment and the ray goes on. Slivers at the span's ends
-    /// (IsSpanEndSliver) and empty cells are skipped and counted in `culled`.
+    /// as long as each is such a segment, in no cell of `isoCells` (null: none), and the
+    /// ray goes on. Slivers at the span's ends (IsSpanEndSliver) and empty cells are
+    /// skipped and counted in `culled`.
     struct LinearTetRunResult {
         std::size_t next;  ///< the first segment not taken (kOther), or last
         bool stop;         ///< LinearTet said kStop for segment next - 1
@@ -202,7 +218,8 @@ class VolumeRayMarcher {
     LinearTetRunResult LinearTetRun(const MeshGeometry& geometry, const Segment* segs,
                                     const SegmentEnds* ends, std::size_t first,
                                     std::size_t last, double sliverLength, double tMin,
-                                    double tMax, RayComposite& composite);
+                                    double tMax, const IsoCells* isoCells,
+                                    RayComposite& composite);
     /// Segments LinearTetRun took in groups of up to four (LinearTetGroup), since
     /// construction.
     std::int64_t GroupedSegments() const { return groupedSegments_; }
@@ -278,12 +295,13 @@ class VolumeRayMarcher {
     /// Up to four consecutive segments of a run (segs[0..3], ends[0..3]) as LinearTet
     /// takes them, in SIMD lanes where the build has AVX2, each lane bitwise LinearTet:
     /// the segments before the first that is not a varying linear tetrahedron (no
-    /// sliver) with valid face points and a gradient bound whose field passes no
-    /// breakpoint of the transfer functions (one piece each). Their pieces are
+    /// sliver, not in isoCells) with valid face points and a gradient bound whose field
+    /// passes no breakpoint of the transfer functions (one piece each). Their pieces are
     /// composited in order as LinearTet composites them.
     GroupResult LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
                                const SegmentEnds* ends, double sliverLength, double tMin,
-                               double tMax, RayComposite& composite);
+                               double tMax, const IsoCells* isoCells,
+                               RayComposite& composite);
     std::int64_t groupedSegments_ = 0;
     /// Queued pieces beyond which LinearTet composites.
     static constexpr std::size_t kQueuedPieces = 8;

@@ -718,7 +718,7 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
                 for (std::size_t k = 0; k < segments.size() && !stopC;) {
                     const auto r =
                         runner.LinearTetRun(geometry, segments.data(), ends.data(), k,
-                                            segments.size(), 0.0, 0.0, 1e30, c);
+                                            segments.size(), 0.0, 0.0, 1e30, nullptr, c);
                     ++runs;
                     stopC = r.stop;
                     if (stopC || r.next == segments.size()) break;
