@@ -1780,33 +1780,23 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
         const __m256d t0 = _mm256_load_pd(out[0]), t1 = _mm256_load_pd(out[1]);
         const __m256d colorError = _mm256_load_pd(out[8]),
                       tauError = _mm256_load_pd(out[9]);
-        // The emission of each channel (WilliamsMaxEmission, GlowEmission).
+        // The emission of each channel: the chromaticities at the piece's ends weighted
+        // as WilliamsMaxEmission (opacity - P, P) or GlowEmission (I0 - I1, I1, then
+        // times the length) weights them.
         alignas(32) double emission[3][4];
         const bool wm = s.glow == GlowModel::WilliamsMax;
-        if (wm) {
-            const __m256d opacity =
-                member([](const LinearPieceIntegrals& v) { return v.opacity; });
-            const __m256d far =
-                member([](const LinearPieceIntegrals& v) { return v.farWeight; });
-            const __m256d near = _mm256_sub_pd(opacity, far);
-            for (int c = 0; c < 3; ++c)
-                _mm256_store_pd(
-                    emission[c],
-                    _mm256_add_pd(_mm256_mul_pd(_mm256_load_pd(out[2 + c]), near),
-                                  _mm256_mul_pd(_mm256_load_pd(out[5 + c]), far)));
-        } else {
-            const __m256d mean =
-                member([](const LinearPieceIntegrals& v) { return v.mean; });
-            const __m256d first =
-                member([](const LinearPieceIntegrals& v) { return v.firstMoment; });
-            const __m256d rest = _mm256_sub_pd(mean, first);
-            for (int c = 0; c < 3; ++c)
-                _mm256_store_pd(
-                    emission[c],
-                    _mm256_mul_pd(
-                        length,
-                        _mm256_add_pd(_mm256_mul_pd(_mm256_load_pd(out[2 + c]), rest),
-                                      _mm256_mul_pd(_mm256_load_pd(out[5 + c]), first))));
+        const __m256d far =
+            wm ? member([](const LinearPieceIntegrals& v) { return v.farWeight; })
+               : member([](const LinearPieceIntegrals& v) { return v.firstMoment; });
+        const __m256d near = _mm256_sub_pd(
+            wm ? member([](const LinearPieceIntegrals& v) { return v.opacity; })
+               : member([](const LinearPieceIntegrals& v) { return v.mean; }),
+            far);
+        for (int c = 0; c < 3; ++c) {
+            const __m256d e =
+                _mm256_add_pd(_mm256_mul_pd(_mm256_load_pd(out[2 + c]), near),
+                              _mm256_mul_pd(_mm256_load_pd(out[5 + c]), far));
+            _mm256_store_pd(emission[c], wm ? e : _mm256_mul_pd(length, e));
         }
         // FieldErrorOwn(length, 0.5 length (tau0 + tau1), min(tau0, tau1), ...).
         const __m256d sum = _mm256_add_pd(t0, t1);
