@@ -1759,11 +1759,11 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
     crossings_.clear();
     faceSums_[0].t = std::numeric_limits<double>::quiet_NaN();
     lastColor_.piece = lastExtinction_.piece = -2;
-    groupedSegments_ += lanes;
     // Composited here, not queued, unless a piece lies at an end of the ray (RecordEnds):
-    // what waits in the queue first, then the four closed forms (IntegrateLinearPieces,
-    // bitwise per piece however they are grouped) and CompositeLinearPiece's terms of
-    // each piece in lanes, its running sums in order. Each piece bitwise as queued.
+    // what waits in the queue first, then the group's closed forms
+    // (IntegrateLinearPieces, bitwise per piece however they are batched) and
+    // CompositeLinearPiece's terms of each piece in lanes, its running sums in order.
+    // Each piece bitwise as queued.
     const __m256d length = _mm256_sub_pd(tExit, tEnter);
     const __m256d atEnd =
         _mm256_or_pd(_mm256_cmp_pd(tEnter, _mm256_set1_pd(tStart_), _CMP_EQ_OQ),
@@ -1843,10 +1843,15 @@ VolumeRayMarcher::GroupResult VolumeRayMarcher::LinearTetGroup(
             composite.transmittance = T * q[j].transmittance;
             composite.depthError += roundingDepths[j];
             // (Terminate changes the error only where it stops.)
-            if (Terminate(segs[j].tExit, composite)) return {j + 1, true};
+            if (Terminate(segs[j].tExit, composite)) {
+                groupedSegments_ += j + 1;
+                return {j + 1, true};
+            }
         }
+        groupedSegments_ += lanes;
         return {lanes, false};
     }
+    groupedSegments_ += lanes;
     for (int j = 0; j < lanes; ++j) {
         if (queued_ == queue_.size()) queue_.resize(queued_ + kQueuedPieces);
         QueuedPiece& piece = queue_[queued_++];
