@@ -265,28 +265,6 @@ inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) co
     }
 }
 
-inline void PiecewiseLinearTf::ComputeAffineOn(int k, double* offset,
-                                               double* slope) const {
-    const int n = Size();
-    if (k < 0 || k >= n - 1) {
-        const double* v = values_.data() + (k < 0 ? 0 : std::size_t(n - 1) * channels_);
-        for (int c = 0; c < channels_; ++c) {
-            offset[c] = v[c];
-            slope[c] = 0;
-        }
-        return;
-    }
-    const double s0 = scalars_[k], s1 = scalars_[k + 1];
-    const double* v0 = values_.data() + std::size_t(k) * channels_;
-    const double* v1 = v0 + channels_;
-    for (int c = 0; c < channels_; ++c) {
-        slope[c] = (v1[c] - v0[c]) / (s1 - s0);
-        // Anchored at the end nearer zero, so the offset carries no large cancellation.
-        offset[c] =
-            std::abs(s0) <= std::abs(s1) ? v0[c] - slope[c] * s0 : v1[c] - slope[c] * s1;
-    }
-}
-
 /// Integrals of one ray piece of world length `length` over which the extinction is
 /// linear, tau(x) = tau0 (1 - x) + tau1 x for x = (t - tStart) / length in [0, 1]. With
 /// the optical depth D(x) = length * (tau0 x + (tau1 - tau0) x^2 / 2) and T(x) =
