@@ -383,6 +383,16 @@ struct BrickTraverser::Impl {
     // Appends every crossing of the ray line with face f (any t).
     void AppendCrossings(std::int32_t f, const RayFrame& frame,
                          std::vector<Crossing>& out) const;
+    // The crossings of a Triangle or PlanarQuad face f into out (at most two), as
+    // AppendCrossings appends them; their count.
+    int PlanarCrossings(std::int32_t f, const FaceRec& rec, const RayFrame& frame,
+                        Crossing* out) const;
+    // FindExit for a cell whose nf faces cf[] are all planar (triangles, planar quads or
+    // degenerate) and that the ray line crosses exactly twice: false where that is not
+    // so (the general pairing then decides); else true, with found as ForEachPair's.
+    bool PlanarCellExit(std::int64_t c, const std::int32_t* cf, int nf,
+                        std::int32_t entryFace, double entryT, const RayFrame& frame,
+                        Crossing& exit, bool& found) const;
     void AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
                                std::vector<Crossing>& out) const;
     // The crossing by which the ray leaves cell c after entering it by the crossing of
@@ -1573,26 +1583,11 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
     switch (rec.kind) {
         case FaceKind::Degenerate:
             return;
-        case FaceKind::Triangle: {
-            const ShearedPoint a = frame.Transform(P(rec.v[0]));
-            const ShearedPoint b = frame.Transform(P(rec.v[1]));
-            const ShearedPoint c = frame.Transform(P(rec.v[2]));
-            // (u, v) at corners 0, 1, 2: the barycentric weights of corners 1 and 2.
-            if (CrossTriangle(a, b, c, x))
-                out.push_back({x.t, f, x.side, x.bary[1], x.bary[2]});
-            return;
-        }
+        case FaceKind::Triangle:
         case FaceKind::PlanarQuad: {
-            const ShearedPoint a = frame.Transform(P(rec.v[0]));
-            const ShearedPoint b = frame.Transform(P(rec.v[1]));
-            const ShearedPoint c = frame.Transform(P(rec.v[2]));
-            const ShearedPoint d = frame.Transform(P(rec.v[3]));
-            // (u, v) of the bilinear parametrisation at the triangles' corners (exact for
-            // a parallelogram), as for the bilinear faces below.
-            if (CrossTriangle(a, b, c, x))
-                out.push_back({x.t, f, x.side, x.bary[1] + x.bary[2], x.bary[2]});
-            if (CrossTriangle(a, c, d, x))
-                out.push_back({x.t, f, x.side, x.bary[1], x.bary[1] + x.bary[2]});
+            Crossing xs[2];
+            const int n = PlanarCrossings(f, rec, frame, xs);
+            for (int k = 0; k < n; ++k) out.push_back(xs[k]);
             return;
         }
         case FaceKind::BilinearQuad: {
@@ -1677,6 +1672,28 @@ void BrickTraverser::Impl::AppendCrossings(std::int32_t f, const RayFrame& frame
             AppendCurvedCrossings(f, frame, out);
             return;
     }
+}
+
+int BrickTraverser::Impl::PlanarCrossings(std::int32_t f, const FaceRec& rec,
+                                          const RayFrame& frame, Crossing* out) const {
+    TriangleCrossing x;
+    int n = 0;
+    const ShearedPoint a = frame.Transform(P(rec.v[0]));
+    const ShearedPoint b = frame.Transform(P(rec.v[1]));
+    const ShearedPoint c = frame.Transform(P(rec.v[2]));
+    if (rec.kind == FaceKind::Triangle) {
+        // (u, v) at corners 0, 1, 2: the barycentric weights of corners 1 and 2.
+        if (CrossTriangle(a, b, c, x)) out[n++] = {x.t, f, x.side, x.bary[1], x.bary[2]};
+        return n;
+    }
+    const ShearedPoint d = frame.Transform(P(rec.v[3]));
+    // (u, v) of the bilinear parametrisation at the triangles' corners (exact for a
+    // parallelogram), as for the bilinear faces below.
+    if (CrossTriangle(a, b, c, x))
+        out[n++] = {x.t, f, x.side, x.bary[1] + x.bary[2], x.bary[2]};
+    if (CrossTriangle(a, c, d, x))
+        out[n++] = {x.t, f, x.side, x.bary[1], x.bary[1] + x.bary[2]};
+    return n;
 }
 
 void BrickTraverser::Impl::AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
@@ -1948,6 +1965,9 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
                            faces[cf[3]].kind == FaceKind::Triangle)) {
         if (PlanarTetExit(c, cf, entryFace, frame, exit, exitPoint, lastFace))
             return true;
+    } else if (bool planarFound = false;
+               PlanarCellExit(c, cf, nf, entryFace, entryT, frame, exit, planarFound)) {
+        if (planarFound) return true;
     } else {
         // General cells (bilinear faces can be crossed twice, curved cells left and
         // re-entered): all crossings of the cell's faces along the whole line, sorted by
@@ -1968,6 +1988,40 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
         return true;
     }
     return false;
+}
+
+// A cell with planar faces only (linear hexahedra, wedges and pyramids) is mostly
+// crossed by the ray line exactly twice, once entering and once leaving. ForEachPair
+// would find those two crossings (the same PlanarCrossings on the same faces, each
+// computed from the same sheared corners: bitwise the same) and, whatever their order,
+// pair the entering one with the leaving one. So where there are two, that pair is the
+// outcome without the list, the sort and the pairing's bookkeeping; any other count
+// (a ray along a fold of a quad that rounding left slightly bent) goes to ForEachPair.
+bool BrickTraverser::Impl::PlanarCellExit(std::int64_t c, const std::int32_t* cf, int nf,
+                                          std::int32_t entryFace, double entryT,
+                                          const RayFrame& frame, Crossing& exit,
+                                          bool& found) const {
+    constexpr int kMaxFaces = 8;
+    if (nf > kMaxFaces) return false;
+    for (int k = 0; k < nf; ++k) __builtin_prefetch(&faces[cf[k]]);
+    Crossing xs[2 * kMaxFaces];
+    int n = 0;
+    for (int k = 0; k < nf; ++k) {
+        const FaceRec& rec = faces[cf[k]];
+        if (rec.kind == FaceKind::Degenerate) continue;
+        if (rec.kind != FaceKind::Triangle && rec.kind != FaceKind::PlanarQuad)
+            return false;
+        n += PlanarCrossings(cf[k], rec, frame, xs + n);
+    }
+    if (n != 2) return false;
+    const bool leaves0 = Leaves(xs[0], c), leaves1 = Leaves(xs[1], c);
+    found = false;
+    if (leaves0 == leaves1) return true;  // no pair: as ForEachPair
+    const Crossing& in = leaves0 ? xs[1] : xs[0];
+    if (in.face != entryFace || in.t != entryT) return true;
+    exit = leaves0 ? xs[0] : xs[1];
+    found = true;
+    return true;
 }
 
 // A planar tet seen along the (perturbed) ray covers the ray with exactly one entering
