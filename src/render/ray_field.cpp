@@ -13,6 +13,7 @@
 #include <limits>
 
 #include "elements/bounds.h"
+#include "elements/field.h"
 #include "elements/tensor_eval.h"
 #include "mesh/cell.h"
 #include "util/check.h"
@@ -827,6 +828,21 @@ void SegmentField::SampleBatch(const double* t, int n, double* out) {
                 for (int s = 0; s < n; ++s) RefAt(t[s], refs + 3 * s);
             }
             HexFieldValuesAt(p, scalar_.nodal, refs, n, out, batchScratch_.data());
+        }
+        evaluations_ += n;
+        return;
+    }
+    if (!linearTet_ && scalar_.nodal && affine_ && cell_->basis->order == 1 &&
+        (cell_->basis->kind == BasisKind::PyramidLagrange ||
+         cell_->basis->kind == BasisKind::WedgeLagrange)) {
+        // Affine linear pyramids and wedges: the point as RefAt gives it and the value as
+        // FieldValue computes it (the same functions), without the per-point dispatch.
+        const bool pyramid = cell_->basis->kind == BasisKind::PyramidLagrange;
+        for (int s = 0; s < n; ++s) {
+            double ref[3];
+            for (int i = 0; i < 3; ++i) ref[i] = ref0_[i] + t[s] * dref_[i];
+            out[s] = pyramid ? LinearPyramidValue(scalar_.nodal, ref)
+                             : LinearWedgeValue(scalar_.nodal, ref);
         }
         evaluations_ += n;
         return;
