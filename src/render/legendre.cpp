@@ -354,7 +354,8 @@ void ApplyTransform(const std::vector<double>& transformByNode, int stride,
                     const double* values, int n, double a, double b, LegendreSeries& s) {
     s.a = a;
     s.b = b;
-    double c[kMaxLegendreDegree + 4] = {};
+    // Written whole by the vectorised rows; zeroed only for the scalar sums.
+    double c[kMaxLegendreDegree + 4];
     const double* m = transformByNode.data();
 #if defined(__AVX2__) && defined(__FMA__)
     using Rows = void (*)(const double*, int, const double*, int, double*);
@@ -368,6 +369,7 @@ void ApplyTransform(const std::vector<double>& transformByNode, int stride,
         return;
     }
 #endif
+    std::fill_n(c, stride, 0.0);
     for (int i = 0; i <= n; ++i, m += stride) {
         const double v = values[i];
         for (int k = 0; k < stride; ++k) c[k] = std::fma(m[k], v, c[k]);
