@@ -1301,6 +1301,7 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         // next work item) evaluates only the nodes its rule adds.
         const NestedQuadratureRules& rules = GetNestedQuadratureRules();
         constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;  // padded to 4 lanes
+        static_assert(kNodes % 4 == 0 && kNodes >= NestedQuadratureRules::kMaxNodes);
         alignas(32) double nodeT[kNodes], nodeU[kNodes], nodeE[kNodes], nodeDepth[kNodes],
             att[kNodes], gq[kNodes];
         double cachedLo = 0, cachedHi = 0;
@@ -1345,7 +1346,11 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
                     att[i] = std::max(
                         0.0, be != 0 ? tauM * dt + be * (nodeDepth[i] - v0) : tauM * dt);
                 }
-                ExpNegative(att + first, count, att + first);
+                // Whole vectors of four (the arrays are padded; the filler's results
+                // are not read): the same lanes, without a partial one's copies.
+                const int padded = (count + 3) / 4 * 4;
+                for (int i = first + count; i < first + padded; ++i) att[i] = 0;
+                ExpNegative(att + first, padded, att + first);
                 for (int i = first; i < n; ++i) {
                     const double tau = be != 0 ? ae + be * ueAt[i] : ae;
                     tauMin = std::min(tauMin, tau);
