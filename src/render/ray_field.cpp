@@ -634,6 +634,59 @@ bool SegmentField::RationalPole(double t0, double t1, double& pole, double& gap,
     return std::isfinite(pole) && std::isfinite(gap) && std::isfinite(residue);
 }
 
+bool SegmentField::LinearCellLine(double t0, double t1, double mono[4], int& degree,
+                                  double& magnitude) const {
+    if (linearTet_ || !affine_ || !scalar_.nodal || cell_->basis->order != 1)
+        return false;
+    const bool hex = cell_->basis->kind == BasisKind::HexLagrange && hexOrder_ == 1;
+    const bool wedge = cell_->basis->kind == BasisKind::WedgeLagrange;
+    if (!hex && !wedge) return false;
+    const double* v = scalar_.nodal;
+    const double mid = 0.5 * (t0 + t1), half = 0.5 * (t1 - t0);
+    // Reference coordinate d along the segment: m[d] + h[d] x.
+    double m[3], h[3];
+    for (int d = 0; d < 3; ++d) {
+        m[d] = ref0_[d] + mid * dref_[d];
+        h[d] = half * dref_[d];
+    }
+    // a + b y for y = m[d] + h[d] x, as a polynomial p (degree `deg`) times the factor:
+    // out = a + (b - a) y with a, b polynomials of degree deg.
+    auto lerp = [](const double* a, const double* b, int deg, double md, double hd,
+                   double* out) {
+        double diff[4];
+        for (int k = 0; k <= deg; ++k) diff[k] = b[k] - a[k];
+        for (int k = 0; k <= deg + 1; ++k) out[k] = k <= deg ? a[k] : 0.0;
+        for (int k = 0; k <= deg; ++k) {
+            out[k] += diff[k] * md;
+            out[k + 1] += diff[k] * hd;
+        }
+    };
+    magnitude = 0;
+    if (hex) {
+        for (int q = 0; q < 8; ++q) magnitude = std::max(magnitude, std::abs(v[q]));
+        // Lattice order, i fastest: along reference x, then y, then z.
+        double g[4][2], q2[2][3];
+        for (int jk = 0; jk < 4; ++jk)
+            lerp(v + 2 * jk, v + 2 * jk + 1, 0, m[0], h[0], g[jk]);
+        for (int k = 0; k < 2; ++k) lerp(g[2 * k], g[2 * k + 1], 1, m[1], h[1], q2[k]);
+        lerp(q2[0], q2[1], 2, m[2], h[2], mono);
+        degree = 3;
+        return true;
+    }
+    for (int q = 0; q < 6; ++q) magnitude = std::max(magnitude, std::abs(v[q]));
+    // LinearWedgeValue's basis: (1 - r - s, r, s) on each triangle, (1 - t, t) between.
+    double g[2][2];
+    for (int j = 0; j < 2; ++j) {
+        const double* w = v + 3 * j;
+        // w0 + (w1 - w0) r + (w2 - w0) s
+        g[j][0] = w[0] + (w[1] - w[0]) * m[0] + (w[2] - w[0]) * m[1];
+        g[j][1] = (w[1] - w[0]) * h[0] + (w[2] - w[0]) * h[1];
+    }
+    lerp(g[0], g[1], 1, m[2], h[2], mono);
+    degree = 2;
+    return true;
+}
+
 void SegmentField::Begin(const Mesh& mesh, const MeshGeometry& geometry,
                          const ScalarSelector& field, std::int64_t c, const Ray& ray,
                          const InversionOptions& inversion) {

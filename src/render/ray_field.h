@@ -198,6 +198,14 @@ public:
     bool RationalPole(double t0, double t1, double& pole, double& gap,
                       double& residue) const;
 
+    /// For an affine linear hexahedron (a trilinear field: degree 3 along a line) or
+    /// wedge (degree 2): the field along the ray on [t0, t1] as a polynomial in x in
+    /// [-1, 1], t = (t0 + t1) / 2 + x (t1 - t0) / 2, its monomial coefficients into
+    /// mono[0..degree], by sum factorisation of the basis' linear factors (every term at
+    /// most the largest nodal value, `magnitude`). False for every other cell.
+    bool LinearCellLine(double t0, double t1, double mono[4], int& degree,
+                        double& magnitude) const;
+
     /// Mapping-inversion counters accumulated since the last TakeCounters.
     void AddCountersTo(RenderCounters& counters);
 

@@ -774,6 +774,15 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
                        projectionStats_, scratch_);
         return;
     }
+    // Affine linear hexahedra and wedges: the polynomial along the ray in closed form.
+    if (double mono[4], magnitude; n <= 3) {
+        int degree = 0;
+        if (sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude) &&
+            degree == n) {
+            SeriesFromPolynomial(f, seg, n, mono, magnitude);
+            return;
+        }
+    }
     // Affine Lagrange hexahedra: the register-blocked kernel on the gathered values.
     const CellGeometry& cell = geometry.Cell(seg.cell, cellScratch_);
     const bool hexKernel = s.data[f] && cell.affine && cell.linearInvertible &&
@@ -888,6 +897,53 @@ void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
     // degree bound) are dropped, their sum kept as an error: every later evaluation of
     // the series is that much cheaper.
     std::vector<double>& c = piece.p.c;
+    const Interval& range = (*s.ranges[f])[seg.cell];
+    const double noise =
+        kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
+    double dropped = 0;
+    while (c.size() > 2 && dropped + std::abs(c.back()) <= noise) {
+        dropped += std::abs(c.back());
+        c.pop_back();
+    }
+    truncated_[f] = dropped;
+}
+
+void VolumeRayMarcher::SeriesFromPolynomial(int f, const Segment& seg, int n,
+                                            const double* mono, double magnitude) {
+    const VolumeSetup& s = *setup_;
+    // x^2 = (2 P2 + P0) / 3 and x^3 = (2 P3 + 3 P1) / 5: the Legendre coefficients.
+    const double m2 = n >= 2 ? mono[2] : 0.0, m3 = n >= 3 ? mono[3] : 0.0;
+    pieces_[f].resize(1);
+    ProjectedPiece& piece = pieces_[f][0];
+    std::swap(piece.p.c, spareCoefficients_[f]);
+    piece.p.a = seg.tEnter;
+    piece.p.b = seg.tExit;
+    std::vector<double>& c = piece.p.c;
+    c.resize(n + 1);
+    c[0] = mono[0] + m2 / 3;
+    c[1] = mono[1] + 0.6 * m3;
+    if (n >= 2) c[2] = (2.0 / 3.0) * m2;
+    if (n >= 3) c[3] = 0.4 * m3;
+    // The values at the Legendre-Gauss-Lobatto nodes of degree n, where the sampled
+    // series has its samples (SeriesCrossings brackets crossings between them).
+    const LglRule& rule = LglNodes(n);
+    const double mid = 0.5 * (seg.tEnter + seg.tExit),
+                 half = 0.5 * (seg.tExit - seg.tEnter);
+    sampleT_.resize(n + 1);
+    sampleV_[f].resize(n + 1);
+    double scale = magnitude;
+    for (int i = 0; i <= n; ++i) {
+        const double x = rule.nodes[i];
+        double v = mono[n];
+        for (int k = n - 1; k >= 0; --k) v = v * x + mono[k];
+        sampleT_[i] = mid + half * x;
+        sampleV_[f][i] = v;
+        scale = std::max(scale, std::abs(v));
+    }
+    // Every term of the sum factorisation and of the conversion is at most the largest
+    // nodal value: the same bound as the sampled series' rounding.
+    piece.eps = 64 * (n + 1) * kEps * scale;
+    piece.converged = true;
     const Interval& range = (*s.ranges[f])[seg.cell];
     const double noise =
         kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));

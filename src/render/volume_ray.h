@@ -324,6 +324,11 @@ class VolumeRayMarcher {
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
     /// into pieces_[f].
     void ProjectExact(int f, const MeshGeometry& geometry, const Segment& seg);
+    /// The series of a field that is the polynomial mono[0..n] (monomials in x in [-1, 1]
+    /// over the segment, n <= 3; every term at most `magnitude`) along the segment, kept
+    /// as SeriesFromSamples keeps a sampled one.
+    void SeriesFromPolynomial(int f, const Segment& seg, int n, const double* mono,
+                              double magnitude);
     /// The series of field f on the segment from the values at the n + 1 Legendre-Gauss-
     /// Lobatto nodes in scratch_ (values, then the nodes' t): pieces_[f], its rounding
     /// as eps, trailing coefficients below the noise dropped into truncated_[f].
