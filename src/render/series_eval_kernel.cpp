@@ -23,16 +23,22 @@ constexpr const LegendreRecurrence& kRec = kLegendreRecurrence;
 /// sum rounded, as legendre.cpp's loops compile), then for k >= 2
 /// P_k = fma(A_k x, P_{k-1}, -(B_k P_{k-2})) and v = fma(c_k, P_k, v); w likewise for q
 /// when Pair.
-template <bool Pair>
+///
+/// Whole: t, outP and outQ hold all eight lanes (the caller's arrays are padded), read
+/// and written in place; else the m < = 8 points are copied into a padded block and back.
+template <bool Pair, bool Whole = false>
 void Block(const LegendreSeries& p, const LegendreSeries* q, const double* t, int m,
            double scale, double shift, double* outP, double* outQ) {
     alignas(32) double tt[8];
-    for (int s = 0; s < 8; ++s) tt[s] = s < m ? t[s] : t[0];  // padding repeats the first
+    if (!Whole)
+        for (int s = 0; s < 8; ++s)
+            tt[s] = s < m ? t[s] : t[0];  // padding repeats the first
+    const double* ts = Whole ? t : tt;
     const int np = p.Degree(), nq = Pair ? q->Degree() : 0, n = std::max(np, nq);
     const __m256d vs = _mm256_set1_pd(scale), vh = _mm256_set1_pd(shift);
     __m256d x[2], p0[2], p1[2], v[2], w[2];
     for (int h = 0; h < 2; ++h) {
-        x[h] = _mm256_sub_pd(_mm256_mul_pd(_mm256_load_pd(tt + 4 * h), vs), vh);
+        x[h] = _mm256_sub_pd(_mm256_mul_pd(_mm256_loadu_pd(ts + 4 * h), vs), vh);
         p0[h] = _mm256_set1_pd(1.0);
         p1[h] = x[h];
         v[h] = _mm256_set1_pd(p.c[0]);
@@ -56,6 +62,13 @@ void Block(const LegendreSeries& p, const LegendreSeries* q, const double* t, in
             p0[h] = p1[h];
             p1[h] = p2;
         }
+    }
+    if (Whole) {
+        for (int h = 0; h < 2; ++h) {
+            _mm256_storeu_pd(outP + 4 * h, v[h]);
+            if (Pair) _mm256_storeu_pd(outQ + 4 * h, w[h]);
+        }
+        return;
     }
     alignas(32) double rv[8], rw[8];
     for (int h = 0; h < 2; ++h) {
@@ -82,6 +95,26 @@ bool EvalPairKernel(const LegendreSeries& p, const LegendreSeries& q, const doub
     return true;
 }
 
+bool EvalPairKernelWhole(const LegendreSeries& p, const LegendreSeries& q,
+                         const double* t, int count, double* outP, double* outQ) {
+    if (p.a != q.a || p.b != q.b || p.c.empty() || q.c.empty() ||
+        std::max(p.Degree(), q.Degree()) > kMaxDegree)
+        return false;
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    for (int s0 = 0; s0 < count; s0 += 8)
+        Block<true, true>(p, &q, t + s0, 8, scale, shift, outP + s0, outQ + s0);
+    return true;
+}
+
+bool EvalManyKernelWhole(const LegendreSeries& p, const double* t, int count,
+                         double* out) {
+    if (p.c.empty() || p.Degree() > kMaxDegree) return false;
+    const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
+    for (int s0 = 0; s0 < count; s0 += 8)
+        Block<false, true>(p, nullptr, t + s0, 8, scale, shift, out + s0, nullptr);
+    return true;
+}
+
 bool EvalManyKernel(const LegendreSeries& p, const double* t, int count, double* out) {
     if (p.c.empty() || p.Degree() > kMaxDegree) return false;
     const double scale = 2 / (p.b - p.a), shift = (p.a + p.b) / (p.b - p.a);
@@ -98,6 +131,13 @@ bool EvalPairKernel(const LegendreSeries&, const LegendreSeries&, const double*,
     return false;
 }
 bool EvalManyKernel(const LegendreSeries&, const double*, int, double*) { return false; }
+bool EvalPairKernelWhole(const LegendreSeries&, const LegendreSeries&, const double*, int,
+                         double*, double*) {
+    return false;
+}
+bool EvalManyKernelWhole(const LegendreSeries&, const double*, int, double*) {
+    return false;
+}
 
 #endif
 

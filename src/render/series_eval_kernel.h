@@ -17,4 +17,12 @@ bool EvalPairKernel(const LegendreSeries& p, const LegendreSeries& q, const doub
 /// The same for one series (LegendreSeries::EvalMany).
 bool EvalManyKernel(const LegendreSeries& p, const double* t, int count, double* out);
 
+/// EvalPairKernel and EvalManyKernel on whole blocks of eight points: t, outP, outQ and
+/// out hold count rounded up to a multiple of 8 entries, all read and written (each
+/// point's values depend on it alone: those of the first count are the same).
+bool EvalPairKernelWhole(const LegendreSeries& p, const LegendreSeries& q,
+                         const double* t, int count, double* outP, double* outQ);
+bool EvalManyKernelWhole(const LegendreSeries& p, const double* t, int count,
+                         double* out);
+
 }  // namespace hpray

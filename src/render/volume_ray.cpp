@@ -1357,7 +1357,9 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         // next work item) evaluates only the nodes its rule adds.
         const NestedQuadratureRules& rules = GetNestedQuadratureRules();
         constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;  // padded to 4 lanes
-        static_assert(kNodes % 4 == 0 && kNodes >= NestedQuadratureRules::kMaxNodes);
+        // Whole blocks of eight from any rung's first new node fit: a rung's nodes end
+        // at 2^r - 1 <= 31, and its new ones start at 0, 7 or 15.
+        static_assert(kNodes % 8 == 0 && kNodes >= NestedQuadratureRules::kMaxNodes + 1);
         alignas(32) double nodeT[kNodes], nodeU[kNodes], nodeE[kNodes], nodeDepth[kNodes],
             att[kNodes], gq[kNodes];
         double cachedLo = 0, cachedHi = 0;
@@ -1376,15 +1378,19 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
             if (cached < n) {
                 const int first = cached, count = n - cached;
                 for (int i = first; i < n; ++i) nodeT[i] = m + half * rules.nodes[i];
+                // Whole blocks of eight in place (the arrays are padded; what lies past
+                // the rule's nodes is not read, and the next rung overwrites it).
+                const int whole = (count + 7) / 8 * 8;
+                for (int i = first + count; i < first + whole; ++i) nodeT[i] = m;
                 double* ueAt = fe == 0 ? nodeU : nodeE;
                 // The vectorised evaluations where the build has them (bitwise the same).
                 auto many = [&](const LegendreSeries& p, double* out) {
-                    if (!EvalManyKernel(p, nodeT + first, count, out))
+                    if (!EvalManyKernelWhole(p, nodeT + first, whole, out))
                         p.EvalMany(nodeT + first, count, out);
                 };
                 auto pair = [&](const LegendreSeries& p, double* outP) {
-                    if (!EvalPairKernel(p, depthLine_, nodeT + first, count, outP,
-                                        nodeDepth + first))
+                    if (!EvalPairKernelWhole(p, depthLine_, nodeT + first, whole, outP,
+                                             nodeDepth + first))
                         EvalPair(p, depthLine_, nodeT + first, count, outP,
                                  nodeDepth + first);
                 };
