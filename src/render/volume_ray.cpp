@@ -879,7 +879,6 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
 }
 
 void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
-    const VolumeSetup& s = *setup_;
     const double* ts = scratch_.data() + n + 1;
     double scale = 0;
     for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(scratch_[i]));
@@ -896,8 +895,11 @@ void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
     // the segment: its coefficients fall to the noise of the samples well before the
     // degree bound) are dropped, their sum kept as an error: every later evaluation of
     // the series is that much cheaper.
-    std::vector<double>& c = piece.p.c;
-    const Interval& range = (*s.ranges[f])[seg.cell];
+    DropNoiseTail(f, seg, piece.p.c);
+}
+
+void VolumeRayMarcher::DropNoiseTail(int f, const Segment& seg, std::vector<double>& c) {
+    const Interval& range = (*setup_->ranges[f])[seg.cell];
     const double noise =
         kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
     double dropped = 0;
@@ -910,7 +912,6 @@ void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
 
 void VolumeRayMarcher::SeriesFromPolynomial(int f, const Segment& seg, int n,
                                             const double* mono, double magnitude) {
-    const VolumeSetup& s = *setup_;
     // x^2 = (2 P2 + P0) / 3 and x^3 = (2 P3 + 3 P1) / 5: the Legendre coefficients.
     const double m2 = n >= 2 ? mono[2] : 0.0, m3 = n >= 3 ? mono[3] : 0.0;
     pieces_[f].resize(1);
@@ -944,15 +945,7 @@ void VolumeRayMarcher::SeriesFromPolynomial(int f, const Segment& seg, int n,
     // nodal value: the same bound as the sampled series' rounding.
     piece.eps = 64 * (n + 1) * kEps * scale;
     piece.converged = true;
-    const Interval& range = (*s.ranges[f])[seg.cell];
-    const double noise =
-        kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
-    double dropped = 0;
-    while (c.size() > 2 && dropped + std::abs(c.back()) <= noise) {
-        dropped += std::abs(c.back());
-        c.pop_back();
-    }
-    truncated_[f] = dropped;
+    DropNoiseTail(f, seg, c);
 }
 
 bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,

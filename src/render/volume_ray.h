@@ -329,6 +329,10 @@ class VolumeRayMarcher {
     /// as SeriesFromSamples keeps a sampled one.
     void SeriesFromPolynomial(int f, const Segment& seg, int n, const double* mono,
                               double magnitude);
+    /// Drops the trailing coefficients of an exact series of field f whose sum is at the
+    /// level of its rounding (kTruncation eps of the cell's largest |value|), keeping
+    /// their sum in truncated_[f].
+    void DropNoiseTail(int f, const Segment& seg, std::vector<double>& c);
     /// The series of field f on the segment from the values at the n + 1 Legendre-Gauss-
     /// Lobatto nodes in scratch_ (values, then the nodes' t): pieces_[f], its rounding
     /// as eps, trailing coefficients below the noise dropped into truncated_[f].

@@ -992,6 +992,118 @@ accuracy: {volume_tolerance: 1e-12}
 
 namespace {
 
+// A mesh's geometry and walk, and a SegmentField of its first point field begun on each
+// segment of a ray.
+struct FieldAlongRays {
+    explicit FieldAlongRays(const Mesh& m)
+        : mesh(m),
+          geometry(MeshGeometry::Build(m)),
+          sel{&m.pointFields[0], 0},
+          traverser(Brick::WholeMesh(m)) {}
+    // visit(segment) for the ray's segments from tMin, sf begun on each.
+    template <typename Visit>
+    void ForEachSegment(const Ray& ray, double tMin, Visit&& visit) {
+        traverser.Trace(ray, tMin, 1e30, segs);
+        for (const Segment& seg : segs) {
+            sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
+            visit(seg);
+        }
+    }
+    const Mesh& mesh;
+    const MeshGeometry geometry;
+    const ScalarSelector sel;
+    const BrickTraverser traverser;
+    std::vector<Segment> segs;
+    SegmentField sf;
+};
+
+// A point field "u" on mesh, its values uniform in [-amplitude, amplitude] from rng.
+void AddUniformPointField(Mesh& mesh, std::mt19937_64& rng, double amplitude) {
+    std::uniform_real_distribution<double> val(-amplitude, amplitude);
+    Field u{"u", Association::Point, 1, {}};
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) u.values.push_back(val(rng));
+    mesh.pointFields.push_back(std::move(u));
+}
+
+// The scene of the checks against the ODE reference: transfer functions with breakpoints
+// inside the fields' ranges, a tight tolerance.
+constexpr const char* kOdeReferenceScene = R"(
+data: {mesh: "builtin:cube-tets-1"}
+volume:
+  color_field: u
+  color_tf: [[-0.5, 0.1, 0.2, 0.9], [0.2, 1.0, 0.6, 0.2], [1.0, 0.3, 1.0, 0.4]]
+  extinction_tf: [[-0.5, 0.2], [0.1, 3.0], [0.6, 0.5], [1.2, 2.0]]
+accuracy: {volume_tolerance: 1e-10}
+)";
+
+struct OdeCheck {
+    double worst = 0;  ///< largest RGB error of a pixel
+    int checked = 0;
+};
+
+// The volume of kOdeReferenceScene over mesh on rays through random points of [0.05,
+// 0.95]^3 (ray `trial` from seed `trial`; `adjust` may move the point) in random
+// directions, each pixel against the ODE reference of the
+// field `truth` along the ray inside the unit cube, whose kinks are the t that `cuts`
+// appends and the transfer functions' breakpoints crossed between them: the error bar
+// holds and the tolerance is met on every ray.
+template <typename Adjust, typename Truth, typename Cuts>
+OdeCheck CheckAgainstTheOdeReference(const Mesh& mesh, int rays, RenderCounters& counters,
+                                     Adjust&& adjust, Truth&& truth, Cuts&& cuts) {
+    const Scene scene = MakeScene(kOdeReferenceScene);
+    const MeshGeometry geometry = MeshGeometry::Build(mesh);
+    const BrickTraverser traverser(Brick::WholeMesh(mesh));
+    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+    const RefTf ctf = RefTf::Color(scene.volume->colorTf);
+    const RefTf etf = RefTf::Extinction(scene.volume->extinctionTf);
+    OdeCheck out;
+    Pixel sample;
+    for (int trial = 0; trial < rays; ++trial) {
+        std::mt19937 rng(trial);
+        std::uniform_real_distribution<double> uni(0.05, 0.95);
+        std::normal_distribution<double> gauss;
+        testing::Vec3 through = {uni(rng), uni(rng), uni(rng)};
+        adjust(trial, through);
+        const Ray ray =
+            testing::MakeRayDir(through, {gauss(rng), gauss(rng), gauss(rng)});
+        const std::array<double, 3> o = {ray.origin[0], ray.origin[1], ray.origin[2]};
+        const std::array<double, 3> d = {ray.dir[0], ray.dir[1], ray.dir[2]};
+        LD t0, t1;
+        EXPECT_TRUE(testing::RefBoxChord(o, d, {0, 0, 0}, {1, 1, 1}, t0, t1)) << trial;
+        auto field = [&](LD t) {
+            return truth(
+                std::array<LD, 3>{o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]});
+        };
+        std::vector<LD> bounds;
+        cuts(o, d, bounds);
+        bounds.push_back(t0);
+        bounds.push_back(t1);
+        std::sort(bounds.begin(), bounds.end());
+        std::vector<LD> kinks;
+        for (std::size_t k = 0; k + 1 < bounds.size(); ++k) {
+            const LD a = std::max(bounds[k], t0), b = std::min(bounds[k + 1], t1);
+            if (!(b > a)) continue;
+            kinks.push_back(a);
+            for (const auto& p : scene.volume->colorTf)
+                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
+            for (const auto& p : scene.volume->extinctionTf)
+                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
+        }
+        const RefPixel ref = testing::ReferenceRay(t0, t1, field, field, ctf, etf, true,
+                                                   kinks, {}, 1e-16L);
+        IntegrateRay(setup, ray, sample, counters);
+        double err = 0;
+        for (int c = 0; c < 3; ++c)
+            err = std::max(err, double(std::abs(sample.rgba[c] - ref.rgb[c])));
+        EXPECT_LE(err, sample.volError + 1e-14) << trial;  // the error bar holds
+        EXPECT_LE(err, scene.accuracy.volumeTolerance) << trial;
+        EXPECT_NEAR(sample.rgba[3], double(ref.alpha), 1e-10) << trial;
+        out.worst = std::max(out.worst, err);
+        ++out.checked;
+    }
+    return out;
+}
+
 struct PyramidGridTruth {
     int n;
     std::function<LD(LD, LD, LD)> g;  // the nodal values are g at the nodes
@@ -1048,88 +1160,39 @@ TEST(VolumePyramids, RationalFieldAgainstTheOdeReference) {
             // The nodes' values as the mesh holds them (double).
             return LD(double(g(double(x), double(y), double(z))));
         }};
-    Scene scene = MakeScene(R"(
-data: {mesh: "builtin:cube-tets-1"}
-volume:
-  color_field: u
-  color_tf: [[-0.5, 0.1, 0.2, 0.9], [0.2, 1.0, 0.6, 0.2], [1.0, 0.3, 1.0, 0.4]]
-  extinction_tf: [[-0.5, 0.2], [0.1, 3.0], [0.6, 0.5], [1.2, 2.0]]
-accuracy: {volume_tolerance: 1e-10}
-)");
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
-    const RefTf ctf = RefTf::Color(scene.volume->colorTf);
-    const RefTf etf = RefTf::Extinction(scene.volume->extinctionTf);
     RenderCounters counters;
-    Pixel sample;
-    double worst = 0;
-    int checked = 0;
-    for (int trial = 0; trial < 60; ++trial) {
-        std::mt19937 rng(trial);
-        std::uniform_real_distribution<double> uni(0.05, 0.95);
-        std::normal_distribution<double> gauss;
-        // Every fifth ray passes through a cube centre (a pyramid apex), along which the
-        // field is a polynomial; the others mostly pass apex planes at some distance.
-        testing::Vec3 through = {uni(rng), uni(rng), uni(rng)};
-        if (trial % 5 == 0) through = {0.5, 0.5, 1.0 / 6};
-        const Ray ray =
-            testing::MakeRayDir(through, {gauss(rng), gauss(rng), gauss(rng)});
-        const std::array<double, 3> o = {ray.origin[0], ray.origin[1], ray.origin[2]};
-        const std::array<double, 3> d = {ray.dir[0], ray.dir[1], ray.dir[2]};
-        LD t0, t1;
-        ASSERT_TRUE(testing::RefBoxChord(o, d, {0, 0, 0}, {1, 1, 1}, t0, t1));
-        auto field = [&](LD t) {
-            return truth({o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]});
-        };
-        // Kinks: the cube faces and the pyramids' faces (x_i - c_i = +-(x_j - c_j)), then
-        // the transfer functions' breakpoints crossed between them.
-        std::vector<LD> cuts;
-        for (int axis = 0; axis < 3; ++axis)
-            for (int k = 0; k <= n; ++k)
-                if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
-        for (int cz = 0; cz < n; ++cz)
-            for (int cy = 0; cy < n; ++cy)
-                for (int cx = 0; cx < n; ++cx) {
-                    const LD c[3] = {(cx + LD(0.5)) / n, (cy + LD(0.5)) / n,
-                                     (cz + LD(0.5)) / n};
-                    for (int i = 0; i < 3; ++i)
-                        for (int j = i + 1; j < 3; ++j)
-                            for (int s : {-1, 1}) {
-                                const LD den = d[i] - s * d[j];
-                                if (den != 0)
-                                    cuts.push_back((c[i] - o[i] - s * (c[j] - o[j])) /
-                                                   den);
-                            }
-                }
-        cuts.push_back(t0);
-        cuts.push_back(t1);
-        std::sort(cuts.begin(), cuts.end());
-        std::vector<LD> kinks;
-        for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
-            const LD a = std::max(cuts[k], t0), b = std::min(cuts[k + 1], t1);
-            if (!(b > a)) continue;
-            kinks.push_back(a);
-            for (const auto& p : scene.volume->colorTf)
-                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
-            for (const auto& p : scene.volume->extinctionTf)
-                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
-        }
-        const RefPixel ref = testing::ReferenceRay(t0, t1, field, field, ctf, etf, true,
-                                                   kinks, {}, 1e-16L);
-        IntegrateRay(setup, ray, sample, counters);
-        const double got[3] = {sample.rgba[0], sample.rgba[1], sample.rgba[2]};
-        double err = 0;
-        for (int c = 0; c < 3; ++c)
-            err = std::max(err, double(std::abs(got[c] - ref.rgb[c])));
-        EXPECT_LE(err, sample.volError + 1e-14) << trial;  // the error bar holds
-        EXPECT_LE(err, scene.accuracy.volumeTolerance) << trial;
-        EXPECT_NEAR(sample.rgba[3], double(ref.alpha), 1e-10) << trial;
-        worst = std::max(worst, err);
-        ++checked;
-    }
-    EXPECT_EQ(checked, 60);
-    EXPECT_GT(worst, 0);
+    const OdeCheck check = CheckAgainstTheOdeReference(
+        mesh, 60, counters,
+        [](int trial, testing::Vec3& through) {
+            // Every fifth ray passes through a cube centre (a pyramid apex), along which
+            // the field is a polynomial; the others mostly pass apex planes at some
+            // distance.
+            if (trial % 5 == 0) through = {0.5, 0.5, 1.0 / 6};
+        },
+        [&](const std::array<LD, 3>& p) { return truth(p); },
+        [&](const std::array<double, 3>& o, const std::array<double, 3>& d,
+            std::vector<LD>& cuts) {
+            // The cube faces and the pyramids' faces (x_i - c_i = +-(x_j - c_j)).
+            for (int axis = 0; axis < 3; ++axis)
+                for (int k = 0; k <= n; ++k)
+                    if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
+            for (int cz = 0; cz < n; ++cz)
+                for (int cy = 0; cy < n; ++cy)
+                    for (int cx = 0; cx < n; ++cx) {
+                        const LD c[3] = {(cx + LD(0.5)) / n, (cy + LD(0.5)) / n,
+                                         (cz + LD(0.5)) / n};
+                        for (int i = 0; i < 3; ++i)
+                            for (int j = i + 1; j < 3; ++j)
+                                for (int s : {-1, 1}) {
+                                    const LD den = d[i] - s * d[j];
+                                    if (den != 0)
+                                        cuts.push_back((c[i] - o[i] - s * (c[j] - o[j])) /
+                                                       den);
+                                }
+                    }
+        });
+    EXPECT_EQ(check.checked, 60);
+    EXPECT_GT(check.worst, 0);
     EXPECT_EQ(counters.inversionFailures, 0);
     // The pyramids' series (ProjectRational: one sample per node of the degree it needs)
     // instead of the general path's adaptive projection and quadrature on the field,
@@ -1145,26 +1208,17 @@ TEST(VolumePyramids, RationalPoleAndTheInterpolationBound) {
     Mesh mesh = testing::GridMesh(
         1, 0.0, [](int, int, int) { return testing::CubeCut::Pyramids; });
     std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> val(-1, 1), uni(0.02, 0.98);
+    std::uniform_real_distribution<double> uni(0.02, 0.98);
     std::normal_distribution<double> gauss;
-    Field u{"u", Association::Point, 1, {}};
-    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) u.values.push_back(val(rng));
-    mesh.pointFields.push_back(std::move(u));
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const ScalarSelector sel{&mesh.pointFields[0], 0};
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    std::vector<Segment> segs;
-    SegmentField sf;
+    AddUniformPointField(mesh, rng, 1);
+    FieldAlongRays rig(mesh);
+    SegmentField& sf = rig.sf;
     // visit(trial, segment) for the segments of `rays` random rays, sf begun on each.
     auto forEachSegment = [&](int rays, auto&& visit) {
         for (int trial = 0; trial < rays; ++trial) {
             const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
                                                 {gauss(rng), gauss(rng), gauss(rng)});
-            traverser.Trace(ray, 0, 1e30, segs);
-            for (const Segment& seg : segs) {
-                sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
-                visit(trial, seg);
-            }
+            rig.ForEachSegment(ray, 0, [&](const Segment& seg) { visit(trial, seg); });
         }
     };
     // The largest |p - f| at 201 points of the segment, p the interpolant of degree deg.
@@ -1248,16 +1302,10 @@ TEST(VolumeLinearCells, LinearCellLineIsTheFieldAlongTheRay) {
             x[2] = 0.2 * p[0] - 0.6 * p[1] + 1.1 * p[2] - 0.3;
         }
         std::mt19937_64 rng(11);
-        std::uniform_real_distribution<double> val(-3, 3), uni(0.05, 0.95);
+        AddUniformPointField(mesh, rng, 3);
+        FieldAlongRays rig(mesh);
+        std::uniform_real_distribution<double> uni(0.05, 0.95);
         std::normal_distribution<double> gauss;
-        Field u{"u", Association::Point, 1, {}};
-        for (std::int64_t i = 0; i < mesh.PointCount(); ++i) u.values.push_back(val(rng));
-        mesh.pointFields.push_back(std::move(u));
-        const MeshGeometry geometry = MeshGeometry::Build(mesh);
-        const ScalarSelector sel{&mesh.pointFields[0], 0};
-        const BrickTraverser traverser(Brick::WholeMesh(mesh));
-        std::vector<Segment> segs;
-        SegmentField sf;
         int checked = 0, declined = 0;
         for (int trial = 0; trial < 200; ++trial) {
             // Rays through the sheared cube's interior (the image of [0.05, 0.95]^3).
@@ -1267,21 +1315,19 @@ TEST(VolumeLinearCells, LinearCellLineIsTheFieldAlongTheRay) {
                                            0.2 * p[0] - 0.6 * p[1] + 1.1 * p[2] - 0.3};
             const Ray ray =
                 testing::MakeRayDir(through, {gauss(rng), gauss(rng), gauss(rng)});
-            traverser.Trace(ray, -1e30, 1e30, segs);
-            for (const Segment& seg : segs) {
-                sf.Begin(mesh, geometry, sel, seg.cell, ray, InversionOptions{});
+            rig.ForEachSegment(ray, -1e30, [&](const Segment& seg) {
                 double mono[4], magnitude = 0;
                 int degree = -1;
                 const bool has =
-                    sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude);
+                    rig.sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude);
                 if (cut == CubeCut::Pyramids || cut == CubeCut::Tets5) {
                     EXPECT_FALSE(has) << int(cut);
                     ++declined;
-                    continue;
+                    return;
                 }
                 ASSERT_TRUE(has) << int(cut) << " " << trial;
                 EXPECT_EQ(degree, cut == CubeCut::Hex ? 3 : 2);
-                EXPECT_EQ(degree, sf.LineDegree());
+                EXPECT_EQ(degree, rig.sf.LineDegree());
                 EXPECT_GT(magnitude, 0);
                 const double mid = 0.5 * (seg.tEnter + seg.tExit),
                              half = 0.5 * (seg.tExit - seg.tEnter);
@@ -1289,11 +1335,11 @@ TEST(VolumeLinearCells, LinearCellLineIsTheFieldAlongTheRay) {
                     const double x = -1 + k / 4.0;
                     double v = mono[degree];
                     for (int q = degree - 1; q >= 0; --q) v = v * x + mono[q];
-                    EXPECT_NEAR(v, sf(mid + half * x), 1e-14 * magnitude)
+                    EXPECT_NEAR(v, rig.sf(mid + half * x), 1e-14 * magnitude)
                         << int(cut) << " " << trial << " x " << x;
                 }
                 ++checked;
-            }
+            });
         }
         if (cut == CubeCut::Hex || cut == CubeCut::Wedges)
             EXPECT_GT(checked, 300) << int(cut);
@@ -1337,66 +1383,17 @@ TEST(VolumeLinearCells, TrilinearFieldAgainstTheOdeReference) {
         }
         return f;
     };
-    Scene scene = MakeScene(R"(
-data: {mesh: "builtin:cube-tets-1"}
-volume:
-  color_field: u
-  color_tf: [[-0.5, 0.1, 0.2, 0.9], [0.2, 1.0, 0.6, 0.2], [1.0, 0.3, 1.0, 0.4]]
-  extinction_tf: [[-0.5, 0.2], [0.1, 3.0], [0.6, 0.5], [1.2, 2.0]]
-accuracy: {volume_tolerance: 1e-10}
-)");
-    const MeshGeometry geometry = MeshGeometry::Build(mesh);
-    const BrickTraverser traverser(Brick::WholeMesh(mesh));
-    const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
-    const RefTf ctf = RefTf::Color(scene.volume->colorTf);
-    const RefTf etf = RefTf::Extinction(scene.volume->extinctionTf);
     RenderCounters counters;
-    Pixel sample;
-    double worst = 0;
-    int checked = 0;
-    for (int trial = 0; trial < 60; ++trial) {
-        std::mt19937 rng(trial);
-        std::uniform_real_distribution<double> uni(0.05, 0.95);
-        std::normal_distribution<double> gauss;
-        const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
-                                            {gauss(rng), gauss(rng), gauss(rng)});
-        const std::array<double, 3> o = {ray.origin[0], ray.origin[1], ray.origin[2]};
-        const std::array<double, 3> d = {ray.dir[0], ray.dir[1], ray.dir[2]};
-        LD t0, t1;
-        ASSERT_TRUE(testing::RefBoxChord(o, d, {0, 0, 0}, {1, 1, 1}, t0, t1));
-        auto field = [&](LD t) {
-            return truth({o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]});
-        };
-        // Kinks: the cube faces, then the transfer functions' breakpoints between them.
-        std::vector<LD> cuts = {t0, t1};
-        for (int axis = 0; axis < 3; ++axis)
-            for (int k = 0; k <= n; ++k)
-                if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
-        std::sort(cuts.begin(), cuts.end());
-        std::vector<LD> kinks;
-        for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
-            const LD a = std::max(cuts[k], t0), b = std::min(cuts[k + 1], t1);
-            if (!(b > a)) continue;
-            kinks.push_back(a);
-            for (const auto& p : scene.volume->colorTf)
-                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
-            for (const auto& p : scene.volume->extinctionTf)
-                testing::SampledCrossings(field, a, b, p.scalar, 64, kinks);
-        }
-        const RefPixel ref = testing::ReferenceRay(t0, t1, field, field, ctf, etf, true,
-                                                   kinks, {}, 1e-16L);
-        IntegrateRay(setup, ray, sample, counters);
-        double err = 0;
-        for (int c = 0; c < 3; ++c)
-            err = std::max(err, double(std::abs(sample.rgba[c] - ref.rgb[c])));
-        EXPECT_LE(err, sample.volError + 1e-14) << trial;  // the error bar holds
-        EXPECT_LE(err, scene.accuracy.volumeTolerance) << trial;
-        EXPECT_NEAR(sample.rgba[3], double(ref.alpha), 1e-10) << trial;
-        worst = std::max(worst, err);
-        ++checked;
-    }
-    EXPECT_EQ(checked, 60);
-    EXPECT_GT(worst, 0);
+    const OdeCheck check = CheckAgainstTheOdeReference(
+        mesh, 60, counters, [](int, testing::Vec3&) {}, truth,
+        [&](const std::array<double, 3>& o, const std::array<double, 3>& d,
+            std::vector<LD>& cuts) {
+            for (int axis = 0; axis < 3; ++axis)  // the cube faces
+                for (int k = 0; k <= n; ++k)
+                    if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
+        });
+    EXPECT_EQ(check.checked, 60);
+    EXPECT_GT(check.worst, 0);
     // The closed form evaluates no field sample: only the general path's would count.
     EXPECT_EQ(counters.fieldEvaluations, 0);
     EXPECT_GT(counters.segments, 60);
