@@ -649,8 +649,8 @@ bool SegmentField::LinearCellLine(double t0, double t1, double mono[4], int& deg
         m[d] = ref0_[d] + mid * dref_[d];
         h[d] = half * dref_[d];
     }
-    // a + b y for y = m[d] + h[d] x, as a polynomial p (degree `deg`) times the factor:
-    // out = a + (b - a) y with a, b polynomials of degree deg.
+    // One linear factor along axis d: out = a (1 - y) + b y = a + (b - a) y with y = md +
+    // hd x, for a and b polynomials in x of degree deg (out of degree deg + 1).
     auto lerp = [](const double* a, const double* b, int deg, double md, double hd,
                    double* out) {
         double diff[4];

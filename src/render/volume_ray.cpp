@@ -1349,10 +1349,10 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         // nested nodes of [cachedLo, cachedHi]. A rung climbed on the same interval (the
         // next work item) evaluates only the nodes its rule adds.
         const NestedQuadratureRules& rules = GetNestedQuadratureRules();
-        constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;  // padded to 4 lanes
-        // Whole blocks of eight from any rung's first new node fit: a rung's nodes end
-        // at 2^r - 1 <= 31, and its new ones start at 0, 7 or 15.
-        static_assert(kNodes % 8 == 0 && kNodes >= NestedQuadratureRules::kMaxNodes + 1);
+        // Padded to whole blocks of eight: a rung's nodes end at 2^r - 1 <= 31 and its
+        // new ones start at 0, 7 or 15, so the blocks from any rung's first new node fit.
+        constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;
+        static_assert(kNodes % 8 == 0);
         alignas(32) double nodeT[kNodes], nodeU[kNodes], nodeE[kNodes], nodeDepth[kNodes],
             att[kNodes], gq[kNodes];
         double cachedLo = 0, cachedHi = 0;

@@ -2004,14 +2004,20 @@ bool BrickTraverser::Impl::PlanarCellExit(std::int64_t c, const std::int32_t* cf
     constexpr int kMaxFaces = 8;
     if (nf > kMaxFaces) return false;
     for (int k = 0; k < nf; ++k) __builtin_prefetch(&faces[cf[k]]);
+    // Every face's kind first: a cell with a bilinear or curved face computes nothing
+    // here that ForEachPair would compute again.
+    for (int k = 0; k < nf; ++k) {
+        const FaceKind kind = faces[cf[k]].kind;
+        if (kind != FaceKind::Triangle && kind != FaceKind::PlanarQuad &&
+            kind != FaceKind::Degenerate)
+            return false;
+    }
     Crossing xs[2 * kMaxFaces];
     int n = 0;
     for (int k = 0; k < nf; ++k) {
         const FaceRec& rec = faces[cf[k]];
-        if (rec.kind == FaceKind::Degenerate) continue;
-        if (rec.kind != FaceKind::Triangle && rec.kind != FaceKind::PlanarQuad)
-            return false;
-        n += PlanarCrossings(cf[k], rec, frame, xs + n);
+        if (rec.kind != FaceKind::Degenerate)
+            n += PlanarCrossings(cf[k], rec, frame, xs + n);
     }
     if (n != 2) return false;
     const bool leaves0 = Leaves(xs[0], c), leaves1 = Leaves(xs[1], c);
