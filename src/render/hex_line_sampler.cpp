@@ -7,6 +7,13 @@
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
 #define HPRAY_HEX_LINE_KERNEL 1
+// The block kernel also in an AVX-512 version, chosen at run time where the processor has
+// it (the build itself leaves AVX-512 out; see CMakeLists.txt).
+#if defined(__GNUC__) && defined(__x86_64__)
+#define HPRAY_HEX_LINE_KERNEL_512 1
+#else
+#define HPRAY_HEX_LINE_KERNEL_512 0
+#endif
 #else
 #define HPRAY_HEX_LINE_KERNEL 0
 #endif
@@ -22,8 +29,8 @@ namespace {
 /// q = P (1 - x): four lanes at a time, the factors in registers (one fused multiply-add
 /// each), every row stored once. S is a multiple of 4.
 template <int P>
-void LagrangeRows(const double* x, int S, double* L) {
-    for (int s = 0; s < S; s += 4) {
+void LagrangeRows(const double* x, int S, double* L, int first = 0) {
+    for (int s = first; s < S; s += 4) {
         const __m256d xv = _mm256_loadu_pd(x + s);
         const __m256d q = _mm256_mul_pd(_mm256_set1_pd(P),
                                         _mm256_sub_pd(_mm256_set1_pd(1.0), xv));
@@ -46,6 +53,39 @@ void LagrangeRows(const double* x, int S, double* L) {
         }
     }
 }
+
+#if HPRAY_HEX_LINE_KERNEL_512
+/// LagrangeRows on AVX-512, eight lanes at a time, the same operations per lane (bitwise
+/// the same rows); returns how many samples (a multiple of 8) it did.
+template <int P>
+__attribute__((target("avx512f"))) int LagrangeRows512(const double* x, int S,
+                                                       double* L) {
+    int s = 0;
+    for (; s + 8 <= S; s += 8) {
+        const __m512d xv = _mm512_loadu_pd(x + s);
+        const __m512d q =
+            _mm512_mul_pd(_mm512_set1_pd(P), _mm512_sub_pd(_mm512_set1_pd(1.0), xv));
+        const __m512d r = _mm512_mul_pd(_mm512_set1_pd(P), xv);
+        __m512d B[P + 1];
+        B[0] = _mm512_set1_pd(1.0);
+        for (int m = 0; m < P; ++m) {
+            const double inv = 1.0 / (m + 1);
+            B[m + 1] = _mm512_mul_pd(
+                B[m], _mm512_fmadd_pd(q, _mm512_set1_pd(inv), _mm512_set1_pd(-m * inv)));
+        }
+        __m512d A = _mm512_set1_pd(1.0);
+        for (int i = 0; i <= P; ++i) {
+            _mm512_storeu_pd(L + i * S + s, _mm512_mul_pd(A, B[P - i]));
+            if (i < P) {
+                const double inv = 1.0 / (i + 1);
+                A = _mm512_mul_pd(
+                    A, _mm512_fmadd_pd(r, _mm512_set1_pd(inv), _mm512_set1_pd(-i * inv)));
+            }
+        }
+    }
+    return s;
+}
+#endif
 
 /// out[s] = sum_k L2[k][s] sum_j L1[j][s] sum_i u[i + N (j + N k)] L0[i][s] for s < count
 /// (a multiple of 4; L rows have stride S). The first contraction, which holds almost all
@@ -163,6 +203,92 @@ void Contract(const double* u, const double* L0, const double* L1, const double*
     }
 }
 
+#if HPRAY_HEX_LINE_KERNEL_512
+/// Contract on AVX-512: blocks of 24 samples (three vectors of eight) with the same
+/// register tile, so every sample sees the same fused multiply-adds in the same order as
+/// in Contract (bitwise the same results), at twice the width. Returns how many samples
+/// (a multiple of 24) it did; Contract does the rest.
+template <int N>
+__attribute__((target("avx512f"))) int Contract512(const double* u, const double* L0,
+                                                   const double* L1, const double* L2,
+                                                   int count, int S, double* out) {
+    int b = 0;
+    for (; b + 24 <= count; b += 24) {
+        __m512d o0 = _mm512_setzero_pd(), o1 = o0, o2 = o0;
+        for (int k = 0; k < N; ++k) {
+            __m512d g0 = _mm512_setzero_pd(), g1 = g0, g2 = g0;
+            int j = 0;
+            for (; j + 4 <= N; j += 4) {
+                const double* r = u + N * (j + N * k);
+                __m512d a00 = _mm512_setzero_pd(), a01 = a00, a02 = a00, a10 = a00,
+                        a11 = a00, a12 = a00, a20 = a00, a21 = a00, a22 = a00, a30 = a00,
+                        a31 = a00, a32 = a00;
+                for (int i = 0; i < N; ++i) {
+                    const double* l = L0 + i * S + b;
+                    const __m512d l0 = _mm512_loadu_pd(l), l1 = _mm512_loadu_pd(l + 8),
+                                  l2 = _mm512_loadu_pd(l + 16);
+                    __m512d c = _mm512_set1_pd(r[i]);
+                    a00 = _mm512_fmadd_pd(c, l0, a00);
+                    a01 = _mm512_fmadd_pd(c, l1, a01);
+                    a02 = _mm512_fmadd_pd(c, l2, a02);
+                    c = _mm512_set1_pd(r[N + i]);
+                    a10 = _mm512_fmadd_pd(c, l0, a10);
+                    a11 = _mm512_fmadd_pd(c, l1, a11);
+                    a12 = _mm512_fmadd_pd(c, l2, a12);
+                    c = _mm512_set1_pd(r[2 * N + i]);
+                    a20 = _mm512_fmadd_pd(c, l0, a20);
+                    a21 = _mm512_fmadd_pd(c, l1, a21);
+                    a22 = _mm512_fmadd_pd(c, l2, a22);
+                    c = _mm512_set1_pd(r[3 * N + i]);
+                    a30 = _mm512_fmadd_pd(c, l0, a30);
+                    a31 = _mm512_fmadd_pd(c, l1, a31);
+                    a32 = _mm512_fmadd_pd(c, l2, a32);
+                }
+                const double* m = L1 + j * S + b;
+                g0 = _mm512_fmadd_pd(a00, _mm512_loadu_pd(m), g0);
+                g1 = _mm512_fmadd_pd(a01, _mm512_loadu_pd(m + 8), g1);
+                g2 = _mm512_fmadd_pd(a02, _mm512_loadu_pd(m + 16), g2);
+                m += S;
+                g0 = _mm512_fmadd_pd(a10, _mm512_loadu_pd(m), g0);
+                g1 = _mm512_fmadd_pd(a11, _mm512_loadu_pd(m + 8), g1);
+                g2 = _mm512_fmadd_pd(a12, _mm512_loadu_pd(m + 16), g2);
+                m += S;
+                g0 = _mm512_fmadd_pd(a20, _mm512_loadu_pd(m), g0);
+                g1 = _mm512_fmadd_pd(a21, _mm512_loadu_pd(m + 8), g1);
+                g2 = _mm512_fmadd_pd(a22, _mm512_loadu_pd(m + 16), g2);
+                m += S;
+                g0 = _mm512_fmadd_pd(a30, _mm512_loadu_pd(m), g0);
+                g1 = _mm512_fmadd_pd(a31, _mm512_loadu_pd(m + 8), g1);
+                g2 = _mm512_fmadd_pd(a32, _mm512_loadu_pd(m + 16), g2);
+            }
+            for (; j < N; ++j) {
+                const double* r = u + N * (j + N * k);
+                __m512d a0 = _mm512_setzero_pd(), a1 = a0, a2 = a0;
+                for (int i = 0; i < N; ++i) {
+                    const double* l = L0 + i * S + b;
+                    const __m512d c = _mm512_set1_pd(r[i]);
+                    a0 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l), a0);
+                    a1 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 8), a1);
+                    a2 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 16), a2);
+                }
+                const double* m = L1 + j * S + b;
+                g0 = _mm512_fmadd_pd(a0, _mm512_loadu_pd(m), g0);
+                g1 = _mm512_fmadd_pd(a1, _mm512_loadu_pd(m + 8), g1);
+                g2 = _mm512_fmadd_pd(a2, _mm512_loadu_pd(m + 16), g2);
+            }
+            const double* n = L2 + k * S + b;
+            o0 = _mm512_fmadd_pd(g0, _mm512_loadu_pd(n), o0);
+            o1 = _mm512_fmadd_pd(g1, _mm512_loadu_pd(n + 8), o1);
+            o2 = _mm512_fmadd_pd(g2, _mm512_loadu_pd(n + 16), o2);
+        }
+        _mm512_storeu_pd(out + b, o0);
+        _mm512_storeu_pd(out + b + 8, o1);
+        _mm512_storeu_pd(out + b + 16, o2);
+    }
+    return b;
+}
+#endif
+
 /// The same for the one sample s (column s of the L rows): the first two contractions
 /// swapped, G[i] = sum_jk u[i + N (j + N k)] L1[j] L2[k] vectorised over i, then
 /// sum_i G[i] L0[i]. A few hundred cycles where a block of four lanes for one sample costs
@@ -198,7 +324,7 @@ using Kernel = void (*)(const double*, const double*, const double*, const doubl
 using OneKernel = double (*)(const double*, const double*, const double*, const double*, int,
                              int);
 constexpr int kMaxKernelOrder = 10;
-using RowsKernel = void (*)(const double*, int, double*);
+using RowsKernel = void (*)(const double*, int, double*, int);
 constexpr RowsKernel kRows[kMaxKernelOrder + 1] = {
     nullptr,          &LagrangeRows<1>, &LagrangeRows<2>, &LagrangeRows<3>,
     &LagrangeRows<4>, &LagrangeRows<5>, &LagrangeRows<6>, &LagrangeRows<7>,
@@ -210,6 +336,34 @@ constexpr OneKernel kOneKernels[kMaxKernelOrder + 1] = {
     nullptr,         &ContractOne<2>, &ContractOne<3>, &ContractOne<4>,
     &ContractOne<5>, &ContractOne<6>, &ContractOne<7>, &ContractOne<8>,
     &ContractOne<9>, &ContractOne<10>, &ContractOne<11>};
+
+#if HPRAY_HEX_LINE_KERNEL_512
+using Kernel512 = int (*)(const double*, const double*, const double*, const double*, int,
+                          int, double*);
+using RowsKernel512 = int (*)(const double*, int, double*);
+constexpr RowsKernel512 kRows512[kMaxKernelOrder + 1] = {nullptr,
+                                                         &LagrangeRows512<1>,
+                                                         &LagrangeRows512<2>,
+                                                         &LagrangeRows512<3>,
+                                                         &LagrangeRows512<4>,
+                                                         &LagrangeRows512<5>,
+                                                         &LagrangeRows512<6>,
+                                                         &LagrangeRows512<7>,
+                                                         &LagrangeRows512<8>,
+                                                         &LagrangeRows512<9>,
+                                                         &LagrangeRows512<10>};
+constexpr Kernel512 kKernels512[kMaxKernelOrder + 1] = {
+    nullptr,         &Contract512<2>,  &Contract512<3>, &Contract512<4>,
+    &Contract512<5>, &Contract512<6>,  &Contract512<7>, &Contract512<8>,
+    &Contract512<9>, &Contract512<10>, &Contract512<11>};
+
+/// Whether this processor runs AVX-512 (asked once; false under tools that emulate a
+/// processor without it, such as valgrind).
+bool HasAvx512() {
+    static const bool has = __builtin_cpu_supports("avx512f");
+    return has;
+}
+#endif
 
 }  // namespace
 
@@ -225,11 +379,22 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const dou
     for (int d = 0; d < 3; ++d) {
         // Padding repeats the last point.
         for (int s = 0; s < S; ++s) x[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
-        kRows[p](x, S, L + d * n * S);
+        int first = 0;
+#if HPRAY_HEX_LINE_KERNEL_512
+        if (S >= 8 && HasAvx512()) first = kRows512[p](x, S, L + d * n * S);
+#endif
+        kRows[p](x, S, L + d * n * S, first);
     }
     // Whole vectors of samples by the blocked kernel, the last count % 4 one by one.
     const int blocked = count / 4 * 4;
-    if (blocked > 0) kKernels[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
+    int wide = 0;
+#if HPRAY_HEX_LINE_KERNEL_512
+    if (blocked >= 24 && HasAvx512())
+        wide = kKernels512[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
+#endif
+    if (blocked > wide)
+        kKernels[p](u, L + wide, L + n * S + wide, L + 2 * n * S + wide, blocked - wide,
+                    S, result + wide);
     for (int s = blocked; s < count; ++s)
         result[s] = kOneKernels[p](u, L, L + n * S, L + 2 * n * S, S, s);
     for (int s = 0; s < count; ++s) out[s] = result[s];
