@@ -204,86 +204,168 @@ void Contract(const double* u, const double* L0, const double* L1, const double*
 }
 
 #if HPRAY_HEX_LINE_KERNEL_512
-/// Contract on AVX-512: blocks of 24 samples (three vectors of eight) with the same
-/// register tile, so every sample sees the same fused multiply-adds in the same order as
-/// in Contract (bitwise the same results), at twice the width. Returns how many samples
-/// (a multiple of 24) it did; Contract does the rest.
+/// Contract on AVX-512 for one block of 8 V samples (V vectors of eight) with the same
+/// register tile (4 rows of u times the V vectors), so that every sample sees the same
+/// fused multiply-adds in the same order as in Contract (bitwise the same results), at
+/// twice the width.
+template <int N, int V>
+__attribute__((target("avx512f"))) inline void ContractBlock512(const double* u,
+                                                                const double* L0,
+                                                                const double* L1,
+                                                                const double* L2, int S,
+                                                                double* out) {
+    __m512d o[V], g[V], a[4][V], l[V];
+#pragma GCC unroll 4
+    for (int v = 0; v < V; ++v) o[v] = _mm512_setzero_pd();
+    for (int k = 0; k < N; ++k) {
+#pragma GCC unroll 4
+        for (int v = 0; v < V; ++v) g[v] = _mm512_setzero_pd();
+        int j = 0;
+        for (; j + 4 <= N; j += 4) {
+            const double* r = u + N * (j + N * k);
+#pragma GCC unroll 4
+            for (int q = 0; q < 4; ++q)
+#pragma GCC unroll 4
+                for (int v = 0; v < V; ++v) a[q][v] = _mm512_setzero_pd();
+            for (int i = 0; i < N; ++i) {
+#pragma GCC unroll 4
+                for (int v = 0; v < V; ++v) l[v] = _mm512_loadu_pd(L0 + i * S + 8 * v);
+#pragma GCC unroll 4
+                for (int q = 0; q < 4; ++q) {
+                    const __m512d c = _mm512_set1_pd(r[q * N + i]);
+#pragma GCC unroll 4
+                    for (int v = 0; v < V; ++v)
+                        a[q][v] = _mm512_fmadd_pd(c, l[v], a[q][v]);
+                }
+            }
+#pragma GCC unroll 4
+            for (int q = 0; q < 4; ++q) {
+                const double* m = L1 + (j + q) * S;
+#pragma GCC unroll 4
+                for (int v = 0; v < V; ++v)
+                    g[v] = _mm512_fmadd_pd(a[q][v], _mm512_loadu_pd(m + 8 * v), g[v]);
+            }
+        }
+        for (; j < N; ++j) {
+            const double* r = u + N * (j + N * k);
+#pragma GCC unroll 4
+            for (int v = 0; v < V; ++v) a[0][v] = _mm512_setzero_pd();
+            for (int i = 0; i < N; ++i) {
+                const __m512d c = _mm512_set1_pd(r[i]);
+#pragma GCC unroll 4
+                for (int v = 0; v < V; ++v)
+                    a[0][v] =
+                        _mm512_fmadd_pd(c, _mm512_loadu_pd(L0 + i * S + 8 * v), a[0][v]);
+            }
+            const double* m = L1 + j * S;
+#pragma GCC unroll 4
+            for (int v = 0; v < V; ++v)
+                g[v] = _mm512_fmadd_pd(a[0][v], _mm512_loadu_pd(m + 8 * v), g[v]);
+        }
+        const double* n = L2 + k * S;
+#pragma GCC unroll 4
+        for (int v = 0; v < V; ++v)
+            o[v] = _mm512_fmadd_pd(g[v], _mm512_loadu_pd(n + 8 * v), o[v]);
+    }
+#pragma GCC unroll 4
+    for (int v = 0; v < V; ++v) _mm512_storeu_pd(out + 8 * v, o[v]);
+}
+
+/// ContractBlock512 for V = 3 written out: the generic form's loops leave the compiler
+/// holding rows of L1 across k, which spills.
+template <int N>
+__attribute__((target("avx512f"))) inline void ContractBlock24(const double* u,
+                                                               const double* L0,
+                                                               const double* L1,
+                                                               const double* L2, int S,
+                                                               double* out) {
+    __m512d o0 = _mm512_setzero_pd(), o1 = o0, o2 = o0;
+    for (int k = 0; k < N; ++k) {
+        __m512d g0 = _mm512_setzero_pd(), g1 = g0, g2 = g0;
+        int j = 0;
+        for (; j + 4 <= N; j += 4) {
+            const double* r = u + N * (j + N * k);
+            __m512d a00 = _mm512_setzero_pd(), a01 = a00, a02 = a00, a10 = a00, a11 = a00,
+                    a12 = a00, a20 = a00, a21 = a00, a22 = a00, a30 = a00, a31 = a00,
+                    a32 = a00;
+            for (int i = 0; i < N; ++i) {
+                const double* l = L0 + i * S;
+                const __m512d l0 = _mm512_loadu_pd(l), l1 = _mm512_loadu_pd(l + 8),
+                              l2 = _mm512_loadu_pd(l + 16);
+                __m512d c = _mm512_set1_pd(r[i]);
+                a00 = _mm512_fmadd_pd(c, l0, a00);
+                a01 = _mm512_fmadd_pd(c, l1, a01);
+                a02 = _mm512_fmadd_pd(c, l2, a02);
+                c = _mm512_set1_pd(r[N + i]);
+                a10 = _mm512_fmadd_pd(c, l0, a10);
+                a11 = _mm512_fmadd_pd(c, l1, a11);
+                a12 = _mm512_fmadd_pd(c, l2, a12);
+                c = _mm512_set1_pd(r[2 * N + i]);
+                a20 = _mm512_fmadd_pd(c, l0, a20);
+                a21 = _mm512_fmadd_pd(c, l1, a21);
+                a22 = _mm512_fmadd_pd(c, l2, a22);
+                c = _mm512_set1_pd(r[3 * N + i]);
+                a30 = _mm512_fmadd_pd(c, l0, a30);
+                a31 = _mm512_fmadd_pd(c, l1, a31);
+                a32 = _mm512_fmadd_pd(c, l2, a32);
+            }
+            const double* m = L1 + j * S;
+            g0 = _mm512_fmadd_pd(a00, _mm512_loadu_pd(m), g0);
+            g1 = _mm512_fmadd_pd(a01, _mm512_loadu_pd(m + 8), g1);
+            g2 = _mm512_fmadd_pd(a02, _mm512_loadu_pd(m + 16), g2);
+            m += S;
+            g0 = _mm512_fmadd_pd(a10, _mm512_loadu_pd(m), g0);
+            g1 = _mm512_fmadd_pd(a11, _mm512_loadu_pd(m + 8), g1);
+            g2 = _mm512_fmadd_pd(a12, _mm512_loadu_pd(m + 16), g2);
+            m += S;
+            g0 = _mm512_fmadd_pd(a20, _mm512_loadu_pd(m), g0);
+            g1 = _mm512_fmadd_pd(a21, _mm512_loadu_pd(m + 8), g1);
+            g2 = _mm512_fmadd_pd(a22, _mm512_loadu_pd(m + 16), g2);
+            m += S;
+            g0 = _mm512_fmadd_pd(a30, _mm512_loadu_pd(m), g0);
+            g1 = _mm512_fmadd_pd(a31, _mm512_loadu_pd(m + 8), g1);
+            g2 = _mm512_fmadd_pd(a32, _mm512_loadu_pd(m + 16), g2);
+        }
+        for (; j < N; ++j) {
+            const double* r = u + N * (j + N * k);
+            __m512d a0 = _mm512_setzero_pd(), a1 = a0, a2 = a0;
+            for (int i = 0; i < N; ++i) {
+                const double* l = L0 + i * S;
+                const __m512d c = _mm512_set1_pd(r[i]);
+                a0 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l), a0);
+                a1 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 8), a1);
+                a2 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 16), a2);
+            }
+            const double* m = L1 + j * S;
+            g0 = _mm512_fmadd_pd(a0, _mm512_loadu_pd(m), g0);
+            g1 = _mm512_fmadd_pd(a1, _mm512_loadu_pd(m + 8), g1);
+            g2 = _mm512_fmadd_pd(a2, _mm512_loadu_pd(m + 16), g2);
+        }
+        const double* n = L2 + k * S;
+        o0 = _mm512_fmadd_pd(g0, _mm512_loadu_pd(n), o0);
+        o1 = _mm512_fmadd_pd(g1, _mm512_loadu_pd(n + 8), o1);
+        o2 = _mm512_fmadd_pd(g2, _mm512_loadu_pd(n + 16), o2);
+    }
+    _mm512_storeu_pd(out, o0);
+    _mm512_storeu_pd(out + 8, o1);
+    _mm512_storeu_pd(out + 16, o2);
+}
+
+/// Whole blocks of 24, 16 and 8 samples by ContractBlock24 and ContractBlock512; returns
+/// how many samples (a multiple of 8) it did, Contract does the rest.
 template <int N>
 __attribute__((target("avx512f"))) int Contract512(const double* u, const double* L0,
                                                    const double* L1, const double* L2,
                                                    int count, int S, double* out) {
     int b = 0;
-    for (; b + 24 <= count; b += 24) {
-        __m512d o0 = _mm512_setzero_pd(), o1 = o0, o2 = o0;
-        for (int k = 0; k < N; ++k) {
-            __m512d g0 = _mm512_setzero_pd(), g1 = g0, g2 = g0;
-            int j = 0;
-            for (; j + 4 <= N; j += 4) {
-                const double* r = u + N * (j + N * k);
-                __m512d a00 = _mm512_setzero_pd(), a01 = a00, a02 = a00, a10 = a00,
-                        a11 = a00, a12 = a00, a20 = a00, a21 = a00, a22 = a00, a30 = a00,
-                        a31 = a00, a32 = a00;
-                for (int i = 0; i < N; ++i) {
-                    const double* l = L0 + i * S + b;
-                    const __m512d l0 = _mm512_loadu_pd(l), l1 = _mm512_loadu_pd(l + 8),
-                                  l2 = _mm512_loadu_pd(l + 16);
-                    __m512d c = _mm512_set1_pd(r[i]);
-                    a00 = _mm512_fmadd_pd(c, l0, a00);
-                    a01 = _mm512_fmadd_pd(c, l1, a01);
-                    a02 = _mm512_fmadd_pd(c, l2, a02);
-                    c = _mm512_set1_pd(r[N + i]);
-                    a10 = _mm512_fmadd_pd(c, l0, a10);
-                    a11 = _mm512_fmadd_pd(c, l1, a11);
-                    a12 = _mm512_fmadd_pd(c, l2, a12);
-                    c = _mm512_set1_pd(r[2 * N + i]);
-                    a20 = _mm512_fmadd_pd(c, l0, a20);
-                    a21 = _mm512_fmadd_pd(c, l1, a21);
-                    a22 = _mm512_fmadd_pd(c, l2, a22);
-                    c = _mm512_set1_pd(r[3 * N + i]);
-                    a30 = _mm512_fmadd_pd(c, l0, a30);
-                    a31 = _mm512_fmadd_pd(c, l1, a31);
-                    a32 = _mm512_fmadd_pd(c, l2, a32);
-                }
-                const double* m = L1 + j * S + b;
-                g0 = _mm512_fmadd_pd(a00, _mm512_loadu_pd(m), g0);
-                g1 = _mm512_fmadd_pd(a01, _mm512_loadu_pd(m + 8), g1);
-                g2 = _mm512_fmadd_pd(a02, _mm512_loadu_pd(m + 16), g2);
-                m += S;
-                g0 = _mm512_fmadd_pd(a10, _mm512_loadu_pd(m), g0);
-                g1 = _mm512_fmadd_pd(a11, _mm512_loadu_pd(m + 8), g1);
-                g2 = _mm512_fmadd_pd(a12, _mm512_loadu_pd(m + 16), g2);
-                m += S;
-                g0 = _mm512_fmadd_pd(a20, _mm512_loadu_pd(m), g0);
-                g1 = _mm512_fmadd_pd(a21, _mm512_loadu_pd(m + 8), g1);
-                g2 = _mm512_fmadd_pd(a22, _mm512_loadu_pd(m + 16), g2);
-                m += S;
-                g0 = _mm512_fmadd_pd(a30, _mm512_loadu_pd(m), g0);
-                g1 = _mm512_fmadd_pd(a31, _mm512_loadu_pd(m + 8), g1);
-                g2 = _mm512_fmadd_pd(a32, _mm512_loadu_pd(m + 16), g2);
-            }
-            for (; j < N; ++j) {
-                const double* r = u + N * (j + N * k);
-                __m512d a0 = _mm512_setzero_pd(), a1 = a0, a2 = a0;
-                for (int i = 0; i < N; ++i) {
-                    const double* l = L0 + i * S + b;
-                    const __m512d c = _mm512_set1_pd(r[i]);
-                    a0 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l), a0);
-                    a1 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 8), a1);
-                    a2 = _mm512_fmadd_pd(c, _mm512_loadu_pd(l + 16), a2);
-                }
-                const double* m = L1 + j * S + b;
-                g0 = _mm512_fmadd_pd(a0, _mm512_loadu_pd(m), g0);
-                g1 = _mm512_fmadd_pd(a1, _mm512_loadu_pd(m + 8), g1);
-                g2 = _mm512_fmadd_pd(a2, _mm512_loadu_pd(m + 16), g2);
-            }
-            const double* n = L2 + k * S + b;
-            o0 = _mm512_fmadd_pd(g0, _mm512_loadu_pd(n), o0);
-            o1 = _mm512_fmadd_pd(g1, _mm512_loadu_pd(n + 8), o1);
-            o2 = _mm512_fmadd_pd(g2, _mm512_loadu_pd(n + 16), o2);
-        }
-        _mm512_storeu_pd(out + b, o0);
-        _mm512_storeu_pd(out + b + 8, o1);
-        _mm512_storeu_pd(out + b + 16, o2);
+    for (; b + 24 <= count; b += 24)
+        ContractBlock24<N>(u, L0 + b, L1 + b, L2 + b, S, out + b);
+    if (b + 16 <= count) {
+        ContractBlock512<N, 2>(u, L0 + b, L1 + b, L2 + b, S, out + b);
+        b += 16;
+    } else if (b + 8 <= count) {
+        ContractBlock512<N, 1>(u, L0 + b, L1 + b, L2 + b, S, out + b);
+        b += 8;
     }
     return b;
 }
@@ -389,7 +471,7 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const dou
     const int blocked = count / 4 * 4;
     int wide = 0;
 #if HPRAY_HEX_LINE_KERNEL_512
-    if (blocked >= 24 && HasAvx512())
+    if (blocked >= 8 && HasAvx512())
         wide = kKernels512[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
 #endif
     if (blocked > wide)

@@ -85,14 +85,15 @@ TEST(HexLineSampler, EqualsTheGenericEvaluatorToRounding) {
 }
 
 TEST(HexLineSampler, EveryBlockingGivesTheSameBits) {
-    // One call of `count` samples (the wide kernel for whole blocks of 24 where the
+    // One call of `count` samples (the wide kernel for blocks of 24, 16 and 8 where the
     // processor has AVX-512, then blocks of 12 and 4, the rest one by one) against calls
     // of four samples at a time (blocks of 4 only) and of the same leftover samples: the
     // kernels run the same fused multiply-adds per sample, so the bits must agree.
     std::mt19937_64 rng(5);
     int compared = 0;
     for (int p = 1; p <= 10; ++p) {
-        for (int count : {24, 25, 28, 48, 51, kMaxHexLineSamples}) {
+        for (int count :
+             {8, 12, 16, 17, 20, 24, 25, 28, 32, 40, 44, 48, 51, kMaxHexLineSamples}) {
             const Line line = RandomLine(p, count, rng);
             std::vector<double> whole(count), pieces(count);
             if (!SampleAffineHexLine(p, line.u.data(), line.ref0, line.dref,
