@@ -29,8 +29,8 @@ namespace {
 /// q = P (1 - x): four lanes at a time, the factors in registers (one fused multiply-add
 /// each), every row stored once. S is a multiple of 4.
 template <int P>
-void LagrangeRows(const double* x, int S, double* L, int first = 0) {
-    for (int s = first; s < S; s += 4) {
+void LagrangeRows(const double* x, int S, double* L) {
+    for (int s = 0; s < S; s += 4) {
         const __m256d xv = _mm256_loadu_pd(x + s);
         const __m256d q = _mm256_mul_pd(_mm256_set1_pd(P),
                                         _mm256_sub_pd(_mm256_set1_pd(1.0), xv));
@@ -56,12 +56,11 @@ void LagrangeRows(const double* x, int S, double* L, int first = 0) {
 
 #if HPRAY_HEX_LINE_KERNEL_512
 /// LagrangeRows on AVX-512, eight lanes at a time, the same operations per lane (bitwise
-/// the same rows); returns how many samples (a multiple of 8) it did.
+/// the same rows); S is a multiple of 8.
 template <int P>
-__attribute__((target("avx512f"))) int LagrangeRows512(const double* x, int S,
-                                                       double* L) {
-    int s = 0;
-    for (; s + 8 <= S; s += 8) {
+__attribute__((target("avx512f"))) void LagrangeRows512(const double* x, int S,
+                                                        double* L) {
+    for (int s = 0; s < S; s += 8) {
         const __m512d xv = _mm512_loadu_pd(x + s);
         const __m512d q =
             _mm512_mul_pd(_mm512_set1_pd(P), _mm512_sub_pd(_mm512_set1_pd(1.0), xv));
@@ -83,7 +82,6 @@ __attribute__((target("avx512f"))) int LagrangeRows512(const double* x, int S,
             }
         }
     }
-    return s;
 }
 #endif
 
@@ -246,7 +244,8 @@ __attribute__((target("avx512f"))) inline void ContractBlock512(const double* u,
                     g[v] = _mm512_fmadd_pd(a[q][v], _mm512_loadu_pd(m + 8 * v), g[v]);
             }
         }
-        for (; j < N; ++j) {
+        // The rest of j (none when N is a multiple of 4).
+        for (; N % 4 != 0 && j < N; ++j) {
             const double* r = u + N * (j + N * k);
 #pragma GCC unroll 4
             for (int v = 0; v < V; ++v) a[0][v] = _mm512_setzero_pd();
@@ -351,12 +350,11 @@ __attribute__((target("avx512f"))) inline void ContractBlock24(const double* u,
     _mm512_storeu_pd(out + 16, o2);
 }
 
-/// Whole blocks of 24, 16 and 8 samples by ContractBlock24 and ContractBlock512; returns
-/// how many samples (a multiple of 8) it did, Contract does the rest.
+/// Contract for count a multiple of 8: whole blocks of 24, then one of 16 or 8 samples.
 template <int N>
-__attribute__((target("avx512f"))) int Contract512(const double* u, const double* L0,
-                                                   const double* L1, const double* L2,
-                                                   int count, int S, double* out) {
+__attribute__((target("avx512f"))) void Contract512(const double* u, const double* L0,
+                                                    const double* L1, const double* L2,
+                                                    int count, int S, double* out) {
     int b = 0;
     for (; b + 24 <= count; b += 24)
         ContractBlock24<N>(u, L0 + b, L1 + b, L2 + b, S, out + b);
@@ -365,9 +363,7 @@ __attribute__((target("avx512f"))) int Contract512(const double* u, const double
         b += 16;
     } else if (b + 8 <= count) {
         ContractBlock512<N, 1>(u, L0 + b, L1 + b, L2 + b, S, out + b);
-        b += 8;
     }
-    return b;
 }
 #endif
 
@@ -406,7 +402,7 @@ using Kernel = void (*)(const double*, const double*, const double*, const doubl
 using OneKernel = double (*)(const double*, const double*, const double*, const double*, int,
                              int);
 constexpr int kMaxKernelOrder = 10;
-using RowsKernel = void (*)(const double*, int, double*, int);
+using RowsKernel = void (*)(const double*, int, double*);
 constexpr RowsKernel kRows[kMaxKernelOrder + 1] = {
     nullptr,          &LagrangeRows<1>, &LagrangeRows<2>, &LagrangeRows<3>,
     &LagrangeRows<4>, &LagrangeRows<5>, &LagrangeRows<6>, &LagrangeRows<7>,
@@ -420,9 +416,9 @@ constexpr OneKernel kOneKernels[kMaxKernelOrder + 1] = {
     &ContractOne<9>, &ContractOne<10>, &ContractOne<11>};
 
 #if HPRAY_HEX_LINE_KERNEL_512
-using Kernel512 = int (*)(const double*, const double*, const double*, const double*, int,
-                          int, double*);
-using RowsKernel512 = int (*)(const double*, int, double*);
+using Kernel512 = void (*)(const double*, const double*, const double*, const double*,
+                           int, int, double*);
+using RowsKernel512 = void (*)(const double*, int, double*);
 constexpr RowsKernel512 kRows512[kMaxKernelOrder + 1] = {nullptr,
                                                          &LagrangeRows512<1>,
                                                          &LagrangeRows512<2>,
@@ -449,34 +445,43 @@ bool HasAvx512() {
 
 }  // namespace
 
-bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const double dref[3],
-                         const double* t, int count, double* out) {
+bool SampleAffineHexLine(int p, const double* u, const double ref0[3],
+                         const double dref[3], const double* t, int count, double* out,
+                         bool wideKernels) {
     if (p < 1 || p > kMaxKernelOrder || count < 1 || count > kMaxHexLineSamples)
         return false;
-    const int S = (count + 3) / 4 * 4;
+#if HPRAY_HEX_LINE_KERNEL_512
+    const bool wide = wideKernels && HasAvx512();
+#else
+    const bool wide = false;
+    (void)wideKernels;
+#endif
+    // Rows padded to whole vectors of the kernels in use.
+    const int S = wide ? (count + 7) / 8 * 8 : (count + 3) / 4 * 4;
     const int n = p + 1;
-    alignas(32) double L[3 * (kMaxKernelOrder + 1) * kMaxHexLineSamples];
-    alignas(32) double x[kMaxHexLineSamples];
-    alignas(32) double result[kMaxHexLineSamples];
+    alignas(64) double L[3 * (kMaxKernelOrder + 1) * kMaxHexLineSamples];
+    alignas(64) double x[kMaxHexLineSamples];
+    alignas(64) double result[kMaxHexLineSamples];
     for (int d = 0; d < 3; ++d) {
         // Padding repeats the last point.
         for (int s = 0; s < S; ++s) x[s] = ref0[d] + t[std::min(s, count - 1)] * dref[d];
-        int first = 0;
 #if HPRAY_HEX_LINE_KERNEL_512
-        if (S >= 8 && HasAvx512()) first = kRows512[p](x, S, L + d * n * S);
+        if (wide) {
+            kRows512[p](x, S, L + d * n * S);
+            continue;
+        }
 #endif
-        kRows[p](x, S, L + d * n * S, first);
+        kRows[p](x, S, L + d * n * S);
     }
-    // Whole vectors of samples by the blocked kernel, the last count % 4 one by one.
+    // Whole vectors of samples by the blocked kernels (with AVX-512 the last vector of
+    // four is widened to eight on the padding), the last count % 4 one by one.
     const int blocked = count / 4 * 4;
-    int wide = 0;
 #if HPRAY_HEX_LINE_KERNEL_512
-    if (blocked >= 8 && HasAvx512())
-        wide = kKernels512[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
+    if (wide && blocked > 0)
+        kKernels512[p](u, L, L + n * S, L + 2 * n * S, (blocked + 7) / 8 * 8, S, result);
 #endif
-    if (blocked > wide)
-        kKernels[p](u, L + wide, L + n * S + wide, L + 2 * n * S + wide, blocked - wide,
-                    S, result + wide);
+    if (!wide && blocked > 0)
+        kKernels[p](u, L, L + n * S, L + 2 * n * S, blocked, S, result);
     for (int s = blocked; s < count; ++s)
         result[s] = kOneKernels[p](u, L, L + n * S, L + 2 * n * S, S, s);
     for (int s = 0; s < count; ++s) out[s] = result[s];
@@ -486,7 +491,7 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3], const dou
 #else
 
 bool SampleAffineHexLine(int, const double*, const double*, const double*, const double*,
-                         int, double*) {
+                         int, double*, bool) {
     return false;
 }
 

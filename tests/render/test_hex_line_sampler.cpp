@@ -1,7 +1,6 @@
 // The register-blocked sampler of affine Lagrange hexahedra along a line
-// (render/hex_line_sampler.h) against the library's generic evaluator, and its blockings
-// (the wide block kernel where the processor has AVX-512, blocks of 12 and 4 samples, one
-// sample at a time) against each other.
+// (render/hex_line_sampler.h) against the library's generic evaluator, and its kernels
+// (AVX-512 where the processor has it, AVX2) and blockings against each other.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -84,31 +83,37 @@ TEST(HexLineSampler, EqualsTheGenericEvaluatorToRounding) {
     EXPECT_GT(compared, 2000);
 }
 
-TEST(HexLineSampler, EveryBlockingGivesTheSameBits) {
-    // One call of `count` samples (the wide kernel for blocks of 24, 16 and 8 where the
-    // processor has AVX-512, then blocks of 12 and 4, the rest one by one) against calls
-    // of four samples at a time (blocks of 4 only) and of the same leftover samples: the
-    // kernels run the same fused multiply-adds per sample, so the bits must agree.
+TEST(HexLineSampler, EveryKernelAndBlockingGivesTheSameBits) {
+    // One call of `count` samples with the processor's widest kernels (AVX-512 blocks of
+    // 24, 16 and 8 samples where it has them; else AVX2 blocks of 12 and 4), the last
+    // count % 4 one by one, against the AVX2 kernels alone, and against calls of four
+    // samples at a time: the kernels run the same fused multiply-adds per sample, so the
+    // bits must agree.
     std::mt19937_64 rng(5);
     int compared = 0;
     for (int p = 1; p <= 10; ++p) {
-        for (int count :
-             {8, 12, 16, 17, 20, 24, 25, 28, 32, 40, 44, 48, 51, kMaxHexLineSamples}) {
+        for (int count : {4, 5, 8, 12, 16, 17, 20, 24, 25, 28, 32, 40, 44, 48, 51,
+                          kMaxHexLineSamples}) {
             const Line line = RandomLine(p, count, rng);
-            std::vector<double> whole(count), pieces(count);
+            std::vector<double> whole(count), narrow(count), pieces(count);
             if (!SampleAffineHexLine(p, line.u.data(), line.ref0, line.dref,
                                      line.t.data(), count, whole.data()))
                 GTEST_SKIP()
                     << "this build has no line-sampling kernel (needs AVX2 and FMA)";
+            ASSERT_TRUE(SampleAffineHexLine(p, line.u.data(), line.ref0, line.dref,
+                                            line.t.data(), count, narrow.data(), false));
             for (int s = 0; s < count; s += 4) {
                 const int n = std::min(4, count - s);
                 ASSERT_TRUE(SampleAffineHexLine(p, line.u.data(), line.ref0, line.dref,
                                                 line.t.data() + s, n, pieces.data() + s));
             }
             for (int s = 0; s < count; ++s) {
+                ASSERT_TRUE(SameBits(whole[s], narrow[s]))
+                    << "p " << p << " count " << count << " sample " << s << ": "
+                    << whole[s] << " against the AVX2 kernels' " << narrow[s];
                 ASSERT_TRUE(SameBits(whole[s], pieces[s]))
                     << "p " << p << " count " << count << " sample " << s << ": "
-                    << whole[s] << " against " << pieces[s];
+                    << whole[s] << " against " << pieces[s] << " four at a time";
                 ++compared;
             }
         }
