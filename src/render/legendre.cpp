@@ -313,14 +313,21 @@ void LegendreSeries::Antiderivative(LegendreSeries& r) const {
     r.a = a;
     r.b = b;
     const int n = Degree();
-    r.c.assign(n + 2, 0.0);
+    r.c.resize(n + 2);
+    double* out = r.c.data();
     const double h = 0.5 * (b - a);
-    r.c[0] += h * c[0];
-    r.c[1] += h * c[0];
-    for (int k = 1; k <= n; ++k) {
-        const double q = h * c[k] / (2 * k + 1);
-        r.c[k + 1] += q;
-        r.c[k - 1] -= q;
+    // The sums of the form above, term by term in the same order: r_0 = (0 + h c_0) -
+    // q_1, r_1 = (0 + h c_0) - q_2, r_j = (0 + q_{j-1}) - q_{j+1}, with q_k = h c_k / (2
+    // k
+    // + 1) for 1 <= k <= n and no q beyond n (the zeros the sums start from are kept:
+    // 0 + x turns a -0 into +0).
+    auto q = [&](int k) { return h * c[k] / (2 * k + 1); };
+    const double h0 = 0.0 + h * c[0];
+    out[0] = n >= 1 ? h0 - q(1) : h0;
+    out[1] = n >= 2 ? h0 - q(2) : h0;
+    for (int j = 2; j <= n + 1; ++j) {
+        const double up = 0.0 + q(j - 1);
+        out[j] = j + 1 <= n ? up - q(j + 1) : up;
     }
 }
 

@@ -75,6 +75,8 @@ constexpr int kSampledDegrees[] = {3, 7, 11, 15, 19, 23, 27};
 /// Highest degree of the series of a linear pyramid's (rational) field along a ray; a
 /// segment that needs more (one passing near the apex plane) takes the general path.
 constexpr int kMaxRationalDegree = 32;
+/// The nested rules, looked up once (GetNestedQuadratureRules builds them on first use).
+const NestedQuadratureRules& kQuadratureRules = GetNestedQuadratureRules();
 
 /// Legendre coefficients from values at the equispaced nodes y_i = 2 i / p - 1 of
 /// [-1, 1]: the inverse of V_ij = P_j(y_i) (row-major, (p + 1)^2), by Gauss-Jordan with
@@ -1348,7 +1350,7 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         // The integrands at the nodes of the interval last evaluated: the first `cached`
         // nested nodes of [cachedLo, cachedHi]. A rung climbed on the same interval (the
         // next work item) evaluates only the nodes its rule adds.
-        const NestedQuadratureRules& rules = GetNestedQuadratureRules();
+        const NestedQuadratureRules& rules = kQuadratureRules;
         // Padded to whole blocks of eight: a rung's nodes end at 2^r - 1 <= 31 and its
         // new ones start at 0, 7 or 15, so the blocks from any rung's first new node fit.
         constexpr int kNodes = NestedQuadratureRules::kMaxNodes + 1;

@@ -153,6 +153,11 @@ struct Scratch {
     std::vector<trace::FaceCrossing> face;
     std::vector<std::pair<Segment, SegmentSeed>> seeded;  // sorting filtered segments
     std::uint64_t ray = 0;  // id of the current Trace call on this thread
+    // A planar face that PlanarCellExit found the ray line of Trace call singleRay to
+    // cross exactly once, at singleT (see PlanarCellExit).
+    std::uint64_t singleRay = 0;
+    std::int32_t singleFace = -1;
+    double singleT = 0;
     CurvedCacheEntry cache[8];
     int cacheNext = 0;
 };
@@ -2012,21 +2017,41 @@ bool BrickTraverser::Impl::PlanarCellExit(std::int64_t c, const std::int32_t* cf
             kind != FaceKind::Degenerate)
             return false;
     }
+    // Where the previous cell of this walk found the entry face crossed exactly once, at
+    // entryT (that cell's two crossings lay on two faces), the same computation here
+    // gives that one crossing again: it is the entering one, and the other faces' count
+    // decides alone (one more crossing makes the two of the full count).
+    Scratch& scratch = tScratch;
+    const bool entryKnown = scratch.singleRay == scratch.ray &&
+                            scratch.singleFace == entryFace && scratch.singleT == entryT;
     Crossing xs[2 * kMaxFaces];
     int n = 0;
     for (int k = 0; k < nf; ++k) {
         const FaceRec& rec = faces[cf[k]];
-        if (rec.kind != FaceKind::Degenerate)
+        if (rec.kind != FaceKind::Degenerate && !(entryKnown && cf[k] == entryFace))
             n += PlanarCrossings(cf[k], rec, frame, xs + n);
     }
-    if (n != 2) return false;
-    const bool leaves0 = Leaves(xs[0], c), leaves1 = Leaves(xs[1], c);
     found = false;
-    if (leaves0 == leaves1) return true;  // no pair: as ForEachPair
-    const Crossing& in = leaves0 ? xs[1] : xs[0];
-    if (in.face != entryFace || in.t != entryT) return true;
-    exit = leaves0 ? xs[0] : xs[1];
+    if (entryKnown) {
+        // The entry crossing leaves the previous cell, so it enters this one: a pair
+        // exactly when the other crossing leaves.
+        if (n != 1) return false;
+        if (!Leaves(xs[0], c)) return true;
+        exit = xs[0];
+    } else {
+        if (n != 2) return false;
+        const bool leaves0 = Leaves(xs[0], c), leaves1 = Leaves(xs[1], c);
+        if (leaves0 == leaves1) return true;  // no pair: as ForEachPair
+        const Crossing& in = leaves0 ? xs[1] : xs[0];
+        if (in.face != entryFace || in.t != entryT) return true;
+        exit = leaves0 ? xs[0] : xs[1];
+    }
     found = true;
+    if (exit.face != entryFace) {
+        scratch.singleRay = scratch.ray;
+        scratch.singleFace = exit.face;
+        scratch.singleT = exit.t;
+    }
     return true;
 }
 

@@ -85,5 +85,82 @@ TEST(SeriesEvalKernel, LglTransformIsItsDefinitionBitwise) {
     }
 }
 
+TEST(LegendreAntiderivative, IsTheIntegralFromTheStart) {
+    // Against the coefficient identity written as sums (integral of P_0 = P_1 + P_0,
+    // integral of P_k = (P_{k+1} - P_{k-1}) / (2k + 1), times (b - a) / 2), bit for bit,
+    // and against the integral from a by 20-point Gauss-Legendre quadrature in long
+    // double (exact for these degrees) at points of the interval.
+    const long double gx[10] = {
+        0.0765265211334973337546404093988382L, 0.2277858511416450780804961953685746L,
+        0.3737060887154195606725481770249272L, 0.5108670019508270980043640509552510L,
+        0.6360536807265150254528366962262859L, 0.7463319064601507926143050703556416L,
+        0.8391169718222188233945290617015207L, 0.9122344282513259058677524412032981L,
+        0.9639719272779137912676661311972772L, 0.9931285991850949247861223884713203L};
+    const long double gw[10] = {
+        0.1527533871307258506980843319550976L, 0.1491729864726037467878287370019694L,
+        0.1420961093183820513292983250671649L, 0.1316886384491766268984944997481631L,
+        0.1181945319615184173123773777113823L, 0.1019301198172404350367501354803499L,
+        0.0832767415767047487247581432220463L, 0.0626720483341090635695065351870128L,
+        0.0406014298003869413310399522749140L, 0.0176140071391521183118619623518528L};
+    auto valueLd = [](const LegendreSeries& p, long double t) {
+        const long double x = (2 * t - p.a - p.b) / (p.b - p.a);
+        long double v = 0, p0 = 1, p1 = x;
+        for (std::size_t k = 0; k < p.c.size(); ++k) {
+            const long double pk = k == 0   ? 1
+                                   : k == 1 ? x
+                                            : ((2 * k - 1) * x * p1 - (k - 1) * p0) / k;
+            if (k >= 2) {
+                p0 = p1;
+                p1 = pk;
+            }
+            v += p.c[k] * pk;
+        }
+        return v;
+    };
+    int compared = 0;
+    for (int seed = 0; seed < 300; ++seed) {
+        std::mt19937_64 rng(seed);
+        std::uniform_real_distribution<double> u(-1, 1);
+        LegendreSeries p, r;
+        p.a = 3 * u(rng);
+        p.b = p.a + 1e-2 + 2 * std::abs(u(rng));
+        p.c.resize(1 + seed % 19);
+        for (double& c : p.c) c = u(rng) * (seed % 3 == 0 ? 0.0 : 1.0);
+        if (seed % 5 == 1) p.c.back() = -0.0;
+        r.c.assign(40, 7.0);  // stale contents must not leak into the result
+        p.Antiderivative(r);
+        const int n = p.Degree();
+        std::vector<double> want(n + 2, 0.0);
+        const double h = 0.5 * (p.b - p.a);
+        want[0] += h * p.c[0];
+        want[1] += h * p.c[0];
+        for (int k = 1; k <= n; ++k) {
+            const double q = h * p.c[k] / (2 * k + 1);
+            want[k + 1] += q;
+            want[k - 1] -= q;
+        }
+        ASSERT_EQ(r.c.size(), want.size());
+        EXPECT_EQ(r.a, p.a);
+        EXPECT_EQ(r.b, p.b);
+        for (std::size_t k = 0; k < want.size(); ++k)
+            ASSERT_TRUE(SameBits(r.c[k], want[k])) << "seed " << seed << " k " << k;
+        double scale = 0;
+        for (double c : p.c) scale += std::abs(c);
+        for (double frac : {0.0, 0.3, 0.77, 1.0}) {
+            const long double t = p.a + frac * (p.b - p.a);
+            long double integral = 0;
+            const long double half = 0.5L * (t - p.a), mid = 0.5L * (t + p.a);
+            for (int i = 0; i < 10; ++i)
+                for (int sgn : {-1, 1})
+                    integral += gw[i] * half * valueLd(p, mid + sgn * half * gx[i]);
+            EXPECT_NEAR(double(valueLd(r, t)), double(integral),
+                        64 * 2.2e-16 * scale * (p.b - p.a) + 1e-300)
+                << "seed " << seed << " at " << frac;
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 1200);
+}
+
 }  // namespace
 }  // namespace hpray
