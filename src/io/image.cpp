@@ -3,6 +3,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -20,6 +21,60 @@ double LinearToSrgb(double linear) {
     if (linear >= 1.0) return 1.0;
     if (linear <= 0.0031308) return 12.92 * linear;
     return 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+}
+
+std::uint8_t EncodeSrgb8Reference(double linear) {
+    return static_cast<std::uint8_t>(std::floor(255.0 * LinearToSrgb(linear) + 0.5));
+}
+
+namespace {
+
+struct SrgbTable {
+    static constexpr int kCells = 4096;
+    /// first[k], k = 1..255: the smallest double in (0, 1] whose code is at least k.
+    double first[256];
+    /// code[i]: the code of the lower end i / kCells of cell i.
+    std::uint8_t code[kCells];
+
+    SrgbTable() {
+        first[0] = 0;
+        for (int k = 1; k <= 255; ++k) {
+            // Bisection over the doubles of (0, 1] by their bit patterns (ordered like
+            // the values): lo has a code below k, hi one of at least k.
+            std::uint64_t lo = 0, hi;
+            const double one = 1.0;
+            std::memcpy(&hi, &one, sizeof hi);
+            while (hi - lo > 1) {
+                const std::uint64_t mid = lo + (hi - lo) / 2;
+                double v;
+                std::memcpy(&v, &mid, sizeof v);
+                (EncodeSrgb8Reference(v) >= k ? hi : lo) = mid;
+            }
+            std::memcpy(&first[k], &hi, sizeof hi);
+        }
+        for (int i = 0; i < kCells; ++i)
+            code[i] = EncodeSrgb8Reference(static_cast<double>(i) / kCells);
+    }
+};
+
+const SrgbTable& GetSrgbTable() {
+    static const SrgbTable table;
+    return table;
+}
+
+}  // namespace
+
+std::uint8_t EncodeSrgb8(double linear) {
+    if (!(linear > 0.0)) return 0;  // NaN too, as LinearToSrgb
+    if (linear >= 1.0) return 255;
+    const SrgbTable& t = GetSrgbTable();
+    // i / kCells <= linear (exact products: kCells is a power of two), so the code is at
+    // least code[i]; the codes whose first value lies in the cell up to linear add one
+    // each.
+    const int i = static_cast<int>(linear * SrgbTable::kCells);
+    int c = t.code[i];
+    while (c < 255 && linear >= t.first[c + 1]) ++c;
+    return static_cast<std::uint8_t>(c);
 }
 
 // ---------------------------------------------------------------------------------------

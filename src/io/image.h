@@ -27,6 +27,13 @@ void ReadPng(const std::string& path, int& width, int& height, std::vector<std::
 
 /// sRGB transfer function applied to a linear value in [0, 1] (clamped), result in [0, 1].
 double LinearToSrgb(double linear);
+/// The 8-bit sRGB code of a linear value, floor(255 LinearToSrgb(linear) + 1/2), by the
+/// function itself (a power per call).
+std::uint8_t EncodeSrgb8Reference(double linear);
+/// The same byte for every double, from a table of the 255 smallest values of each
+/// code (found once by bisection on the function itself, which is monotone) in 4096
+/// cells of [0, 1]: a lookup and a comparison or two instead of a power.
+std::uint8_t EncodeSrgb8(double linear);
 
 /// Writes a float64 NumPy .npy array of shape `shape` (C order) from `data`.
 void WriteNpy(const std::string& path, const std::vector<double>& data,

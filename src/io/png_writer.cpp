@@ -32,14 +32,6 @@ class PngImageGuard {
     png_image& image_;
 };
 
-std::uint8_t EncodeSrgb8(double linear) {
-    return static_cast<std::uint8_t>(std::floor(255.0 * LinearToSrgb(linear) + 0.5));
-}
-
-}  // namespace
-
-namespace {
-
 /// Writes 8-bit sRGB samples, 3 per pixel, top row first.
 void WriteRgb8(const std::string& path, int width, int height,
                const std::vector<std::uint8_t>& rgb) {
@@ -49,6 +41,10 @@ void WriteRgb8(const std::string& path, int width, int height,
     png.width = static_cast<png_uint_32>(width);
     png.height = static_cast<png_uint_32>(height);
     png.format = PNG_FORMAT_RGB;  // 8-bit sRGB: libpng records an sRGB chunk
+    // libpng's fast setting (fast deflate, simple filters): t16's 1024^2 picture in 20 ms
+    // against 65 ms, for a file of 281 kB against 147 kB (the quick start's: 25 kB
+    // against 19 kB).
+    png.flags = PNG_IMAGE_FLAG_FAST;
 
     const std::string tmp = detail::BeginOutputFile(path);
     const int ok = png_image_write_to_file(&png, tmp.c_str(), 0, rgb.data(),

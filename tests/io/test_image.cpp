@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <random>
 #include <set>
 #include <sstream>
 #include <string>
@@ -232,6 +233,63 @@ TEST(SrgbTest, MatchesTheClosedFormCurve) {
         const double s = LinearToSrgb(k / 1000.0);
         EXPECT_GT(s, previous) << k;
         previous = s;
+    }
+}
+
+TEST(SrgbTest, TheTableEncoderGivesTheFunctionsByteForEveryValue) {
+    // Special values.
+    const double inf = std::numeric_limits<double>::infinity();
+    for (double v : {0.0, -0.0, -1e-300, 4.9e-324, 1e-300, 0.0031308, 0.5, 1.0,
+                     std::nextafter(1.0, 0.0), 1.5, inf, -inf,
+                     std::numeric_limits<double>::quiet_NaN()})
+        EXPECT_EQ(EncodeSrgb8(v), EncodeSrgb8Reference(v)) << v;
+    // Around every code's first value (found here by bisection on the values, apart
+    // from the encoder's own search), a few doubles on either side.
+    int checked = 0;
+    for (int k = 1; k <= 255; ++k) {
+        double lo = 0, hi = 1;
+        for (int it = 0; it < 200 && std::nextafter(lo, 1.0) < hi; ++it) {
+            const double mid = lo + 0.5 * (hi - lo);
+            (EncodeSrgb8Reference(mid) >= k ? hi : lo) = mid;
+        }
+        ASSERT_GE(EncodeSrgb8Reference(hi), k);
+        ASSERT_LT(EncodeSrgb8Reference(std::nextafter(hi, 0.0)), k);
+        double v = hi;
+        for (int s = 0; s < 8; ++s) v = std::nextafter(v, 0.0);
+        for (int s = 0; s < 17; ++s, v = std::nextafter(v, 1.0)) {
+            ASSERT_EQ(EncodeSrgb8(v), EncodeSrgb8Reference(v))
+                << "code " << k << " at " << v;
+            ++checked;
+        }
+    }
+    // Random values, uniform and spread over many decades.
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> unit(0, 1), decades(-14, 0.1);
+    for (int i = 0; i < 2000000; ++i) {
+        const double a = unit(rng), b = std::pow(10.0, decades(rng));
+        ASSERT_EQ(EncodeSrgb8(a), EncodeSrgb8Reference(a)) << a;
+        ASSERT_EQ(EncodeSrgb8(b), EncodeSrgb8Reference(b)) << b;
+        checked += 2;
+    }
+    EXPECT_EQ(checked, 255 * 17 + 4000000);
+}
+
+TEST(SrgbTest, TheBytesNeverFallAsTheValueRises) {
+    // What the table encoder relies on: each code is reached once and kept.
+    int previous = 0;
+    for (int i = 0; i <= 4000000; ++i) {
+        const int c = EncodeSrgb8Reference(i / 4000000.0);
+        ASSERT_GE(c, previous) << i;
+        previous = c;
+    }
+    EXPECT_EQ(previous, 255);
+    // And across the joint of the curve's two pieces, ulp by ulp.
+    double v = 0.0031308;
+    for (int s = 0; s < 1000; ++s) v = std::nextafter(v, 0.0);
+    previous = EncodeSrgb8Reference(v);
+    for (int s = 0; s < 2000; ++s, v = std::nextafter(v, 1.0)) {
+        ASSERT_GE(EncodeSrgb8Reference(v), previous);
+        previous = EncodeSrgb8Reference(v);
     }
 }
 
