@@ -56,7 +56,9 @@ void LagrangeRows(const double* x, int S, double* L) {
 
 #if HPRAY_HEX_LINE_KERNEL_512
 /// LagrangeRows on AVX-512, eight lanes at a time, the same operations per lane (bitwise
-/// the same rows); S is a multiple of 8.
+/// the same rows); S is a multiple of 8. Written out again rather than shared: a
+/// function of the build's own instruction set cannot hold the wider intrinsics, and
+/// only these functions carry the AVX-512 target.
 template <int P>
 __attribute__((target("avx512f"))) void LagrangeRows512(const double* x, int S,
                                                         double* L) {
@@ -270,8 +272,9 @@ __attribute__((target("avx512f"))) inline void ContractBlock512(const double* u,
     for (int v = 0; v < V; ++v) _mm512_storeu_pd(out + 8 * v, o[v]);
 }
 
-/// ContractBlock512 for V = 3 written out: the generic form's loops leave the compiler
-/// holding rows of L1 across k, which spills.
+/// ContractBlock512 for V = 3 written out as Contract's block of 12 is: the generic form's
+/// loops leave the compiler holding rows of L1 across k, which spills (6% slower on
+/// nk-sinc's volume).
 template <int N>
 __attribute__((target("avx512f"))) inline void ContractBlock24(const double* u,
                                                                const double* L0,
