@@ -441,7 +441,10 @@ constexpr Kernel512 kKernels512[kMaxKernelOrder + 1] = {
 /// Whether this processor runs AVX-512 (asked once; false under tools that emulate a
 /// processor without it, such as valgrind).
 bool HasAvx512() {
-    static const bool has = __builtin_cpu_supports("avx512f");
+    static const bool has = [] {
+        __builtin_cpu_init();  // idempotent; needed if asked before constructors ran
+        return __builtin_cpu_supports("avx512f") != 0;
+    }();
     return has;
 }
 #endif
