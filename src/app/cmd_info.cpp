@@ -39,9 +39,10 @@ nlohmann::json MeshSummaryJson(const Mesh& mesh) {
         // How the cells map: affine (closed-form inversion), curved but of a lower map
         // order than their nodes (a trilinear cell with order-8 nodes), or curved.
         const MeshGeometry geometry = MeshGeometry::Build(mesh);
-        j["geometry"] = {{"affine_cells", geometry.affineCells},
+        const std::int64_t affine = geometry.AffineCells();
+        j["geometry"] = {{"affine_cells", affine},
                          {"reduced_map_cells", geometry.reducedMapCells},
-                         {"curved_cells", mesh.CellCount() - geometry.affineCells}};
+                         {"curved_cells", mesh.CellCount() - affine}};
     }
     json fields = json::object();
     auto addField = [&](const Field& f) {

@@ -3,9 +3,11 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 namespace hpray {
@@ -51,7 +53,12 @@ MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
             const std::int64_t k = g.stored_.empty() ? (g.allStored_ ? c : -1) : g.stored_[c];
             Box box;
             if (k < 0) {
-                part.affine += g.Derive(c, scratch).affine;
+                // A derived cell's geometry is not needed here (AffineCells derives it
+                // when asked): its corners only.
+                const std::int64_t* cellNodes = mesh.CellNodes(c);
+                for (int m = 0; m < 4; ++m)
+                    for (int d = 0; d < 3; ++d)
+                        scratch.xyz[3 * m + d] = mesh.points[3 * cellNodes[m] + d];
                 // The box only widens the bounds: not needed where its enclosure stays
                 // strictly inside them (NaN compares false: then it is computed).
                 const BasisTable& basis = g.Basis(c);
@@ -97,7 +104,7 @@ MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
     g.bounds.lo = {inf, inf, inf};
     g.bounds.hi = {-inf, -inf, -inf};
     for (const Partial& part : partials) {
-        g.affineCells += part.affine;
+        g.storedAffine_ += part.affine;
         g.reducedMapCells += part.reduced;
         for (int d = 0; d < 3; ++d) {
             g.bounds.lo[d] = std::min(g.bounds.lo[d], part.box.lo[d]);
@@ -105,6 +112,21 @@ MeshGeometry MeshGeometry::Build(const Mesh& mesh) {
         }
     }
     return g;
+}
+
+std::int64_t MeshGeometry::AffineCells() const {
+    if (derivedCells == 0) return storedAffine_;
+    const std::int64_t n = mesh_->CellCount();
+    return storedAffine_ +
+           tbb::parallel_reduce(
+               tbb::blocked_range<std::int64_t>(0, n, 4096), std::int64_t{0},
+               [&](const tbb::blocked_range<std::int64_t>& range, std::int64_t count) {
+                   CellScratch scratch;
+                   for (std::int64_t c = range.begin(); c < range.end(); ++c)
+                       if (IsDerived(c)) count += Derive(c, scratch).affine;
+                   return count;
+               },
+               std::plus<>());
 }
 
 const BasisTable& MeshGeometry::Basis(std::int64_t c) const {

@@ -52,7 +52,9 @@ class MeshGeometry {
     Box CellBox(std::int64_t c) const;
 
     Box bounds;  ///< union of the cells' boxes
-    std::int64_t affineCells = 0;
+    /// Cells whose map is affine (CellGeometry::affine); derives every linear
+    /// tetrahedron's geometry to tell (a pass over the mesh: for reports, not rendering).
+    std::int64_t AffineCells() const;
     std::int64_t derivedCells = 0;  ///< linear tetrahedra, derived on request
     std::int64_t reducedMapCells = 0;  ///< curved hexahedra mapped at a lower order
 
@@ -63,6 +65,7 @@ class MeshGeometry {
     const CellGeometry& Derive(std::int64_t c, CellScratch& scratch) const;
 
     const Mesh* mesh_ = nullptr;
+    std::int64_t storedAffine_ = 0;    ///< stored cells with an affine map
     std::vector<double> nodeXyz_;      ///< x y z per node of each stored cell
     std::vector<CellGeometry> cells_;  ///< stored cells
     std::vector<Box> boxes_;           ///< stored cells' boxes

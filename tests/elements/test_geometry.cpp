@@ -570,7 +570,7 @@ TEST(Geometry, DerivedLinearTetsEqualStoredGeometry) {
     EXPECT_GT(tets, 0);
     EXPECT_LT(tets, mesh.CellCount());  // a mixed mesh
     EXPECT_EQ(geometry.derivedCells, tets);
-    EXPECT_EQ(geometry.affineCells, affine);
+    EXPECT_EQ(geometry.AffineCells(), affine);
     EXPECT_EQ(geometry.bounds.lo, bounds.lo);
     EXPECT_EQ(geometry.bounds.hi, bounds.hi);
     // Only the other cells take memory.
@@ -578,7 +578,7 @@ TEST(Geometry, DerivedLinearTetsEqualStoredGeometry) {
     const MeshGeometry allTets = MeshGeometry::Build(cube);
     EXPECT_EQ(allTets.Bytes(), 0u);
     EXPECT_EQ(allTets.derivedCells, cube.CellCount());
-    EXPECT_EQ(allTets.affineCells, cube.CellCount());
+    EXPECT_EQ(allTets.AffineCells(), cube.CellCount());
 }
 
 // GeometryBoxEnclosure holds the exact box of Lagrange tetrahedra of every order it
