@@ -12,6 +12,8 @@
 #include <limits>
 #include <vector>
 
+#include "util/check.h"
+
 #if defined(__AVX2__)
 #include <immintrin.h>
 #endif
@@ -119,6 +121,10 @@ class PiecewiseLinearTf {
     /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
     /// pieces): `offset`, `slope` get Channels() values.
     void AffineOn(int k, double* offset, double* slope) const;
+    /// AffineOn for a function of 3 channels (colour) and of 1 (extinction), written out:
+    /// the general loop of unknown length compiles to two calls of memmove.
+    void AffineOn3(int k, double offset[3], double slope[3]) const;
+    void AffineOn1(int k, double& offset, double& slope) const;
     /// max over channels of |slope| of piece k (AffineOn's), tabulated.
     double SteepestOn(int k) const { return steepest_[k + 1]; }
     /// max of SteepestOn over the pieces that hold some s in [lo, hi].
@@ -263,6 +269,22 @@ inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) co
         offset[c] = affineOffset_[at + c];
         slope[c] = affineSlope_[at + c];
     }
+}
+
+inline void PiecewiseLinearTf::AffineOn3(int k, double offset[3], double slope[3]) const {
+    HPRAY_DCHECK(channels_ == 3);
+    const std::size_t at = std::size_t(std::clamp(k, -1, Size() - 1) + 1) * 3;
+    const double* o = affineOffset_.data() + at;
+    const double* d = affineSlope_.data() + at;
+    offset[0] = o[0], offset[1] = o[1], offset[2] = o[2];
+    slope[0] = d[0], slope[1] = d[1], slope[2] = d[2];
+}
+
+inline void PiecewiseLinearTf::AffineOn1(int k, double& offset, double& slope) const {
+    HPRAY_DCHECK(channels_ == 1);
+    const std::size_t at = std::size_t(std::clamp(k, -1, Size() - 1) + 1);
+    offset = affineOffset_[at];
+    slope = affineSlope_[at];
 }
 
 /// Integrals of one ray piece of world length `length` over which the extinction is

@@ -1293,8 +1293,8 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     const double c0 = uc(mid);
     const double em = fe == 0 ? c0 : ue(mid);
     double ac[3], bc[3], ae, be;
-    s.colorTf.AffineOn(s.colorTf.IntervalOf(c0), ac, bc);
-    s.extinctionTf.AffineOn(s.extinctionTf.IntervalOf(em), &ae, &be);
+    s.colorTf.AffineOn3(s.colorTf.IntervalOf(c0), ac, bc);
+    s.extinctionTf.AffineOn1(s.extinctionTf.IntervalOf(em), ae, be);
     // Optical depth from p0, exact for the polynomial field: with ue = m + w (m its mean
     // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
     // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
