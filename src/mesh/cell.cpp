@@ -2,6 +2,7 @@
 #include "mesh/cell.h"
 
 #include <algorithm>
+#include <array>
 #include <map>
 #include <mutex>
 
@@ -82,6 +83,26 @@ int VertexCount(CellShape shape) {
 }
 
 int NodeCount(CellShape shape, int order, CellFamily family) {
+    // Called per cell (mesh validation, readers): the counts of every supported
+    // combination from one table built once, without LatticeNodes' lock and lookup.
+    static const auto kCounts = [] {
+        std::array<std::array<std::array<int, 2>, kMaxOrder + 1>, kNumCellShapes> t{};
+        for (int s = 0; s < kNumCellShapes; ++s)
+            for (int p = 1; p <= kMaxOrder; ++p)
+                for (int f = 0; f < 2; ++f) {
+                    const auto sh = static_cast<CellShape>(s);
+                    const auto fa = static_cast<CellFamily>(f);
+                    if (fa == CellFamily::Serendipity && (p != 2 || sh == CellShape::Tet))
+                        continue;
+                    t[s][p][f] = static_cast<int>(LatticeNodes(sh, p, fa).size());
+                }
+        return t;
+    }();
+    const int s = static_cast<int>(shape), f = static_cast<int>(family);
+    if (s >= 0 && s < kNumCellShapes && order >= 1 && order <= kMaxOrder && f >= 0 &&
+        f < 2 && kCounts[s][order][f] > 0)
+        return kCounts[s][order][f];
+    // Not supported: LatticeNodes reports it.
     return static_cast<int>(LatticeNodes(shape, order, family).size());
 }
 
