@@ -316,11 +316,10 @@ void LegendreSeries::Antiderivative(LegendreSeries& r) const {
     r.c.resize(n + 2);
     double* out = r.c.data();
     const double h = 0.5 * (b - a);
-    // The sums of the form above, term by term in the same order: r_0 = (0 + h c_0) -
-    // q_1, r_1 = (0 + h c_0) - q_2, r_j = (0 + q_{j-1}) - q_{j+1}, with q_k = h c_k / (2
-    // k
-    // + 1) for 1 <= k <= n and no q beyond n (the zeros the sums start from are kept:
-    // 0 + x turns a -0 into +0).
+    // The sums of the identity above, term by term in their order of accumulation:
+    // r_0 = (0 + h c_0) - q_1, r_1 = (0 + h c_0) - q_2 and r_j = (0 + q_{j-1}) - q_{j+1},
+    // where q_k = h c_k / (2k + 1) for 1 <= k <= n and there is no q beyond n. The zeros
+    // the sums start from are kept (0 + x turns a -0 into +0).
     auto q = [&](int k) { return h * c[k] / (2 * k + 1); };
     const double h0 = 0.0 + h * c[0];
     out[0] = n >= 1 ? h0 - q(1) : h0;

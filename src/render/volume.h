@@ -155,6 +155,11 @@ class PiecewiseLinearTf {
     /// AffineOn(k)'s offsets and slopes, Channels() each, at (k + 1) * Channels():
     /// computed once (a division per channel and piece) instead of on every call.
     std::vector<double> affineOffset_, affineSlope_;
+    /// Where piece k's entries start in affineOffset_ and affineSlope_ (k clamped to the
+    /// pieces, -1 the one below the first control point).
+    std::size_t AffineAt(int k) const {
+        return std::size_t(std::clamp(k, -1, Size() - 1) + 1) * channels_;
+    }
     /// AffineOn computed from the control points (the tables' source).
     void ComputeAffineOn(int k, double* offset, double* slope) const;
     ShortAscending short_;          ///< the control points, for IntervalOf
@@ -263,8 +268,7 @@ inline double PiecewiseLinearTf::EvalOn1(int k, double s) const {
 }
 
 inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) const {
-    const int n = Size();
-    const std::size_t at = std::size_t(std::clamp(k, -1, n - 1) + 1) * channels_;
+    const std::size_t at = AffineAt(k);
     for (int c = 0; c < channels_; ++c) {
         offset[c] = affineOffset_[at + c];
         slope[c] = affineSlope_[at + c];
@@ -273,7 +277,7 @@ inline void PiecewiseLinearTf::AffineOn(int k, double* offset, double* slope) co
 
 inline void PiecewiseLinearTf::AffineOn3(int k, double offset[3], double slope[3]) const {
     HPRAY_DCHECK(channels_ == 3);
-    const std::size_t at = std::size_t(std::clamp(k, -1, Size() - 1) + 1) * 3;
+    const std::size_t at = AffineAt(k);
     const double* o = affineOffset_.data() + at;
     const double* d = affineSlope_.data() + at;
     offset[0] = o[0], offset[1] = o[1], offset[2] = o[2];
@@ -282,7 +286,7 @@ inline void PiecewiseLinearTf::AffineOn3(int k, double offset[3], double slope[3
 
 inline void PiecewiseLinearTf::AffineOn1(int k, double& offset, double& slope) const {
     HPRAY_DCHECK(channels_ == 1);
-    const std::size_t at = std::size_t(std::clamp(k, -1, Size() - 1) + 1);
+    const std::size_t at = AffineAt(k);
     offset = affineOffset_[at];
     slope = affineSlope_[at];
 }
