@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "util/lanes.h"
+
 #if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
 #define HPRAY_HEX_LINE_KERNEL 1
@@ -437,16 +439,6 @@ constexpr Kernel512 kKernels512[kMaxKernelOrder + 1] = {
     nullptr,         &Contract512<2>,  &Contract512<3>, &Contract512<4>,
     &Contract512<5>, &Contract512<6>,  &Contract512<7>, &Contract512<8>,
     &Contract512<9>, &Contract512<10>, &Contract512<11>};
-
-/// Whether this processor runs AVX-512 (asked once; false under tools that emulate a
-/// processor without it, such as valgrind).
-bool HasAvx512() {
-    static const bool has = [] {
-        __builtin_cpu_init();  // idempotent; needed if asked before constructors ran
-        return __builtin_cpu_supports("avx512f") != 0;
-    }();
-    return has;
-}
 #endif
 
 }  // namespace
@@ -457,7 +449,7 @@ bool SampleAffineHexLine(int p, const double* u, const double ref0[3],
     if (p < 1 || p > kMaxKernelOrder || count < 1 || count > kMaxHexLineSamples)
         return false;
 #if HPRAY_HEX_LINE_KERNEL_512
-    const bool wide = wideKernels && HasAvx512();
+    const bool wide = wideKernels && CpuHasAvx512();
 #else
     const bool wide = false;
     (void)wideKernels;

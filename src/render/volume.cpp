@@ -257,44 +257,56 @@ void MomentsBeyondTaylor(const PieceStart& start, const LinearPieceIntegrals& q,
     m[2] = std::numeric_limits<double>::quiet_NaN();
 }
 
-#if defined(__AVX2__) && defined(__FMA__)
-/// TaylorMoments of four pieces at once, bitwise TaylorMoments per lane: every lane runs
-/// the same operations, and a lane whose series has ended takes no more terms.
-void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
-    const __m256d negAlpha = _mm256_sub_pd(_mm256_setzero_pd(), _mm256_loadu_pd(alpha));
-    const __m256d negTwoBeta = _mm256_mul_pd(_mm256_set1_pd(-2), _mm256_loadu_pd(beta));
-    const __m256d absMask = _mm256_castsi256_pd(_mm256_set1_epi64x(0x7fffffffffffffff));
-    const __m256d small = _mm256_set1_pd(1e-17);
-    __m256d cPrev = _mm256_setzero_pd(), c = _mm256_set1_pd(1);
-    __m256d m0 = _mm256_setzero_pd(), m1 = m0, m2 = m0;
-    __m256d live = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+#if defined(HPRAY_LANES)
+/// TaylorMoments of N pieces at once (lanes.h), bitwise TaylorMoments per lane: every
+/// lane runs the same operations, and a lane whose series has ended takes no more terms.
+template <int N>
+[[gnu::always_inline]] inline void TaylorMomentsLanes(const double* alpha,
+                                                      const double* beta, double m[][3]) {
+    using lanes::D;
+    using lanes::Splat;
+    const D<N> negAlpha = Splat<N>(0.0) - lanes::Load<N>(alpha);
+    const D<N> negTwoBeta = Splat<N>(-2) * lanes::Load<N>(beta);
+    const D<N> small = Splat<N>(1e-17);
+    D<N> cPrev = Splat<N>(0), c = Splat<N>(1);
+    D<N> m0 = Splat<N>(0), m1 = m0, m2 = m0;
+    lanes::I<N> live = lanes::SplatI<N>(-1);
     for (int n = 0; n < kMaxTaylorTerms; ++n) {
-        const __m256d r1 = _mm256_set1_pd(kReciprocal[n + 1]);
-        const __m256d r2 = _mm256_set1_pd(kReciprocal[n + 2]);
-        const __m256d r3 = _mm256_set1_pd(kReciprocal[n + 3]);
-        m0 = _mm256_blendv_pd(m0, _mm256_add_pd(m0, _mm256_mul_pd(c, r1)), live);
-        m1 = _mm256_blendv_pd(m1, _mm256_add_pd(m1, _mm256_mul_pd(c, r2)), live);
-        m2 = _mm256_blendv_pd(m2, _mm256_add_pd(m2, _mm256_mul_pd(c, r3)), live);
-        const __m256d a = _mm256_mul_pd(negAlpha, r1);
-        const __m256d b = _mm256_mul_pd(negTwoBeta, r1);
-        const __m256d next = _mm256_fmadd_pd(a, c, _mm256_mul_pd(b, cPrev));
+        const D<N> r1 = Splat<N>(kReciprocal[n + 1]);
+        const D<N> r2 = Splat<N>(kReciprocal[n + 2]);
+        const D<N> r3 = Splat<N>(kReciprocal[n + 3]);
+        m0 = lanes::Select(live, m0 + c * r1, m0);
+        m1 = lanes::Select(live, m1 + c * r2, m1);
+        m2 = lanes::Select(live, m2 + c * r3, m2);
+        const D<N> a = negAlpha * r1;
+        const D<N> b = negTwoBeta * r1;
+        const D<N> next = lanes::Fma(a, c, b * cPrev);
         cPrev = c;
         c = next;
-        const __m256d rest =
-            _mm256_add_pd(_mm256_and_pd(c, absMask), _mm256_and_pd(cPrev, absMask));
-        live = _mm256_andnot_pd(_mm256_cmp_pd(rest, small, _CMP_LE_OQ), live);
-        if (_mm256_movemask_pd(live) == 0) break;
+        const D<N> rest = lanes::Abs<N>(c) + lanes::Abs<N>(cPrev);
+        live = ~(rest <= small) & live;
+        if (lanes::Bits(live) == 0) break;
     }
-    double out[3][4];
-    _mm256_storeu_pd(out[0], m0);
-    _mm256_storeu_pd(out[1], m1);
-    _mm256_storeu_pd(out[2], m2);
-    for (int l = 0; l < 4; ++l)
-        for (int k = 0; k < 3; ++k) m[l][k] = out[k][l];
+    for (int l = 0; l < N; ++l) {
+        m[l][0] = m0[l];
+        m[l][1] = m1[l];
+        m[l][2] = m2[l];
+    }
+}
+
+void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
+    TaylorMomentsLanes<4>(alpha, beta, m);
+}
+HPRAY_TARGET_AVX512 void TaylorMoments8(const double alpha[8], const double beta[8],
+                                        double m[8][3]) {
+    TaylorMomentsLanes<8>(alpha, beta, m);
 }
 #else
 void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
     for (int l = 0; l < 4; ++l) TaylorMoments(alpha[l], beta[l], m[l]);
+}
+void TaylorMoments8(const double alpha[8], const double beta[8], double m[8][3]) {
+    for (int l = 0; l < 8; ++l) TaylorMoments(alpha[l], beta[l], m[l]);
 }
 #endif
 
@@ -303,13 +315,21 @@ void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3])
 /// IntegrateLinearPieces on the inputs of piece i that in(i, tau0, tau1, length) gives.
 template <typename Inputs>
 [[gnu::always_inline]] inline void IntegrateLinearPiecesOf(int n, Inputs in,
-                                                           LinearPieceIntegrals* out) {
-    int lane[4], lanes = 0;
-    double alpha[4], beta[4], m[4][3];
-    PieceStart start[4];
+                                                           LinearPieceIntegrals* out,
+                                                           bool wideLanes) {
+    // Pieces in the Taylor regime wait for a batch of four, or of eight where the
+    // processor has AVX-512.
+    const int batch = wideLanes && CpuHasAvx512() ? 8 : 4;
+    int lane[8], lanes = 0;
+    alignas(64) double alpha[8], beta[8];
+    double m[8][3];
+    PieceStart start[8];
     auto runLanes = [&] {
-        for (int l = lanes; l < 4; ++l) alpha[l] = beta[l] = 0;
-        TaylorMoments4(alpha, beta, m);
+        for (int l = lanes; l < 8; ++l) alpha[l] = beta[l] = 0;
+        if (lanes > 4)
+            TaylorMoments8(alpha, beta, m);
+        else
+            TaylorMoments4(alpha, beta, m);
         for (int l = 0; l < lanes; ++l) FinishLinearPiece(start[l], m[l], out[lane[l]]);
         lanes = 0;
     };
@@ -324,7 +344,7 @@ template <typename Inputs>
             start[lanes] = ps;
             alpha[lanes] = ps.alpha;
             beta[lanes] = ps.beta;
-            if (++lanes == 4) runLanes();
+            if (++lanes == batch) runLanes();
         } else {
             double mm[3];
             MomentsBeyondTaylor(ps, q, mm);
@@ -341,7 +361,8 @@ template <typename Inputs>
 }
 
 void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
-                           const double* length, LinearPieceIntegrals* out) {
+                           const double* length, LinearPieceIntegrals* out,
+                           bool wideLanes) {
     IntegrateLinearPiecesOf(
         n,
         [&](int i, double& a, double& b, double& l) {
@@ -349,12 +370,12 @@ void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
             b = tau1[i];
             l = length[i];
         },
-        out);
+        out, wideLanes);
 }
 
 void IntegrateLinearPieces(int n, const unsigned char* base, std::size_t stride,
                            std::size_t tau0At, std::size_t tau1At, std::size_t lengthAt,
-                           LinearPieceIntegrals* out) {
+                           LinearPieceIntegrals* out, bool wideLanes) {
     IntegrateLinearPiecesOf(
         n,
         [&](int i, double& a, double& b, double& l) {
@@ -363,7 +384,7 @@ void IntegrateLinearPieces(int n, const unsigned char* base, std::size_t stride,
             std::memcpy(&b, piece + tau1At, sizeof b);
             std::memcpy(&l, piece + lengthAt, sizeof l);
         },
-        out);
+        out, wideLanes);
 }
 
 LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double length) {

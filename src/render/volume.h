@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "util/check.h"
+#include "util/lanes.h"
 
 #if defined(__AVX2__)
 #include <immintrin.h>
@@ -316,12 +317,13 @@ LinearPieceIntegrals IntegrateLinearPiece(double tau0, double tau1, double lengt
 /// the small-depth regime, a recurrence whose latency bounds a piece alone, runs for
 /// four pieces at once.
 void IntegrateLinearPieces(int n, const double* tau0, const double* tau1,
-                           const double* length, LinearPieceIntegrals* out);
+                           const double* length, LinearPieceIntegrals* out,
+                           bool wideLanes = true);
 /// The same with piece i's inputs in an array of structures: the doubles at byte offsets
 /// tau0At, tau1At and lengthAt of the stride bytes from base + i * stride.
 void IntegrateLinearPieces(int n, const unsigned char* base, std::size_t stride,
                            std::size_t tau0At, std::size_t tau1At, std::size_t lengthAt,
-                           LinearPieceIntegrals* out);
+                           LinearPieceIntegrals* out, bool wideLanes = true);
 
 /// Williams-Max emission of a linear piece: integral kappa tau T for chromaticity going
 /// linearly from kappa0 to kappa1 (per channel).

@@ -297,14 +297,15 @@ class VolumeRayMarcher {
     /// the segments before the first that is not a varying linear tetrahedron (no
     /// sliver, not in isoCells) with valid face points and a gradient bound whose field
     /// passes no breakpoint of the transfer functions (one piece each). Their pieces are
-    /// composited in order as LinearTet composites them.
+    /// queued as LinearTet queues them.
     GroupResult LinearTetGroup(const MeshGeometry& geometry, const Segment* segs,
                                const SegmentEnds* ends, double sliverLength, double tMin,
                                double tMax, const IsoCells* isoCells,
                                RayComposite& composite);
     std::int64_t groupedSegments_ = 0;
-    /// Queued pieces beyond which LinearTet composites.
-    static constexpr std::size_t kQueuedPieces = 8;
+    /// Queued pieces beyond which LinearTet and LinearTetGroup composite: whole batches
+    /// of eight closed forms where the processor has AVX-512 (IntegrateLinearPieces).
+    static constexpr std::size_t kQueuedPieces = 16;
     std::vector<QueuedPiece> queue_;  ///< the first queued_ are queued
     std::size_t queued_ = 0;
     std::vector<LinearPieceIntegrals> pieceIntegrals_;
