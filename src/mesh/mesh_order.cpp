@@ -2,7 +2,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <numeric>
@@ -27,6 +26,45 @@ void ParallelFor(std::int64_t n, Body body) {
                       [&](const tbb::blocked_range<std::int64_t>& r) {
                           for (std::int64_t i = r.begin(); i < r.end(); ++i) body(i);
                       });
+}
+
+// Sorts keys whose bits below `from` are each item's index in `keys` (so no two are
+// equal, and the order of the bits from `from` up, ties by index, is the order of the
+// whole keys): a least-significant-digit radix sort of those bits, stable, 11 bits a
+// pass, each pass a parallel count and scatter over chunks of the keys.
+void SortIndexedKeys(std::vector<std::uint64_t>& keys, int from) {
+    constexpr int kDigit = 11, kBuckets = 1 << kDigit, kChunks = 16;
+    const std::int64_t n = static_cast<std::int64_t>(keys.size());
+    std::vector<std::uint64_t> other(keys.size());
+    const std::int64_t chunk = (n + kChunks - 1) / kChunks;
+    std::vector<std::int64_t> count(std::size_t(kChunks) * kBuckets);
+    for (int shift = from; shift < 64; shift += kDigit) {
+        const auto digit = [&](std::uint64_t key) {
+            return static_cast<int>(key >> shift & (kBuckets - 1));
+        };
+        std::fill(count.begin(), count.end(), 0);
+        tbb::parallel_for(0, kChunks, [&](int k) {
+            std::int64_t* h = &count[std::size_t(k) * kBuckets];
+            for (std::int64_t i = k * chunk, end = std::min(n, i + chunk); i < end; ++i)
+                ++h[digit(keys[i])];
+        });
+        // Where chunk k's keys of each digit go: after every smaller digit's keys and the
+        // earlier chunks' keys of that digit.
+        std::int64_t at = 0;
+        for (int b = 0; b < kBuckets; ++b)
+            for (int k = 0; k < kChunks; ++k) {
+                std::int64_t& c = count[std::size_t(k) * kBuckets + b];
+                const std::int64_t m = c;
+                c = at;
+                at += m;
+            }
+        tbb::parallel_for(0, kChunks, [&](int k) {
+            std::int64_t* next = &count[std::size_t(k) * kBuckets];
+            for (std::int64_t i = k * chunk, end = std::min(n, i + chunk); i < end; ++i)
+                other[next[digit(keys[i])]++] = keys[i];
+        });
+        keys.swap(other);
+    }
 }
 
 template <typename T>
@@ -79,7 +117,7 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
         }
         keyed[c] = keyOf(centre, c);
     });
-    tbb::parallel_sort(keyed.begin(), keyed.end());
+    SortIndexedKeys(keyed, 31);
     ParallelFor(nCells, [&](std::int64_t i) {
         cellOld[i] = static_cast<std::int64_t>(keyed[i] & ((std::uint64_t(1) << 31) - 1));
     });
@@ -92,7 +130,7 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
         std::vector<std::uint64_t> pointKey(nPoints);
         ParallelFor(nPoints,
                     [&](std::int64_t p) { pointKey[p] = keyOf(&mesh.points[3 * p], p); });
-        tbb::parallel_sort(pointKey.begin(), pointKey.end());
+        SortIndexedKeys(pointKey, 31);
         ParallelFor(nPoints, [&](std::int64_t i) {
             pointOld[i] =
                 static_cast<std::int64_t>(pointKey[i] & ((std::uint64_t(1) << 31) - 1));
@@ -104,10 +142,13 @@ std::vector<std::int64_t> OrderSpatially(Mesh& mesh) {
     }
 
     // Cells: connectivity in the new order with new point indices.
+    // The counts in parallel (each a read at a random old cell), then their running sum
+    // along the new order in one pass.
     std::vector<std::int64_t> offsets(nCells + 1), connectivity(mesh.connectivity.size());
     offsets[0] = 0;
-    for (std::int64_t i = 0; i < nCells; ++i)
-        offsets[i + 1] = offsets[i] + mesh.CellNodeCount(cellOld[i]);
+    ParallelFor(nCells,
+                [&](std::int64_t i) { offsets[i + 1] = mesh.CellNodeCount(cellOld[i]); });
+    for (std::int64_t i = 0; i < nCells; ++i) offsets[i + 1] += offsets[i];
     ParallelFor(nCells, [&](std::int64_t i) {
         const std::int64_t* nodes = mesh.CellNodes(cellOld[i]);
         const int n = mesh.CellNodeCount(cellOld[i]);

@@ -780,12 +780,16 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             std::int32_t Cell() const { return std::int32_t(cf >> 4); }
             int Face() const { return int(cf >> 1 & 7); }
             int Parity() const { return int(cf & 1); }
-            bool operator<(const NarrowFaceKey& o) const {
-                if (k[0] != o.k[0]) return k[0] < o.k[0];
-                if (k[1] != o.k[1]) return k[1] < o.k[1];
-                if (k[2] != o.k[2]) return k[2] < o.k[2];
-                return cf < o.cf;  // cell, then face (the parity bit never decides)
+            // Corners (biased to unsigned: they are >= -1), then cell, then face (the
+            // parity bit never decides), as one 128-bit number: a comparison without
+            // branches.
+            unsigned __int128 Packed() const {
+                using U = unsigned __int128;
+                return U(std::uint32_t(k[0]) + 1u) << 96 |
+                       U(std::uint32_t(k[1]) + 1u) << 64 |
+                       U(std::uint32_t(k[2]) + 1u) << 32 | U(cf);
             }
+            bool operator<(const NarrowFaceKey& o) const { return Packed() < o.Packed(); }
             bool SameFace(const NarrowFaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }

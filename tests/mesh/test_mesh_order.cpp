@@ -114,6 +114,67 @@ TEST(MeshOrder, SameCellsNodesAndDataInASpatialOrder) {
         << meanSpread(before) << " -> " << meanSpread(after);
 }
 
+// The order is the contract's, computed here the slow way: cell centres on a 2^11 grid
+// over the bounds' largest extent, their Morton codes interleaved bit by bit (x lowest),
+// ascending, ties in their old order. Once on the unit cube (codes over the whole grid),
+// once with a point of no cell far away, which stretches the grid so that the cube's
+// cells share codes, several to a grid cell.
+TEST(MeshOrder, CellsFollowTheMortonCodesOfTheirCentresTiesInOldOrder) {
+    for (const bool stretched : {false, true}) {
+        Mesh before = ShuffledCubeTets(20, 9);
+        if (stretched) {
+            for (const double x : {300.0, 0.0, 0.0}) before.points.push_back(x);
+            before.pointFields[0].values.push_back(300.0);
+            before.pointFields[0].values.push_back(0.0);
+        }
+        Mesh after = before;
+        const std::vector<std::int64_t> oldOf = OrderSpatially(after);
+        double lo[3], hi[3];
+        for (int d = 0; d < 3; ++d) {
+            lo[d] = hi[d] = before.points[d];
+            for (std::int64_t p = 0; p < before.PointCount(); ++p) {
+                lo[d] = std::min(lo[d], before.points[3 * p + d]);
+                hi[d] = std::max(hi[d], before.points[3 * p + d]);
+            }
+        }
+        const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+        auto code = [&](std::int64_t c) {
+            std::uint64_t grid[3];
+            for (int d = 0; d < 3; ++d) {
+                double s = 0;
+                for (int k = 0; k < before.CellNodeCount(c); ++k)
+                    s += before.points[3 * before.CellNodes(c)[k] + d];
+                s /= before.CellNodeCount(c);
+                grid[d] = static_cast<std::uint64_t>(
+                    std::clamp((s - lo[d]) * (2047.0 / extent), 0.0, 2047.0));
+            }
+            std::uint64_t m = 0;
+            for (int b = 0; b < 11; ++b)
+                for (int d = 0; d < 3; ++d) m |= (grid[d] >> b & 1) << (3 * b + d);
+            return m;
+        };
+        std::vector<std::int64_t> expected(before.CellCount());
+        std::iota(expected.begin(), expected.end(), 0);
+        std::vector<std::uint64_t> codes(before.CellCount());
+        for (std::int64_t c = 0; c < before.CellCount(); ++c) codes[c] = code(c);
+        std::stable_sort(
+            expected.begin(), expected.end(),
+            [&](std::int64_t a, std::int64_t b) { return codes[a] < codes[b]; });
+        std::int64_t ties = 0;
+        for (std::int64_t i = 1; i < before.CellCount(); ++i)
+            ties += codes[expected[i]] == codes[expected[i - 1]];
+        if (stretched) {
+            EXPECT_GT(ties, before.CellCount() / 10);
+        } else {
+            EXPECT_GT(*std::max_element(codes.begin(), codes.end()), std::uint64_t(1)
+                                                                         << 32);
+        }
+        ASSERT_EQ(oldOf.size(), expected.size());
+        for (std::size_t i = 0; i < expected.size(); ++i)
+            ASSERT_EQ(oldOf[i], expected[i]) << (stretched ? "stretched, " : "") << i;
+    }
+}
+
 TEST(MeshOrder, EmptyAndOneCellMeshes) {
     Mesh empty;
     EXPECT_TRUE(OrderSpatially(empty).empty());
