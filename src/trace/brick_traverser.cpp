@@ -63,6 +63,14 @@ struct FaceRec {
     // (0, 0), (1, 0) and (0, 1) of its crossings, 3 bits each at bit 9 s, and bit 18 + s
     // when set (SegmentSeed). In the struct's padding.
     std::uint8_t seed[3] = {0, 0, 0};
+    // A triangle of a tetrahedron with a tet code (BuildTetCodes): the corner of cell[s]
+    // off this face, -1 where unknown, kept where a planar triangle has room (v[3] for
+    // side 0, `curved` for side 1, neither used otherwise). The walk entering cell[s]
+    // through this face reads its one new corner here, from the record it has just
+    // crossed, instead of from a record of the cell's other faces, which would wait for
+    // the cell's face list first.
+    std::int32_t Opposite(int s) const { return s == 0 ? v[3] : curved; }
+    void SetOpposite(int s, std::int32_t id) { (s == 0 ? v[3] : curved) = id; }
 };
 static_assert(sizeof(FaceRec) == 32);
 
@@ -619,6 +627,12 @@ void BrickTraverser::Impl::BuildTetCodes() {
                 if (!ok) continue;
                 for (int l = 0; l < 4; ++l) code |= std::uint32_t(facing[l]) << (2 * l);
                 tetCodes[static_cast<std::size_t>(c)] = code | tetcode::kValid;
+                // Each face's corner off it, on c's side (every side of a face is its
+                // one cell's: no two threads write one slot).
+                for (int l = 0; l < 4; ++l) {
+                    FaceRec& rec = faces[cf[facing[l]]];
+                    rec.SetOpposite(rec.cell[0] == c ? 0 : 1, corner[l]);
+                }
             }
         });
 }
@@ -2109,8 +2123,12 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         const int in[3] = {LocalCorner(corners, kin, 0), LocalCorner(corners, kin, 1),
                            LocalCorner(corners, kin, 2)};
         const int dl = kin == 0 ? 3 : 6 - in[0] - in[1] - in[2];
-        const std::int32_t d =
-            kin == 0 ? faces[cf[1]].v[tetcode::CornerL3(code)] : faces[cf[0]].v[dl];
+        // d from the entry face's record (see FaceRec::Opposite), the same corner as
+        // the cell's other faces' records give.
+        const FaceRec& entryRec = faces[entryFace];
+        std::int32_t d = entryRec.Opposite(entryRec.cell[0] == c ? 0 : 1);
+        if (d < 0)
+            d = kin == 0 ? faces[cf[1]].v[tetcode::CornerL3(code)] : faces[cf[0]].v[dl];
         const int s = lastFace->side;
         const ShearedPoint pd = frame.Transform(P(d));
         const int m[3] = {EdgeSign(lastFace->p[0], pd), EdgeSign(lastFace->p[1], pd),
