@@ -775,9 +775,10 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     auto& nbCell = t.nbCell;
     auto& nbFace = t.nbFace;
     const std::int64_t nMerged = static_cast<std::int64_t>(xyz.size() / 3);
-    // Faces are bucketed by their smallest merged corner (a counting sort), each bucket
-    // is sorted by the remaining corners, and equal neighbours in a bucket are the two
-    // sides of one face: linear in the faces, parallel over buckets, no per-face heap.
+    // Faces are bucketed by their smallest merged corner (a counting sort), and the keys
+    // of a bucket with the same remaining corners, found by a small hash table, are the
+    // two sides of one face: linear in the faces, parallel over buckets, no per-face
+    // heap.
     auto sortedKey = [&](std::int64_t c, int f, std::int32_t* key) {
         const CellTopology& s = Topology(mesh.cellShape[c]);
         const int n = s.faceSize[f];
@@ -794,9 +795,8 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
     {
         // A face after its smallest corner: the other corners (a triangle's fourth is -1,
         // so triangles and quadrilaterals never match), its cell and face, and for
-        // triangles the parity of its outward corner cycle by merged id. Ordered by
-        // corners, then cell, then face. Two layouts: 16 bytes while cell << 4 fits 32
-        // bits, else 20.
+        // triangles the parity of its outward corner cycle by merged id. Two layouts: 16
+        // bytes while cell << 4 fits 32 bits, else 20.
         struct NarrowFaceKey {
             std::int32_t k[3];
             std::uint32_t cf;  // cell << 4 | face << 1 | parity
@@ -808,16 +808,6 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             std::int32_t Cell() const { return std::int32_t(cf >> 4); }
             int Face() const { return int(cf >> 1 & 7); }
             int Parity() const { return int(cf & 1); }
-            // Corners (biased to unsigned: they are >= -1), then cell, then face (the
-            // parity bit never decides), as one 128-bit number: a comparison without
-            // branches.
-            unsigned __int128 Packed() const {
-                using U = unsigned __int128;
-                return U(std::uint32_t(k[0]) + 1u) << 96 |
-                       U(std::uint32_t(k[1]) + 1u) << 64 |
-                       U(std::uint32_t(k[2]) + 1u) << 32 | U(cf);
-            }
-            bool operator<(const NarrowFaceKey& o) const { return Packed() < o.Packed(); }
             bool SameFace(const NarrowFaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }
@@ -834,12 +824,6 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             std::int32_t Cell() const { return cell; }
             int Face() const { return bits & 7; }
             int Parity() const { return bits >> 3 & 1; }
-            bool operator<(const WideFaceKey& o) const {
-                if (k[0] != o.k[0]) return k[0] < o.k[0];
-                if (k[1] != o.k[1]) return k[1] < o.k[1];
-                if (k[2] != o.k[2]) return k[2] < o.k[2];
-                return cell != o.cell ? cell < o.cell : Face() < o.Face();
-            }
             bool SameFace(const WideFaceKey& o) const {
                 return k[0] == o.k[0] && k[1] == o.k[1] && k[2] == o.k[2];
             }
@@ -923,38 +907,70 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             tbb::parallel_for(
                 tbb::blocked_range<std::int64_t>(0, nMerged, 4096),
                 [&](const tbb::blocked_range<std::int64_t>& range) {
+                    // Equal keys of a bucket found by a small open-addressing table
+                    // instead of a sort (whose comparisons go either way, a branch
+                    // mispredicted at every other one): per face (the slot of its first
+                    // key), how many keys it has, its second, and its lowest cell.
+                    std::vector<std::int32_t> slot, second, count, lowest;
                     for (std::int64_t v = range.begin(); v < range.end(); ++v) {
-                        FaceKey* first = keys.get() + bucket[v];
-                        FaceKey* last = keys.get() + bucket[v + 1];
-                        std::sort(first, last);
-                        for (FaceKey* run = first; run < last;) {
-                            FaceKey* end = run + 1;
-                            while (end < last && end->SameFace(*run)) ++end;
-                            if (end - run == 2 && run[0].Cell() != run[1].Cell()) {
+                        const FaceKey* first = keys.get() + bucket[v];
+                        const int m = static_cast<int>(bucket[v + 1] - bucket[v]);
+                        if (m < 2) continue;
+                        int size = 8;
+                        while (size < 2 * m) size *= 2;
+                        const std::uint32_t mask = std::uint32_t(size) - 1;
+                        slot.assign(size, -1);
+                        second.resize(m);
+                        count.resize(m);
+                        lowest.resize(m);
+                        for (int i = 0; i < m; ++i) {
+                            const FaceKey& key = first[i];
+                            std::uint32_t h = (std::uint32_t(key.k[0]) * 0x9e3779b1u ^
+                                               std::uint32_t(key.k[1]) * 0x85ebca77u ^
+                                               std::uint32_t(key.k[2]) * 0xc2b2ae3du) >>
+                                              7;
+                            while (true) {
+                                const std::int32_t at = slot[h & mask];
+                                if (at < 0) {
+                                    slot[h & mask] = i;
+                                    count[i] = 1;
+                                    lowest[i] = key.Cell();
+                                    break;
+                                }
+                                if (first[at].SameFace(key)) {
+                                    if (count[at]++ == 1) second[at] = i;
+                                    lowest[at] = std::min(lowest[at], key.Cell());
+                                    break;
+                                }
+                                ++h;
+                            }
+                        }
+                        for (std::uint32_t h = 0; h <= mask; ++h) {
+                            const std::int32_t i = slot[h];
+                            if (i < 0 || count[i] < 2) continue;
+                            const FaceKey& p = first[i];
+                            const FaceKey& q = first[second[i]];
+                            if (count[i] == 2 && p.Cell() != q.Cell()) {
                                 const std::int64_t a =
-                                    6 * std::int64_t(run[0].Cell()) + run[0].Face();
+                                    6 * std::int64_t(p.Cell()) + p.Face();
                                 const std::int64_t b =
-                                    6 * std::int64_t(run[1].Cell()) + run[1].Face();
-                                nbCell[a] = run[1].Cell();
-                                nbFace[a] = std::int8_t(run[1].Face());
-                                nbCell[b] = run[0].Cell();
-                                nbFace[b] = std::int8_t(run[0].Face());
-                                if (run->k[2] < 0) {
+                                    6 * std::int64_t(q.Cell()) + q.Face();
+                                nbCell[a] = q.Cell();
+                                nbFace[a] = std::int8_t(q.Face());
+                                nbCell[b] = p.Cell();
+                                nbFace[b] = std::int8_t(p.Face());
+                                if (p.k[2] < 0) {
                                     // Two cycles of the same three corners turn the same
                                     // way exactly when their parities agree.
-                                    const std::uint8_t same =
-                                        run[0].Parity() == run[1].Parity();
+                                    const std::uint8_t same = p.Parity() == q.Parity();
                                     t.nbSameSense[a] = t.nbSameSense[b] = same;
                                 }
-                            } else if (end - run > 2) {
-                                // Sorted by cell within the run: the first names the
-                                // lowest.
+                            } else if (count[i] > 2) {
                                 std::int64_t cur = badCell.load();
-                                while (run->Cell() < cur &&
-                                       !badCell.compare_exchange_weak(cur, run->Cell())) {
+                                while (lowest[i] < cur &&
+                                       !badCell.compare_exchange_weak(cur, lowest[i])) {
                                 }
                             }
-                            run = end;
                         }
                     }
                 });

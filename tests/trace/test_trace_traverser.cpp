@@ -627,6 +627,36 @@ TEST(BrickTraverser, TetsOnTheSameSideOfTheirSharedFaceAreRejected) {
             }
 }
 
+// A triangle that three tetrahedra share (a non-manifold mesh) is an input error naming
+// the lowest of them; with any two of them the mesh is valid (the other faces are each
+// one cell's). A tetrahedron of its own comes first, so that the lowest is not cell 0.
+TEST(BrickTraverser, AFaceSharedByThreeCellsIsRejectedNamingTheLowest) {
+    for (int third = 0; third < 2; ++third) {
+        Mesh mesh;
+        mesh.points = {0,   0,   0,   1, 0, 0, 0, 1, 0, 0.2, 0.2, 1, 0.2, 0.2, -1,
+                       0.3, 0.3, 0.5, 5, 5, 5, 6, 5, 5, 5,   6,   5, 5,   5,   6};
+        const std::int64_t own[4] = {6, 7, 8, 9}, up[4] = {0, 1, 2, 3},
+                           down[4] = {1, 0, 2, 4}, again[4] = {0, 1, 2, 5};
+        mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, own, 4);
+        mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, down, 4);
+        mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, up, 4);
+        if (third) mesh.AddCell(CellShape::Tet, 1, CellFamily::Lagrange, again, 4);
+        if (!third) {
+            const BrickTraverser tr(Brick::WholeMesh(mesh));
+            EXPECT_EQ(tr.Stats().faces, 11);
+            continue;
+        }
+        try {
+            BrickTraverser{Brick::WholeMesh(mesh)};
+            ADD_FAILURE() << "no error";
+        } catch (const InputError& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("cell 1"), std::string::npos) << what;
+            EXPECT_NE(what.find("more than two cells"), std::string::npos) << what;
+        }
+    }
+}
+
 TEST(BrickTraverser, ConcurrentQueriesMatchSerialOnes) {
     const Mesh mesh = MakeCubeMesh("mixed");
     const BrickTraverser tr(Brick::WholeMesh(mesh));
