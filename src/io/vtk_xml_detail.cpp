@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <type_traits>
@@ -594,14 +595,16 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
         }
     }
     const std::size_t n = total / valueSize;
-    std::vector<std::uint8_t> inflated;
+    // Not zero-filled (every byte is inflated into it; its pages are first touched by
+    // the threads that inflate).
+    std::unique_ptr<std::uint8_t[]> inflated;
     std::uint8_t* dst;
     if (direct) {
         out.resize(n);
         dst = reinterpret_cast<std::uint8_t*>(out.data());
     } else {
-        inflated.resize(total);
-        dst = inflated.data();
+        inflated.reset(new std::uint8_t[std::max<std::size_t>(total, 1)]);
+        dst = inflated.get();
     }
     const auto blockLength = [&](std::uint64_t b) {
         return (b + 1 == blocks && lastSize) ? lastSize : blockSize;
@@ -669,7 +672,13 @@ void ReadArray(const XmlFile& file, const ArrayDesc& a, std::int64_t tuples,
     }
     if (!direct) {
         out.resize(n);
-        Convert(inflated.data(), a.type, n, file.swapBytes, out.data());
+        // In parallel: a million-cell mesh's connectivity is millions of values.
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, std::size_t(1) << 16),
+                          [&](const tbb::blocked_range<std::size_t>& range) {
+                              Convert(dst + range.begin() * valueSize, a.type,
+                                      range.size(), file.swapBytes,
+                                      out.data() + range.begin());
+                          });
     }
 }
 
