@@ -64,6 +64,18 @@ PiecewiseLinearTf::PiecewiseLinearTf(std::vector<double> scalars,
         for (int c = 0; c < channels_; ++c) m = std::max(m, std::abs(sl[c]));
         steepest_[k + 1] = m;
     }
+    // The lane lookups' tables (see LaneIndex), which give the clamped pieces' slope as
+    // +0, the value of their entries here.
+    HPRAY_CHECK(steepest_.front() == 0 && !std::signbit(steepest_.front()) &&
+                steepest_.back() == 0 && !std::signbit(steepest_.back()));
+    if (short_.valid && channels_ <= 3) {
+        for (int k = 0; k < Size(); ++k) {
+            laneScalars_[k] = scalars_[k];
+            for (int c = 0; c < channels_; ++c)
+                laneValues_[c][k] = values_[std::size_t(k) * channels_ + c];
+            laneSteepest_[k] = steepest_[k];
+        }
+    }
 }
 
 void PiecewiseLinearTf::RangeOver(double lo, double hi, double* minOut,

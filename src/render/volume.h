@@ -115,8 +115,15 @@ class PiecewiseLinearTf {
         EvalOnX4<1>(k, sA, sB, &outA, &outB);
     }
     __m256d SteepestOn4(__m256i k) const {
-        return _mm256_i64gather_pd(steepest_.data(),
-                                   _mm256_add_epi64(k, _mm256_set1_epi64x(1)), 8);
+        // steepest_[k + 1]: the table's entry for inner pieces, 0 on the clamped pieces
+        // (their entries, 0 too; see the constructor).
+        const __m256i clamped =
+            _mm256_or_si256(_mm256_cmpgt_epi64(_mm256_setzero_si256(), k),
+                            _mm256_cmpgt_epi64(k, _mm256_set1_epi64x(Size() - 2)));
+        const LaneIndex at(
+            _mm256_add_epi64(_mm256_andnot_si256(clamped, k), _mm256_set1_epi64x(1)));
+        return _mm256_andnot_pd(_mm256_castsi256_pd(clamped),
+                                at.Of(laneSteepest_.data()));
     }
 #endif
     /// Piece k as an affine function, value = offset + slope * s (slope 0 on the clamped
@@ -148,7 +155,36 @@ class PiecewiseLinearTf {
 #if defined(__AVX2__)
     template <int C>
     void EvalOnX4(__m256i k, __m256d sA, __m256d sB, __m256d* outA, __m256d* outB) const;
+    /// Entries 0..7 of a table of 8 doubles for four 64-bit lane indices, by two
+    /// in-register permutes and a blend instead of a gather (whose latency the four-lane
+    /// lookups waited for).
+    struct LaneIndex {
+        explicit LaneIndex(__m256i k) {
+            // The 32-bit halves 2k, 2k + 1 of each entry (the permute reads the low 3
+            // bits: entries 4..7 come from the second half of the table).
+            const __m256i twice = _mm256_slli_epi64(k, 1);
+            idx = _mm256_or_si256(
+                twice,
+                _mm256_slli_epi64(_mm256_add_epi64(twice, _mm256_set1_epi64x(1)), 32));
+            high = _mm256_castsi256_pd(_mm256_cmpgt_epi64(k, _mm256_set1_epi64x(3)));
+        }
+        __m256d Of(const double* table) const {
+            const __m256i lo = _mm256_load_si256(reinterpret_cast<const __m256i*>(table));
+            const __m256i hi =
+                _mm256_load_si256(reinterpret_cast<const __m256i*>(table + 4));
+            return _mm256_blendv_pd(
+                _mm256_castsi256_pd(_mm256_permutevar8x32_epi32(lo, idx)),
+                _mm256_castsi256_pd(_mm256_permutevar8x32_epi32(hi, idx)), high);
+        }
+        __m256i idx;
+        __m256d high;
+    };
 #endif
+    /// For the lane lookups (ShortScalars() valid: at most 8 control points): the
+    /// control points, each channel's values and SteepestOn(k - 1) at k, padded to 8.
+    alignas(32) std::array<double, 8> laneScalars_{};
+    alignas(32) std::array<std::array<double, 8>, 3> laneValues_{};
+    alignas(32) std::array<double, 8> laneSteepest_{};
     std::vector<double> scalars_;
     std::vector<double> values_;
     int channels_ = 1;
@@ -238,19 +274,19 @@ inline void PiecewiseLinearTf::EvalOnX4(__m256i k, __m256d sA, __m256d sB, __m25
     const __m256i clampedLanes = _mm256_or_si256(below, above);
     const __m256i inner = _mm256_andnot_si256(clampedLanes, k);
     const __m256d clamped = _mm256_castsi256_pd(clampedLanes);
-    const __m256d s0 = _mm256_i64gather_pd(scalars_.data(), inner, 8);
-    const __m256d s1 = _mm256_i64gather_pd(scalars_.data() + 1, inner, 8);
+    // The tables' entries inner and inner + 1 (lane lookups; see LaneIndex).
+    const LaneIndex at0(inner), at1(_mm256_add_epi64(inner, _mm256_set1_epi64x(1)));
+    const __m256d s0 = at0.Of(laneScalars_.data());
+    const __m256d s1 = at1.Of(laneScalars_.data());
     const __m256d width = _mm256_sub_pd(s1, s0);
     const __m256d one = _mm256_set1_pd(1.0);
     const __m256d wA = _mm256_div_pd(_mm256_sub_pd(sA, s0), width);
     const __m256d wB = _mm256_div_pd(_mm256_sub_pd(sB, s0), width);
     const __m256d oneMinusWA = _mm256_sub_pd(one, wA),
                   oneMinusWB = _mm256_sub_pd(one, wB);
-    const __m256i at =
-        C == 1 ? inner : _mm256_add_epi64(inner, _mm256_add_epi64(inner, inner));
     for (int c = 0; c < C; ++c) {
-        const __m256d v0 = _mm256_i64gather_pd(values_.data() + c, at, 8);
-        const __m256d v1 = _mm256_i64gather_pd(values_.data() + C + c, at, 8);
+        const __m256d v0 = at0.Of(laneValues_[c].data());
+        const __m256d v1 = at1.Of(laneValues_[c].data());
         outA[c] = _mm256_blendv_pd(
             _mm256_add_pd(_mm256_mul_pd(oneMinusWA, v0), _mm256_mul_pd(wA, v1)), fixed[c],
             clamped);
