@@ -54,7 +54,7 @@ template <int N>
 using I = typename Lanes<N>::I;
 
 // Splat: x in every lane (a shuffle of lane 0: the compiler makes poor code of eight
-// equal scalars).
+// equal scalars). SplatI: the same with the bits of an integer.
 template <int N>
 [[gnu::always_inline]] inline D<N> Splat(double x) {
     const D<N> v = {x};
@@ -65,11 +65,9 @@ template <int N>
 }
 template <int N>
 [[gnu::always_inline]] inline I<N> SplatI(std::int64_t x) {
-    const I<N> v = {x};
-    if constexpr (N == 4)
-        return __builtin_shufflevector(v, v, 0, 0, 0, 0);
-    else
-        return __builtin_shufflevector(v, v, 0, 0, 0, 0, 0, 0, 0, 0);
+    double bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    return reinterpret_cast<I<N>>(Splat<N>(bits));
 }
 template <int N>
 [[gnu::always_inline]] inline D<N> Load(const double* p) {
