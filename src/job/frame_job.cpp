@@ -25,6 +25,7 @@
 #include "scene/camera.h"
 #include "util/error.h"
 #include "util/log.h"
+#include "util/memory.h"
 #include "util/mpi.h"
 
 namespace hpray::job {
@@ -308,6 +309,9 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     // whole, split in image tiles, or split in space into one box per rank, each rank
     // clipping its rays to its own box).
     const auto t0 = std::chrono::steady_clock::now();
+    // Reading and preparing the whole mesh free and allocate large arrays in turn.
+    std::optional<ReuseFreedMemory> reuse;
+    if (!isPartition) reuse.emplace();
     if (isPartition) {
         part_ = partition::ReadPartition(scene_.data.mesh);
         partitionPlan_ = PlanFromPartition(*part_);
@@ -338,6 +342,9 @@ FrameJob::FrameJob(const Scene& scene) : scene_(scene) {
     if (whole_) {
         prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene_, setupStats_);
         if (mpi::Root()) prepared_->SetProgress(kProgressSeconds);
+        const auto t1 = std::chrono::steady_clock::now();
+        reuse.reset();  // the free memory back to the system
+        setupStats_.timing.accel += Seconds(t1);
     }
     FitCamera(scene_.camera, DataBounds(), scene_.clip.box);
 }
@@ -549,11 +556,13 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
             missing |= loadedFields_.insert(name).second;
         readOptions_.fields = loadedFields_;
         if (!part_) {
+            std::optional<ReuseFreedMemory> reuse;
             if (missing || newStep) {
                 // Another time step, or fields not yet loaded: the mesh is read again (the
                 // old one released first) and prepared anew. If the reading fails, the
                 // next frame reads again.
                 const auto t0 = std::chrono::steady_clock::now();
+                reuse.emplace();
                 prepared_.reset();
                 whole_.reset();
                 const int previous = timeStep_;
@@ -577,6 +586,9 @@ Image FrameJob::Render(const Scene& frameScene, Change change, RenderStats& stat
                 prepared_ = std::make_unique<PreparedBrick>(*whole_, std::nullopt, scene,
                                                             setupStats_);
                 if (mpi::Root()) prepared_->SetProgress(kProgressSeconds);
+                const auto t1 = std::chrono::steady_clock::now();
+                reuse.reset();
+                setupStats_.timing.accel += Seconds(t1);
             }
             else
                 prepared_->Reconfigure(scene, setupStats_);
