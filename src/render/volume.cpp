@@ -18,6 +18,7 @@
 #include "render/legendre.h"
 #include "util/check.h"
 #include "util/dense_inverse.h"
+#include "util/lanes.h"
 
 namespace hpray {
 

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "util/check.h"
-#include "util/lanes.h"
 
 #if defined(__AVX2__)
 #include <immintrin.h>
