@@ -107,7 +107,8 @@ bool SeedCorners(const FaceRec& rec, int side, int corner[3]) {
 // the corner off that face. Then the code holds, 2 bits each: at bit 2 L, which of the
 // cell's faces lies opposite corner L; at bit 8 + 6 (k - 1) + 2 q (k = 1..3, q = 0..2),
 // the local corner of face k's record corner q (face 0's are L0, L1, L2 by definition);
-// at bit 26, which record corner of face 1 is L3; bit 31 marks a valid code (0: none).
+// bit 31 marks a valid code (0: none). (The walk reads L3 itself from the face records:
+// FaceRec::Opposite.)
 namespace tetcode {
 constexpr std::uint32_t kValid = 1u << 31;
 inline int FaceOpposite(std::uint32_t code, int corner) {
@@ -121,7 +122,6 @@ inline std::uint32_t Corners(std::uint32_t code) {
 inline int LocalCorner(std::uint32_t corners, int face, int q) {
     return corners >> (6 * face + 2 * q) & 3;
 }
-inline int CornerL3(std::uint32_t code) { return code >> 26 & 3; }
 }  // namespace tetcode
 
 struct CurvedRec {
@@ -620,7 +620,6 @@ void BrickTraverser::Impl::BuildTetCodes() {
                     if (local(v) >= 0) continue;
                     ok = corner[3] < 0;  // exactly one corner of face 1 is off face 0
                     corner[3] = v;
-                    code |= std::uint32_t(q) << 26;
                 }
                 ok = ok && corner[3] >= 0 && corner[0] != corner[1] &&
                      corner[1] != corner[2] && corner[0] != corner[2];
@@ -829,8 +828,8 @@ void BrickTraverser::Impl::MatchFaces(TopologyBuild& t) {
             }
         };
         // A parallel counting sort by smallest corner: the cells in kChunks ranges, each
-        // with its own histogram; a chunk's keys of one bucket follow the previous
-        // chunk's, so the order within a bucket is by cell, as a sequential fill gives.
+        // with its own histogram and its own part of every bucket (the matching below
+        // does not depend on the order within a bucket).
         constexpr int kChunks = 8;
         const std::int64_t chunkCells = (nCells + kChunks - 1) / kChunks;
         std::vector<std::vector<std::int64_t>> count(kChunks);
@@ -2153,12 +2152,11 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         const int in[3] = {LocalCorner(corners, kin, 0), LocalCorner(corners, kin, 1),
                            LocalCorner(corners, kin, 2)};
         const int dl = kin == 0 ? 3 : 6 - in[0] - in[1] - in[2];
-        // d from the entry face's record (see FaceRec::Opposite), the same corner as
-        // the cell's other faces' records give.
+        // d from the entry face's record (see FaceRec::Opposite; BuildTetCodes sets it
+        // on every face of a cell with a tet code), the corner the cell's other faces'
+        // records give.
         const FaceRec& entryRec = faces[entryFace];
-        std::int32_t d = entryRec.Opposite(entryRec.cell[0] == c ? 0 : 1);
-        if (d < 0)
-            d = kin == 0 ? faces[cf[1]].v[tetcode::CornerL3(code)] : faces[cf[0]].v[dl];
+        const std::int32_t d = entryRec.Opposite(entryRec.cell[0] == c ? 0 : 1);
         const int s = lastFace->side;
         const ShearedPoint pd = frame.Transform(P(d));
         const int m[3] = {EdgeSign(lastFace->p[0], pd), EdgeSign(lastFace->p[1], pd),
