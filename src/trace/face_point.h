@@ -70,9 +70,10 @@ namespace hpray::trace {
     const double off1 = std::abs(dy) + 4 * kEps * ay + cornerError;
     const double off2 = 4 * kEps * az;
 #if defined(__AVX2__)
-    // Stored in aligned pairs of 16 bytes, the chunks in which the walk copies a face
-    // point it has just made (FacePoint::SetFrom): a load of 16 bytes from two stores of
-    // 8 would wait for both to reach the cache instead of taking their data on the way.
+    // Stored in pieces of 16 bytes (at the struct's offsets 0, 16, ..., 64), the chunks
+    // in which the walk copies a face point it has just made (FacePoint::SetFrom): a load
+    // of 16 bytes from two stores of 8 would wait for both to reach the cache instead of
+    // taking their data on the way.
     static_assert(offsetof(FacePoint, v) == 0 && offsetof(FacePoint, w) == 16 &&
                   offsetof(FacePoint, t) == 40 && offsetof(FacePoint, off) == 48 &&
                   offsetof(FacePoint, cornerError) == 72 && sizeof(FacePoint) == 80);
