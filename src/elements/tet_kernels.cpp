@@ -4,6 +4,8 @@
 // where they are made.
 #include "elements/tet_kernels.h"
 
+#include <immintrin.h>
+
 #include "elements/silvester.h"
 #include "mesh/cell.h"
 #include "util/check.h"
@@ -64,8 +66,49 @@ double ValueGradient(const double* u, const double ref[3], double dRef[3]) {
     return f;
 }
 
+#if defined(__AVX2__)
+// A node's coordinates (x, y, z) in the first three lanes of a vector, the fourth zero
+// (a masked load: nothing past the node is read).
+inline __m256d NodeXyz(const double* xyz, int m) {
+    return _mm256_maskload_pd(xyz + 3 * m, _mm256_setr_epi64x(-1, -1, -1, 0));
+}
+#endif
+
 template <int P>
 void Map(const double* xyz, const double ref[3], double world[3], double* jacobian) {
+#if defined(__AVX2__)
+    // The sums of the scalar version below in the lanes of vectors, coordinate c in lane
+    // c: each lane takes its products and sums in the same order (a product, then a sum;
+    // nothing fused), so the results are bitwise the same.
+    if (!jacobian) {
+        __m256d x = _mm256_setzero_pd();
+        ForEachNode<P, false>(ref, [&](int m, double v, const double*) {
+            x = _mm256_add_pd(x, _mm256_mul_pd(_mm256_set1_pd(v), NodeXyz(xyz, m)));
+        });
+        alignas(32) double out[4];
+        _mm256_store_pd(out, x);
+        for (int c = 0; c < 3; ++c) world[c] = out[c];
+        return;
+    }
+    // x and the Jacobian's columns d x / d ref_k.
+    __m256d x = _mm256_setzero_pd(), j0 = x, j1 = x, j2 = x;
+    ForEachNode<P, true>(ref, [&](int m, double v, const double* d) {
+        const __m256d p = NodeXyz(xyz, m);
+        x = _mm256_add_pd(x, _mm256_mul_pd(_mm256_set1_pd(v), p));
+        j0 = _mm256_add_pd(j0, _mm256_mul_pd(p, _mm256_set1_pd(d[0])));
+        j1 = _mm256_add_pd(j1, _mm256_mul_pd(p, _mm256_set1_pd(d[1])));
+        j2 = _mm256_add_pd(j2, _mm256_mul_pd(p, _mm256_set1_pd(d[2])));
+    });
+    alignas(32) double out[4][4];
+    _mm256_store_pd(out[0], x);
+    _mm256_store_pd(out[1], j0);
+    _mm256_store_pd(out[2], j1);
+    _mm256_store_pd(out[3], j2);
+    for (int c = 0; c < 3; ++c) {
+        world[c] = out[0][c];
+        for (int k = 0; k < 3; ++k) jacobian[3 * c + k] = out[1 + k][c];
+    }
+#else
     double x0 = 0, x1 = 0, x2 = 0;
     if (!jacobian) {
         ForEachNode<P, false>(ref, [&](int m, double v, const double*) {
@@ -91,6 +134,7 @@ void Map(const double* xyz, const double ref[3], double world[3], double* jacobi
     world[0] = x0;
     world[1] = x1;
     world[2] = x2;
+#endif
 }
 
 template <int P>
