@@ -161,22 +161,6 @@ constexpr const LegendreRecurrence& kRec = kLegendreRecurrence;
 
 }  // namespace
 
-double LegendreSeries::operator()(double t) const {
-    const double x = (2 * t - a - b) / (b - a);
-    const int n = Degree();
-    HPRAY_CHECK(n < kRecurrenceSize);
-    double v = c[0];
-    if (n >= 1) v += c[1] * x;
-    double p0 = 1, p1 = x;
-    for (int k = 2; k <= n; ++k) {
-        const double p2 = std::fma(kRec.a[k] * x, p1, -kRec.b[k] * p0);
-        v = std::fma(c[k], p2, v);
-        p0 = p1;
-        p1 = p2;
-    }
-    return v;
-}
-
 void LegendreSeries::EvalMany(const double* t, int count, double* out) const {
     const int n = Degree();
     HPRAY_CHECK(n < kRecurrenceSize);

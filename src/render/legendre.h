@@ -1,7 +1,10 @@
 // Legendre series on an interval: Legendre–Gauss–Lobatto nodes, interpolation, evaluation.
 #pragma once
 
+#include <cmath>
 #include <vector>
+
+#include "util/check.h"
 
 namespace hpray {
 
@@ -82,6 +85,24 @@ struct LegendreSeries {
     /// The same into `out` (reusing its storage; not *this).
     void Antiderivative(LegendreSeries& out) const;
 };
+
+// Inline: evaluated once or twice per piece of every volume segment.
+inline double LegendreSeries::operator()(double t) const {
+    const double x = (2 * t - a - b) / (b - a);
+    const int n = Degree();
+    HPRAY_CHECK(n < LegendreRecurrence::kSize);
+    const LegendreRecurrence& rec = kLegendreRecurrence;
+    double v = c[0];
+    if (n >= 1) v += c[1] * x;
+    double p0 = 1, p1 = x;
+    for (int k = 2; k <= n; ++k) {
+        const double p2 = std::fma(rec.a[k] * x, p1, -rec.b[k] * p0);
+        v = std::fma(c[k], p2, v);
+        p0 = p1;
+        p1 = p2;
+    }
+    return v;
+}
 
 /// p(t[s]) into outP[s] and q(t[s]) into outQ[s] for s < count, for two series on the same
 /// interval (any degrees): the Legendre polynomials are computed once for both.
