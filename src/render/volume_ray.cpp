@@ -207,10 +207,12 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
     return t;
 }
 
-/// out[i] = exp(-x[i]) for x[i] >= 0 (0 beyond 708), to about 2 ulps: x = k ln 2 - r with
-/// |r| <= ln 2 / 2, e^-r by its Taylor polynomial of degree 13 (error below 1e-17), times
-/// 2^-k built in the exponent bits; four lanes at a time where AVX2 is available (all of
-/// them, the last partly filled: out[i] depends on x[i] alone, not on n or i).
+}  // namespace
+
+// x = k ln 2 - r with |r| <= ln 2 / 2, e^-r by its Taylor polynomial of degree 13 (error
+// below 1e-17), times 2^-k built in the exponent bits; four lanes at a time where AVX2 is
+// available (all of them, the last partly filled: out[i] depends on x[i] alone, not on n
+// or i).
 void ExpNegative(const double* x, int n, double* out) {
     constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
                      kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
@@ -238,9 +240,21 @@ void ExpNegative(const double* x, int n, double* out) {
         const __m256d k = _mm256_sub_pd(kd, _mm256_set1_pd(kShifter));
         __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Hi), y);
         r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Lo), r);
-        __m256d poly = _mm256_set1_pd(kCoef[13]);
-        for (int c = 12; c >= 0; --c)
-            poly = _mm256_fmadd_pd(poly, r, _mm256_set1_pd(kCoef[c]));
+        // The polynomial by Estrin's scheme (pairs, then pairs of pairs in r^2, r^4,
+        // r^8): four levels of multiply-adds instead of Horner's chain of thirteen, whose
+        // latency each series piece waited for.
+        auto pair = [&](int c) {
+            return _mm256_fmadd_pd(_mm256_set1_pd(kCoef[c + 1]), r,
+                                   _mm256_set1_pd(kCoef[c]));
+        };
+        const __m256d r2 = _mm256_mul_pd(r, r), r4 = _mm256_mul_pd(r2, r2),
+                      r8 = _mm256_mul_pd(r4, r4);
+        const __m256d s0 = _mm256_fmadd_pd(pair(2), r2, pair(0));
+        const __m256d s1 = _mm256_fmadd_pd(pair(6), r2, pair(4));
+        const __m256d s2 = _mm256_fmadd_pd(pair(10), r2, pair(8));
+        const __m256d s3 = pair(12);
+        const __m256d u0 = _mm256_fmadd_pd(s1, r4, s0), u1 = _mm256_fmadd_pd(s3, r4, s2);
+        const __m256d poly = _mm256_fmadd_pd(u1, r8, u0);
         // 2^k: (k + 1023) << 52, with k the integer in kd's low bits.
         const __m256i ki = _mm256_sub_epi64(_mm256_castpd_si256(kd),
                                             _mm256_castpd_si256(_mm256_set1_pd(kShifter)));
@@ -261,8 +275,6 @@ void ExpNegative(const double* x, int n, double* out) {
     for (int i = 0; i < n; ++i) out[i] = x[i] > 708.0 ? 0.0 : std::exp(-x[i]);
 #endif
 }
-
-}  // namespace
 
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
                      const double* sampleT, const double* sampleV, int samples,

@@ -145,6 +145,10 @@ struct RayComposite {
     }
 };
 
+/// out[i] = exp(-x[i]) for x[i] >= 0 (0 beyond 708), to within 3 ulps (the series
+/// pieces' quadrature nodes, eight at a time).
+void ExpNegative(const double* x, int n, double* out);
+
 /// A sliver that a clip plane through a face leaves at an end of the ray's span [tMin,
 /// tMax]: a segment at most sliverLength long that starts at tMin or ends at tMax. It
 /// holds nothing visible (sliverLength is about 1e-12 of the mesh size) but would cost as

@@ -255,6 +255,39 @@ void ExpectPiece(double tau0, double tau1, double length, double rel = 2e-13) {
     near(g, gRef, gRef, "WVG");
 }
 
+// The exponentials of the series pieces' quadrature nodes against long double's, in
+// units in the last place: 3 at most (the rounding terms of the pieces' error bars count
+// 16 eps per term), over small and large arguments, the range's ends and past 708.
+TEST(VolumeExp, ExpNegativeWithinThreeUlpsOfLongDouble) {
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> small(0, 1e-3), large(0, 700);
+    double worst = 0;
+    for (int round = 0; round < 200000; ++round) {
+        double x[8], out[8];
+        for (int k = 0; k < 8; ++k) x[k] = round % 2 ? large(rng) : small(rng);
+        if (round == 0) {
+            x[0] = 0;
+            x[1] = 708;
+            x[2] = 708.5;
+            x[3] = 1e300;
+        }
+        // Counts of 8 and of 5 (a partly filled last vector).
+        ExpNegative(x, round % 3 ? 8 : 5, out);
+        for (int k = 0; k < (round % 3 ? 8 : 5); ++k) {
+            if (x[k] > 708) {
+                EXPECT_EQ(out[k], 0.0) << x[k];
+                continue;
+            }
+            const long double truth = std::exp(-static_cast<long double>(x[k]));
+            const double near = static_cast<double>(truth);
+            const double ulp = std::nextafter(near, 2 * near + 1) - near;
+            worst = std::max(worst, double(std::abs(out[k] - truth) / ulp));
+        }
+    }
+    EXPECT_LE(worst, 3.0);
+    EXPECT_GT(worst, 0.0);  // the comparison saw the rounding
+}
+
 TEST(VolumeClosedForm, AllRegimesAgainstLongDoubleQuadrature) {
     // alpha = tau0 (length 1) and beta = (tau1 - tau0) / 2 across the Taylor,
     // slope-series and erfcx / Dawson regimes and their borders.
