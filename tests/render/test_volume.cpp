@@ -1236,6 +1236,41 @@ TEST(VolumePyramids, RationalFieldAgainstTheOdeReference) {
     EXPECT_LT(counters.fieldEvaluations, 25 * counters.segments);
 }
 
+// SampleBatch of affine linear pyramids and wedges (pyramids four points at a time in
+// vector lanes) gives bitwise the values of the field point by point, for every count
+// (whole vectors and the rest).
+TEST(VolumePyramids, SampleBatchIsTheFieldPointByPointBitwise) {
+    for (const testing::CubeCut cut :
+         {testing::CubeCut::Pyramids, testing::CubeCut::Wedges}) {
+        Mesh mesh = testing::GridMesh(2, 0.0, [&](int, int, int) { return cut; });
+        std::mt19937_64 rng(11);
+        std::uniform_real_distribution<double> uni(0.02, 0.98), along(0, 1);
+        std::normal_distribution<double> gauss;
+        AddUniformPointField(mesh, rng, 1);
+        FieldAlongRays rig(mesh);
+        int compared = 0;
+        for (int trial = 0; trial < 40; ++trial) {
+            const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
+                                                {gauss(rng), gauss(rng), gauss(rng)});
+            rig.ForEachSegment(ray, 0, [&](const Segment& seg) {
+                const int n = 1 + (compared % 11);
+                std::vector<double> t(n), batch(n);
+                for (double& x : t)
+                    x = seg.tEnter + along(rng) * (seg.tExit - seg.tEnter);
+                t[0] = seg.tEnter;
+                rig.sf.SampleBatch(t.data(), n, batch.data());
+                for (int k = 0; k < n; ++k) {
+                    const double single = rig.sf(t[k]);
+                    ASSERT_EQ(std::memcmp(&batch[k], &single, sizeof single), 0)
+                        << batch[k] << " " << single << " at " << k << " of " << n;
+                }
+                ++compared;
+            });
+        }
+        EXPECT_GT(compared, 40);
+    }
+}
+
 // The decomposition RationalPole gives: along a line through an affine linear pyramid the
 // field minus residue / (x - pole) is linear in x, and a series of degree n misses it by
 // no more than the Chebyshev tail of 1 / (x - pole) allows (the bound ProjectRational
