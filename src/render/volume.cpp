@@ -201,31 +201,73 @@ void SlopeSeriesMoments(double alpha, double beta, double m[3]) {
     }
 }
 
-/// The start of IntegrateLinearPiece: the clamped inputs, alpha, beta and the
-/// exponential. True when the Taylor regime applies.
+/// 1 / (k + 1)! for k = 0..16: the coefficients of (1 - e^-d) / d = sum_k (-d)^k / (k +
+/// 1)!.
+constexpr double kOpacityCoef[17] = {1.0,
+                                     1.0 / 2,
+                                     1.0 / 6,
+                                     1.0 / 24,
+                                     1.0 / 120,
+                                     1.0 / 720,
+                                     1.0 / 5040,
+                                     1.0 / 40320,
+                                     1.0 / 362880,
+                                     1.0 / 3628800,
+                                     1.0 / 39916800,
+                                     1.0 / 479001600,
+                                     1.0 / 6227020800.0,
+                                     1.0 / 87178291200.0,
+                                     1.0 / 1307674368000.0,
+                                     1.0 / 20922789888000.0,
+                                     1.0 / 355687428096000.0};
+/// Depths below this take OpacityOfSmallDepth; the others exp.
+constexpr double kSmallDepth = 0.5;
+
+/// 1 - e^-d for 0 <= d < kSmallDepth: d times its series' sum to degree 16 in -d (the
+/// next term is below 2e-20 of the sum), by Horner's rule with fused multiply-adds; the
+/// terms alternate and fall by at least 4x, so the sum (>= 0.78) carries about an ulp.
+/// Written once for a double and for vectors of N (OpacityOfSmallDepth<N>): the same
+/// operations, so each lane's value is the scalar one bitwise.
+inline double OpacityOfSmallDepth(double d) {
+    const double x = -d;
+    double p = kOpacityCoef[16];
+    for (int k = 15; k >= 0; --k) p = std::fma(p, x, kOpacityCoef[k]);
+    return d * p;
+}
+
+/// The start of IntegrateLinearPiece: the clamped inputs, alpha, beta and depth.
 struct PieceStart {
-    double alpha, beta;
+    double alpha, beta, depth;
 };
-bool BeginLinearPiece(double tau0, double tau1, double length, LinearPieceIntegrals& q,
-                      PieceStart& start) {
+[[gnu::always_inline]] inline PieceStart LinearPieceStart(double tau0, double tau1,
+                                                          double length) {
     tau0 = std::max(0.0, tau0);
     tau1 = std::max(0.0, tau1);
     length = std::max(0.0, length);
     // D(x) = alpha x + beta x^2; alpha + 2 beta = length tau1 >= 0.
-    const double alpha = length * tau0;
-    const double beta = 0.5 * length * (tau1 - tau0);
-    const double depth = 0.5 * length * (tau0 + tau1);
-    // One exponential: for small depth the opacity by expm1 and T = 1 - opacity (T >=
-    // 0.6, so within 2 ulps), else T by exp and the opacity 1 - T (>= 0.39, likewise).
-    if (depth < 0.5) {
-        q.opacity = -std::expm1(-depth);
+    return {length * tau0, 0.5 * length * (tau1 - tau0), 0.5 * length * (tau0 + tau1)};
+}
+/// The piece's exponential from its start, given its opacity when the depth is small
+/// (OpacityOfSmallDepth, or the same computed in lanes). True when the Taylor regime
+/// applies.
+bool FinishLinearPieceStart(const PieceStart& start, double smallOpacity,
+                            LinearPieceIntegrals& q) {
+    // One exponential: for small depth the opacity and T = 1 - opacity (T >= 0.6, so
+    // within 2 ulps), else T by exp and the opacity 1 - T (>= 0.39, likewise).
+    if (start.depth < kSmallDepth) {
+        q.opacity = smallOpacity;
         q.transmittance = 1 - q.opacity;
     } else {
-        q.transmittance = std::exp(-depth);
+        q.transmittance = std::exp(-start.depth);
         q.opacity = 1 - q.transmittance;
     }
-    start = {alpha, beta};
-    return alpha + std::abs(beta) <= 1;
+    return start.alpha + std::abs(start.beta) <= 1;
+}
+bool BeginLinearPiece(double tau0, double tau1, double length, LinearPieceIntegrals& q,
+                      PieceStart& start) {
+    start = LinearPieceStart(tau0, tau1, length);
+    return FinishLinearPieceStart(
+        start, start.depth < kSmallDepth ? OpacityOfSmallDepth(start.depth) : 0.0, q);
 }
 
 /// The end of IntegrateLinearPiece from the moments m.
@@ -307,6 +349,20 @@ template <int N>
     }
 }
 
+/// OpacityOfSmallDepth of N depths at once, each lane the scalar function's operations.
+template <int N>
+[[gnu::always_inline]] inline void OpacityOfSmallDepthLanes(const double* d,
+                                                            double* out) {
+    using lanes::D;
+    using lanes::Splat;
+    const D<N> dv = lanes::Load<N>(d);
+    const D<N> x = -dv;
+    D<N> p = Splat<N>(kOpacityCoef[16]);
+    for (int k = 15; k >= 0; --k) p = lanes::Fma(p, x, Splat<N>(kOpacityCoef[k]));
+    const D<N> r = dv * p;
+    std::memcpy(out, &r, sizeof r);
+}
+
 void TaylorMoments4(const double alpha[4], const double beta[4], double m[4][3]) {
     TaylorMomentsLanes<4>(alpha, beta, m);
 }
@@ -346,22 +402,42 @@ template <typename Inputs>
         for (int l = 0; l < lanes; ++l) FinishLinearPiece(start[l], m[l], out[lane[l]]);
         lanes = 0;
     };
-    for (int i = 0; i < n; ++i) {
-        LinearPieceIntegrals& q = out[i];
-        q = LinearPieceIntegrals{};
-        PieceStart ps;
-        double tau0, tau1, length;
-        in(i, tau0, tau1, length);
-        if (BeginLinearPiece(tau0, tau1, length, q, ps)) {
-            lane[lanes] = i;
-            start[lanes] = ps;
-            alpha[lanes] = ps.alpha;
-            beta[lanes] = ps.beta;
-            if (++lanes == batch) runLanes();
-        } else {
-            double mm[3];
-            MomentsBeyondTaylor(ps, q, mm);
-            FinishLinearPiece(ps, mm, q);
+    // The pieces in chunks: their starts, then the opacities of those of small depth
+    // in vector lanes (OpacityOfSmallDepth lane by lane), then each piece in order.
+    constexpr int kChunk = 16;
+    for (int i0 = 0; i0 < n; i0 += kChunk) {
+        const int count = std::min(kChunk, n - i0);
+        PieceStart starts[kChunk];
+        alignas(32) double depth[kChunk], opacity[kChunk];
+        for (int k = 0; k < count; ++k) {
+            double tau0, tau1, length;
+            in(i0 + k, tau0, tau1, length);
+            starts[k] = LinearPieceStart(tau0, tau1, length);
+            depth[k] = starts[k].depth < kSmallDepth ? starts[k].depth : 0.0;
+        }
+#if defined(HPRAY_LANES)
+        for (int k = count; k < (count + 3) / 4 * 4; ++k) depth[k] = 0;
+        for (int k = 0; k < count; k += 4)
+            OpacityOfSmallDepthLanes<4>(depth + k, opacity + k);
+#else
+        for (int k = 0; k < count; ++k) opacity[k] = OpacityOfSmallDepth(depth[k]);
+#endif
+        for (int k = 0; k < count; ++k) {
+            const int i = i0 + k;
+            LinearPieceIntegrals& q = out[i];
+            q = LinearPieceIntegrals{};
+            const PieceStart& ps = starts[k];
+            if (FinishLinearPieceStart(ps, opacity[k], q)) {
+                lane[lanes] = i;
+                start[lanes] = ps;
+                alpha[lanes] = ps.alpha;
+                beta[lanes] = ps.beta;
+                if (++lanes == batch) runLanes();
+            } else {
+                double mm[3];
+                MomentsBeyondTaylor(ps, q, mm);
+                FinishLinearPiece(ps, mm, q);
+            }
         }
     }
     if (lanes == 1) {

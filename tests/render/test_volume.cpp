@@ -288,6 +288,39 @@ TEST(VolumeExp, ExpNegativeWithinThreeUlpsOfLongDouble) {
     EXPECT_GT(worst, 0.0);  // the comparison saw the rounding
 }
 
+// A piece's opacity (its series for depths below 0.5, lane by lane where pieces are
+// batched) and transmittance (exp beyond) against long double's, in units in the last
+// place: within 2 of the one computed directly, 3 of the other (1 - it).
+TEST(VolumeClosedForm, OpacityAndTransmittanceWithinUlpsOfLongDouble) {
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> unit(0, 1);
+    auto ulps = [](double x, long double truth) {
+        const double near = static_cast<double>(truth);
+        const double ulp = std::nextafter(near, 2 * near + 1) - near;
+        return double(std::abs(x - truth) / ulp);
+    };
+    double worstSmall = 0, worstLarge = 0;
+    for (int trial = 0; trial < 200000; ++trial) {
+        // Depths over many scales below 0.5, and up to 40 above.
+        const double depth = trial % 2 ? 0.5 * unit(rng) * std::ldexp(1.0, -(trial % 40))
+                                       : 0.5 + 40 * unit(rng);
+        // Constant extinction: the depth is length * tau.
+        const LinearPieceIntegrals q = IntegrateLinearPiece(depth, depth, 1.0);
+        const long double opacity = -std::expm1(-static_cast<long double>(depth));
+        const long double transmittance = std::exp(-static_cast<long double>(depth));
+        if (depth < 0.5) {
+            if (depth > 0) worstSmall = std::max(worstSmall, ulps(q.opacity, opacity));
+            EXPECT_LE(ulps(q.transmittance, transmittance), 3.0) << depth;
+        } else {
+            worstLarge = std::max(worstLarge, ulps(q.transmittance, transmittance));
+            EXPECT_LE(ulps(q.opacity, opacity), 3.0) << depth;
+        }
+    }
+    EXPECT_LE(worstSmall, 2.0);
+    EXPECT_LE(worstLarge, 2.0);
+    EXPECT_GT(worstSmall, 0.0);  // the comparisons saw the rounding
+}
+
 TEST(VolumeClosedForm, AllRegimesAgainstLongDoubleQuadrature) {
     // alpha = tau0 (length 1) and beta = (tau1 - tau0) / 2 across the Taylor,
     // slope-series and erfcx / Dawson regimes and their borders.
