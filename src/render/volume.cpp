@@ -201,37 +201,18 @@ void SlopeSeriesMoments(double alpha, double beta, double m[3]) {
     }
 }
 
-/// 1 / (k + 1)! for k = 0..16: the coefficients of (1 - e^-d) / d = sum_k (-d)^k / (k +
-/// 1)!.
-constexpr double kOpacityCoef[17] = {1.0,
-                                     1.0 / 2,
-                                     1.0 / 6,
-                                     1.0 / 24,
-                                     1.0 / 120,
-                                     1.0 / 720,
-                                     1.0 / 5040,
-                                     1.0 / 40320,
-                                     1.0 / 362880,
-                                     1.0 / 3628800,
-                                     1.0 / 39916800,
-                                     1.0 / 479001600,
-                                     1.0 / 6227020800.0,
-                                     1.0 / 87178291200.0,
-                                     1.0 / 1307674368000.0,
-                                     1.0 / 20922789888000.0,
-                                     1.0 / 355687428096000.0};
 /// Depths below this take OpacityOfSmallDepth; the others exp.
 constexpr double kSmallDepth = 0.5;
 
-/// 1 - e^-d for 0 <= d < kSmallDepth: d times its series' sum to degree 16 in -d (the
-/// next term is below 2e-20 of the sum), by Horner's rule with fused multiply-adds; the
-/// terms alternate and fall by at least 4x, so the sum (>= 0.78) carries about an ulp.
-/// Written once for a double and for vectors of N (OpacityOfSmallDepth<N>): the same
+/// 1 - e^-d for 0 <= d < kSmallDepth: d times the sum of (-d)^k / (k + 1)! to degree 16
+/// (the next term is below 2e-20 of the sum), by Horner's rule with fused multiply-adds;
+/// the terms alternate and fall by at least 4x, so the sum (>= 0.78) carries about an
+/// ulp. Written once for a double and for vectors (OpacityOfSmallDepthLanes): the same
 /// operations, so each lane's value is the scalar one bitwise.
 inline double OpacityOfSmallDepth(double d) {
     const double x = -d;
-    double p = kOpacityCoef[16];
-    for (int k = 15; k >= 0; --k) p = std::fma(p, x, kOpacityCoef[k]);
+    double p = kInverseFactorial[17];
+    for (int k = 15; k >= 0; --k) p = std::fma(p, x, kInverseFactorial[k + 1]);
     return d * p;
 }
 
@@ -357,8 +338,9 @@ template <int N>
     using lanes::Splat;
     const D<N> dv = lanes::Load<N>(d);
     const D<N> x = -dv;
-    D<N> p = Splat<N>(kOpacityCoef[16]);
-    for (int k = 15; k >= 0; --k) p = lanes::Fma(p, x, Splat<N>(kOpacityCoef[k]));
+    D<N> p = Splat<N>(kInverseFactorial[17]);
+    for (int k = 15; k >= 0; --k)
+        p = lanes::Fma(p, x, Splat<N>(kInverseFactorial[k + 1]));
     const D<N> r = dv * p;
     std::memcpy(out, &r, sizeof r);
 }

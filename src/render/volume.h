@@ -341,6 +341,27 @@ struct LinearPieceIntegrals {
     double farWeight = 0;
 };
 
+/// 1 / k! for k = 0..17: the Taylor coefficients of the exponentials of the closed forms
+/// and the quadratures.
+inline constexpr double kInverseFactorial[18] = {1.0,
+                                                 1.0,
+                                                 1.0 / 2,
+                                                 1.0 / 6,
+                                                 1.0 / 24,
+                                                 1.0 / 120,
+                                                 1.0 / 720,
+                                                 1.0 / 5040,
+                                                 1.0 / 40320,
+                                                 1.0 / 362880,
+                                                 1.0 / 3628800,
+                                                 1.0 / 39916800,
+                                                 1.0 / 479001600,
+                                                 1.0 / 6227020800.0,
+                                                 1.0 / 87178291200.0,
+                                                 1.0 / 1307674368000.0,
+                                                 1.0 / 20922789888000.0,
+                                                 1.0 / 355687428096000.0};
+
 /// The closed form of LinearPieceIntegrals, accurate to a few ulps relative in every
 /// regime: a Taylor series for small depth (including length -> 0 and zero extinction),
 /// a series in the extinction slope around the exponential for small slope (d -> 0) and

@@ -216,20 +216,8 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
 void ExpNegative(const double* x, int n, double* out) {
     constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
                      kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
-    constexpr double kCoef[14] = {1.0,
-                                  1.0,
-                                  1.0 / 2,
-                                  1.0 / 6,
-                                  1.0 / 24,
-                                  1.0 / 120,
-                                  1.0 / 720,
-                                  1.0 / 5040,
-                                  1.0 / 40320,
-                                  1.0 / 362880,
-                                  1.0 / 3628800,
-                                  1.0 / 39916800,
-                                  1.0 / 479001600,
-                                  1.0 / 6227020800.0};
+    // 1 / k!, k = 0..13.
+    const double* kCoef = kInverseFactorial;
 #if defined(__AVX2__) && defined(__FMA__)
     auto lanes = [&](const double* in, double* result4) {
         const __m256d xv = _mm256_loadu_pd(in);
