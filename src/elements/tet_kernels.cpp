@@ -4,7 +4,9 @@
 // where they are made.
 #include "elements/tet_kernels.h"
 
+#if defined(__AVX2__)
 #include <immintrin.h>
+#endif
 
 #include "elements/silvester.h"
 #include "mesh/cell.h"
