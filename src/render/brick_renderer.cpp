@@ -305,6 +305,10 @@ class RayIntegrator {
     std::vector<char> fieldUsed_;
     std::vector<double> isoValues_;
     ProjectionStats projectionStats_;
+    /// Per field, the span of the segment the isosurface source projects the field on,
+    /// and whether it has.
+    std::vector<double> projectT0_, projectT1_;
+    std::vector<char> projected_;
     std::vector<double> scratch_;
     std::vector<Event> events_;
     int fieldLoaded_ = -1;  ///< the field field_ was last begun for in this segment
@@ -590,6 +594,35 @@ bool RayIntegrator::SliceSource(const BrickSetup& setup, std::size_t si, const R
     return any;
 }
 
+namespace {
+/// The root of field - C on [t0, t1] where the field is a linear tetrahedron's (linear
+/// along the ray) and the decision is clear of rounding: true with r the root (kind
+/// Simple, its residual on the field there) where the field's end values lie on opposite
+/// sides of C and the root at least 1e-9 of the span from either end, or with r.kind None
+/// where both end values lie on one side, farther from C than 1e-12 of the field's scale
+/// (the projection's error bound is below 3e-14 of it, so FindRoots would find none
+/// either); false otherwise (near an end, or tangent), where FindRoots decides.
+bool LinearRoot(SegmentField& field, double C, double scale, double t0, double t1,
+                RootResult& r) {
+    double a, b;
+    if (!field.LinearTetLine(a, b) || !(t1 > t0)) return false;
+    const double v0 = a + b * t0 - C, v1 = a + b * t1 - C;
+    const double clear = 1e-12 * scale;
+    if ((v0 > clear && v1 > clear) || (v0 < -clear && v1 < -clear)) {
+        r.kind = RootKind::None;
+        return true;
+    }
+    if (!((v0 < 0 && v1 > 0) || (v0 > 0 && v1 < 0))) return false;
+    const double t = (C - a) / b;
+    const double margin = 1e-9 * (t1 - t0);
+    if (!(t > t0 + margin && t < t1 - margin)) return false;
+    r.kind = RootKind::Simple;
+    r.t = t;
+    r.residual = std::abs(field(t) - C);
+    return true;
+}
+}  // namespace
+
 double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const Segment& seg,
                                 const RaySpan& span, RenderCounters& counters) {
     const std::size_t nIso = setup.isos.size();
@@ -597,6 +630,9 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
     fieldLoaded_ = -1;
     const std::size_t nFields = setup.fields.size();
     if (pieces_.size() < nFields) pieces_.resize(nFields);
+    projectT0_.resize(nFields);
+    projectT1_.resize(nFields);
+    projected_.resize(nFields);
     fieldUsed_.assign(nFields, 0);
     for (std::size_t k = 0; k < nIso; ++k)
         if (relevant_[k]) fieldUsed_[setup.isos[k].field] = 1;
@@ -647,6 +683,15 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                     field_.AddCountersTo(counters);
                     continue;
                 }
+                projectT0_[f] = t0;
+                projectT1_[f] = t1;
+                projected_[f] = 0;
+            }
+            // The projection of the field on [projectT0_, projectT1_], once per field and
+            // segment, when a root search needs it.
+            auto project = [&] {
+                if (projected_[f]) return;
+                projected_[f] = 1;
                 ProjectionOptions projection = setup.projection;
                 projection.scaleFloor = setup.fieldScale[f];
                 // Only the isovalues matter: a projection far from all of them may stop
@@ -656,35 +701,43 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 if (field_.ExactAlongLine())
                     projection.exactDegree = std::max(1, field_.LineDegree());
                 projectionStats_ = ProjectionStats{};
-                ProjectSegment(field_, t0, t1, projection, pieces_[f], projectionStats_,
-                               scratch_);
+                ProjectSegment(field_, projectT0_[f], projectT1_[f], projection,
+                               pieces_[f], projectionStats_, scratch_);
                 counters.projections += projectionStats_.pieces;
                 counters.projectionOrderSum += projectionStats_.degreeSum;
                 counters.projectionOrderMax =
                     std::max<double>(counters.projectionOrderMax, projectionStats_.maxDegree);
                 counters.projectionUnconverged += projectionStats_.unconverged;
-            }
+            };
             for (std::size_t k = 0; k < nIso; ++k) {
                 const BrickSetup::Iso& iso = setup.isos[k];
                 if (!relevant_[k] || iso.field != int(f) || (iso.opacity >= 1) != (pass == 0))
                     continue;
                 double previous = lastHit_[k];
+                auto onRoot = [&](const RootResult& r) {
+                    if (r.t > cutoff) return true;
+                    if (!span.Holds(r.t)) return false;
+                    if (r.t - previous <= setup.duplicateDistance) return false;
+                    previous = r.t;
+                    events_.push_back({r.t, int(k), r.residual});
+                    if (iso.opacity >= 1) {
+                        cutoff = std::min(cutoff, r.t);
+                        return true;
+                    }
+                    return false;
+                };
+                // A linear tetrahedron's field is linear along the ray: its one root in
+                // closed form, where the segment's ends are clear of the isovalue.
+                if (RootResult r; LinearRoot(field_, iso.value, setup.fieldScale[f],
+                                             projectT0_[f], projectT1_[f], r)) {
+                    if (r.kind != RootKind::None) onRoot(r);
+                    continue;
+                }
+                project();
                 RootOptions roots = setup.roots;
                 roots.residualTarget = iso.residualTarget;
-                const int failures = FindRoots(
-                    field_, pieces_[f], iso.value, roots, scratch_, [&](const RootResult& r) {
-                        if (r.t > cutoff) return true;
-                        if (!span.Holds(r.t)) return false;
-                        if (r.t - previous <= setup.duplicateDistance) return false;
-                        previous = r.t;
-                        events_.push_back({r.t, int(k), r.residual});
-                        if (iso.opacity >= 1) {
-                            cutoff = std::min(cutoff, r.t);
-                            return true;
-                        }
-                        return false;
-                    });
-                counters.rootFailures += failures;
+                counters.rootFailures +=
+                    FindRoots(field_, pieces_[f], iso.value, roots, scratch_, onRoot);
             }
             field_.AddCountersTo(counters);
         }

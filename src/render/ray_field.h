@@ -179,6 +179,13 @@ public:
     /// Value and world gradient at t; returns false where the Jacobian is singular.
     bool ValueGradient(double t, double& value, double gradient[3]);
 
+    /// A linear tetrahedron begun by its closed form (BeginLinearTet): the field is a + b
+    /// t along the ray, the same function operator() evaluates.
+    bool LinearTetLine(double& a, double& b) const {
+        a = lineA_;
+        b = lineB_;
+        return linearTet_;
+    }
     /// True when the field restricted to the ray is a polynomial of known degree
     /// (affine cell, polynomial space): then `LineDegree()` samples make it exact.
     bool ExactAlongLine() const { return exact_; }
