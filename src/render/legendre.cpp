@@ -161,6 +161,8 @@ constexpr const LegendreRecurrence& kRec = kLegendreRecurrence;
 
 }  // namespace
 
+double LegendreSeries::operator()(double t) const { return At(t); }
+
 void LegendreSeries::EvalMany(const double* t, int count, double* out) const {
     const int n = Degree();
     HPRAY_CHECK(n < kRecurrenceSize);

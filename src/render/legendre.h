@@ -69,6 +69,10 @@ struct LegendreSeries {
     /// p(t) by the three-term recurrence (any t; accurate on [a, b]). The evaluations use
     /// explicit fused multiply-adds.
     double operator()(double t) const;
+    /// The same, inline (the same operations: bitwise the same value), for the few hot
+    /// loops that evaluate short series many times; elsewhere operator() keeps callers
+    /// small.
+    double At(double t) const;
     /// p(t[s]) into out[s] for s < count, the points evaluated together (vectorised).
     void EvalMany(const double* t, int count, double* out) const;
     /// p(t) and dp/dt.
@@ -86,8 +90,7 @@ struct LegendreSeries {
     void Antiderivative(LegendreSeries& out) const;
 };
 
-// Inline: evaluated once or twice per piece of every volume segment.
-inline double LegendreSeries::operator()(double t) const {
+inline double LegendreSeries::At(double t) const {
     const double x = (2 * t - a - b) / (b - a);
     const int n = Degree();
     HPRAY_CHECK(n < LegendreRecurrence::kSize);

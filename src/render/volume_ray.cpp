@@ -305,9 +305,9 @@ void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, d
     // On each interval between them p is monotone: a level strictly between the end
     // values is crossed once.
     const double noise = 2 * kEps * (std::abs(p.c[0]) + tail);
-    double vlo = p(points[0]);
+    double vlo = p.At(points[0]);
     for (std::size_t k = 0; k + 1 < points.size(); ++k) {
-        const double lo = points[k], hi = points[k + 1], vhi = p(hi);
+        const double lo = points[k], hi = points[k + 1], vhi = p.At(hi);
         const double vmin = std::min(vlo, vhi), vmax = std::max(vlo, vhi);
         for (int m = 0; m < count; ++m) {
             const double level = levels[m];
@@ -1290,8 +1290,8 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
-    const double c0 = uc(mid);
-    const double em = fe == 0 ? c0 : ue(mid);
+    const double c0 = uc.At(mid);
+    const double em = fe == 0 ? c0 : ue.At(mid);
     double ac[3], bc[3], ae, be;
     s.colorTf.AffineOn3(s.colorTf.IntervalOf(c0), ac, bc);
     s.extinctionTf.AffineOn1(s.extinctionTf.IntervalOf(em), ae, be);
@@ -1312,8 +1312,8 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         }
         tauM = ae + be * ue.c[0];
         // Pieces follow each other along the segment: the last end is this start.
-        v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_(p0);
-        v1 = depthLine_(p1);
+        v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_.At(p0);
+        v1 = depthLine_.At(p1);
         depthLineT_ = p1;
         depthLineV_ = v1;
     }
