@@ -4,12 +4,12 @@
 #if defined(__AVX2__)
 #include <immintrin.h>
 #endif
-
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "elements/bounds.h"
@@ -17,6 +17,7 @@
 #include "elements/tensor_eval.h"
 #include "mesh/cell.h"
 #include "util/check.h"
+#include "util/lanes.h"
 
 namespace hpray {
 
@@ -892,38 +893,30 @@ void SegmentField::SampleBatch(const double* t, int n, double* out) {
         // FieldValue computes it (the same functions), without the per-point dispatch.
         const bool pyramid = cell_->basis->kind == BasisKind::PyramidLagrange;
         int first = 0;
-#if defined(__AVX2__)
+#if defined(HPRAY_LANES)
         if (pyramid) {
-            // Four points at a time in the lanes of vectors: LinearPyramidValue's
-            // products, sums and quotients in the same order (nothing fused), so bitwise
-            // its values.
+            // Four points at a time in the lanes of vectors (lanes.h):
+            // LinearPyramidValue's products, sums and quotients in the same order,
+            // nothing fused, so bitwise its values (the apex plane's lanes take a = b =
+            // 0.5, as it does).
+            using lanes::D;
             const double* v = scalar_.nodal;
-            const __m256d one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5),
-                          zero = _mm256_setzero_pd();
+            const D<4> half = lanes::Splat<4>(0.5);
             for (; first + 4 <= n; first += 4) {
-                const __m256d ts = _mm256_loadu_pd(t + first);
-                __m256d ref[3];
-                for (int i = 0; i < 3; ++i)
-                    ref[i] = _mm256_add_pd(_mm256_set1_pd(ref0_[i]),
-                                           _mm256_mul_pd(ts, _mm256_set1_pd(dref_[i])));
-                const __m256d u = _mm256_sub_pd(one, ref[2]);
-                const __m256d atApex = _mm256_cmp_pd(u, zero, _CMP_EQ_OQ);
-                const __m256d hz = _mm256_mul_pd(half, ref[2]);
-                const __m256d a = _mm256_blendv_pd(
-                    _mm256_div_pd(_mm256_sub_pd(ref[0], hz), u), half, atApex);
-                const __m256d b = _mm256_blendv_pd(
-                    _mm256_div_pd(_mm256_sub_pd(ref[1], hz), u), half, atApex);
-                const __m256d la0 = _mm256_sub_pd(one, a), lb0 = _mm256_sub_pd(one, b);
-                auto term = [&](double c, __m256d x) {
-                    return _mm256_mul_pd(_mm256_set1_pd(c), x);
-                };
-                __m256d f = _mm256_add_pd(
-                    zero, term(v[0], _mm256_mul_pd(_mm256_mul_pd(la0, lb0), u)));
-                f = _mm256_add_pd(f, term(v[1], _mm256_mul_pd(_mm256_mul_pd(a, lb0), u)));
-                f = _mm256_add_pd(f, term(v[2], _mm256_mul_pd(_mm256_mul_pd(la0, b), u)));
-                f = _mm256_add_pd(f, term(v[3], _mm256_mul_pd(_mm256_mul_pd(a, b), u)));
-                f = _mm256_add_pd(f, term(v[4], ref[2]));
-                _mm256_storeu_pd(out + first, f);
+                const D<4> ts = lanes::Load<4>(t + first);
+                const D<4> r0 = ref0_[0] + ts * dref_[0], r1 = ref0_[1] + ts * dref_[1],
+                           r2 = ref0_[2] + ts * dref_[2];
+                const D<4> u = 1.0 - r2;
+                const lanes::I<4> apex = u == 0.0;
+                const D<4> a = lanes::Select(apex, half, (r0 - 0.5 * r2) / u);
+                const D<4> b = lanes::Select(apex, half, (r1 - 0.5 * r2) / u);
+                const D<4> la0 = 1.0 - a, lb0 = 1.0 - b;
+                D<4> f = 0.0 + v[0] * ((la0 * lb0) * u);
+                f += v[1] * ((a * lb0) * u);
+                f += v[2] * ((la0 * b) * u);
+                f += v[3] * ((a * b) * u);
+                f += v[4] * r2;
+                std::memcpy(out + first, &f, sizeof f);
             }
         }
 #endif
