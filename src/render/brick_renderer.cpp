@@ -6,16 +6,17 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <cstdio>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
+#include <optional>
 
 #include "render/ray_field.h"
 #include "util/check.h"
-#include "util/log.h"
 #include "util/error.h"
+#include "util/log.h"
 
 namespace hpray {
 
@@ -415,13 +416,23 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
     std::vector<SegmentSeed>* seeds =
         !setup.isos.empty() && setup.traverser->HasSeeds() ? &seeds_ : nullptr;
     if (!seeds) seeds_.clear();
-    if (setup.isoCells)
-        setup.traverser->Trace(ray, tMin, tMax, segments_, *setup.isoCells, seeds);
-    else
-        setup.traverser->Trace(ray, tMin, tMax, segments_, facePoints ? &ends_ : nullptr,
-                               seeds);
-    counters.segments += static_cast<double>(segments_.size());
-    SegmentCostRecorder recorder(
+    // Without a volume or slices, a segment needs nothing of those after it: the walk
+    // hands each over as it is found, and stops where the ray ends (at an opaque
+    // surface), without walking the cells behind. (The volume's error budget needs the
+    // whole path's length first, slices the next segment; measuring costs goes on past
+    // the end.)
+    const bool incremental = !hasVolume && setup.slices.empty() && !costSamples;
+    auto trace = [&](SegmentSink* sink) {
+        if (setup.isoCells)
+            setup.traverser->Trace(ray, tMin, tMax, segments_, *setup.isoCells, seeds,
+                                   sink);
+        else
+            setup.traverser->Trace(ray, tMin, tMax, segments_,
+                                   facePoints ? &ends_ : nullptr, seeds, sink);
+    };
+    if (!incremental) trace(nullptr);
+    std::optional<SegmentCostRecorder> recorder;
+    recorder.emplace(
         costSamples, ray, segments_,
         costSamples ? std::chrono::duration<double>(CostClock::now() - traceStart).count()
                     : 0.0);
@@ -449,7 +460,9 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         }
     }
     std::size_t runFrom = 0;  // where the next run may start
-    for (std::size_t si = 0; si < segments_.size(); ++si) {
+    // Segment si (and, through a run of linear tetrahedra, those after it: si is left at
+    // the last one taken). True when the ray ends there.
+    auto step = [&](std::size_t& si) {
         bool lean = linearTets;
         if (runs && si >= runFrom) {
             const VolumeRayMarcher::LinearTetRunResult r = marcher_.LinearTetRun(
@@ -457,7 +470,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                 setup.sliverLength, tMin, tMax, anyIso ? &isoCells : nullptr, composite);
             counters.segmentsCulled += r.culled;
             volumeSeen |= r.seen;
-            if (r.stop || r.next == segments_.size()) break;
+            if (r.stop || r.next == segments_.size()) return true;
             si = r.next;
             runFrom = si + 1;
             lean = false;
@@ -467,8 +480,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         // it leaves in the next cell is skipped.
         if (IsSpanEndSliver(seg, setup.sliverLength, tMin, tMax)) {
             counters.segmentsCulled += 1;
-            recorder.Done(si);
-            continue;
+            recorder->Done(si);
+            return false;
         }
         // Isosurfaces whose field's guaranteed range in the cell holds their value.
         const bool isoHere = anyIso && IsoSourceRelevant(setup, seg);
@@ -477,16 +490,15 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
             const R r = marcher_.LinearTet(*setup.geometry, seg, ends_[si], composite);
             if (r == R::kEmpty) {
                 counters.segmentsCulled += 1;
-                continue;
+                return false;
             }
             if (r != R::kOther) {
                 volumeSeen = true;
-                if (r == R::kStop) break;
-                continue;
+                return r == R::kStop;
             }
         }
         // What LinearTet queued comes first.
-        if (linearTets && marcher_.FlushLinearTets(composite)) break;
+        if (linearTets && marcher_.FlushLinearTets(composite)) return true;
         // The sources of this segment: isosurfaces whose field's guaranteed range holds
         // their value, slice planes it owns, and the volume unless its transfer functions
         // map the cell's guaranteed ranges to nothing (empty-space skipping).
@@ -498,8 +510,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                                   facePoints ? &ends_[si] : nullptr);
         if (!isoHere && !sliceHere && !volumeHere) {
             counters.segmentsCulled += 1;
-            recorder.Done(si);
-            continue;
+            recorder->Done(si);
+            return false;
         }
         volumeSeen |= volumeHere;
         fieldLoaded_ = -1;
@@ -512,10 +524,26 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                                                 (a.iso == b.iso && a.slice < b.slice)));
         });
         const bool done = Composite(setup, ray, seg, cutoff, volumeHere, composite, out,
-                                    counters, recorder);
-        recorder.Done(si);
-        if (done) break;
+                                    counters, *recorder);
+        recorder->Done(si);
+        return done;
+    };
+    if (incremental) {
+        // (No runs of linear tetrahedra here: they are a volume's.)
+        struct Sink final : SegmentSink {
+            decltype(step)& take;
+            explicit Sink(decltype(step)& t) : take(t) {}
+            bool Take(std::size_t index) override {
+                std::size_t si = index;
+                return !take(si);
+            }
+        } sink(step);
+        trace(&sink);
+    } else {
+        for (std::size_t si = 0; si < segments_.size(); ++si)
+            if (step(si)) break;
     }
+    counters.segments += static_cast<double>(segments_.size());
     if (linearTets) marcher_.FlushLinearTets(composite);
     if (volumeSeen) {
         marcher_.FinishRay(composite);

@@ -162,6 +162,12 @@ struct Scratch {
     std::vector<std::int64_t> candidates;  // cells whose box holds a located point
     std::vector<trace::FaceCrossing> face;
     std::vector<std::pair<Segment, SegmentSeed>> seeded;  // sorting filtered segments
+    // A filtered Trace with a sink: its cells in order, their segments not yet passed on,
+    // and one cell's segments.
+    std::vector<std::pair<double, std::int64_t>> order;
+    std::vector<std::pair<Segment, SegmentSeed>> waiting;
+    std::vector<Segment> cellSegments;
+    std::vector<SegmentSeed> cellSeeds;
     std::uint64_t ray = 0;  // id of the current Trace call on this thread
     // A planar face that PlanarCellExit found the ray line of Trace call singleRay to
     // cross exactly once, at singleT (see PlanarCellExit).
@@ -2289,7 +2295,10 @@ bool BrickTraverser::HasSeeds() const {
 
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                            std::vector<Segment>& out, std::vector<SegmentEnds>* ends,
-                           std::vector<SegmentSeed>* seeds) const {
+                           std::vector<SegmentSeed>* seeds, SegmentSink* sink) const {
+    // (The face points' last entry is pending while the walk goes on: a sink would see
+    // segments without theirs.)
+    HPRAY_CHECK(!(sink && ends));
     out.clear();
     if (ends) ends->clear();
     if (seeds) seeds->clear();
@@ -2382,6 +2391,7 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                     ends->emplace_back();
                     ends->back().enter.SetFrom((ends->end() - 2)->exit);
                 }
+                if (sink && !sink->Take(out.size() - 1)) return true;
             } else if (pending) {
                 pending->enter.SetFrom(pending->exit);
             }
@@ -2461,6 +2471,7 @@ class CellFilter {
     std::vector<std::uint8_t> keep;   // per cell of the brick
     std::vector<std::int64_t> cells;  // primitive index -> cell (a cell's consecutive)
     std::vector<float> boxes;         // 6 per primitive
+    std::vector<float> cellBoxes;     // 6 per primitive: its cell's own box
     RTCScene scene = nullptr;
 };
 
@@ -2492,13 +2503,21 @@ std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
         }
     }
     filter->boxes.resize(6 * filter->cells.size());
+    filter->cellBoxes.resize(6 * filter->cells.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filter->cells.size(), 1024),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                           std::vector<std::array<std::int32_t, 3>> tris;
                           for (std::size_t i = range.begin(); i < range.end(); ++i) {
                               float* out = &filter->boxes[6 * i];
+                              float* cell = &filter->cellBoxes[6 * i];
+                              // A cell's primitives are consecutive: its own box once.
+                              if (i > range.begin() &&
+                                  filter->cells[i] == filter->cells[i - 1])
+                                  std::copy_n(cell - 6, 6, cell);
+                              else
+                                  im.CellBox(filter->cells[i], tris, cell);
                               if (own[i] < 0)
-                                  im.CellBox(filter->cells[i], tris, out);
+                                  std::copy_n(cell, 6, out);
                               else
                                   std::copy_n(&(*boxes)[6 * own[i]], 6, out);
                           }
@@ -2507,9 +2526,26 @@ std::shared_ptr<const CellFilter> BrickTraverser::MakeCellFilter(
     return filter;
 }
 
+namespace {
+/// Where the ray enters a box (6 floats: lo, hi) in [t0, inf), or t0 where the box holds
+/// the ray's point there. The box is padded and rounded outwards (FloatBox), far more
+/// than this arithmetic's rounding: no point of the box's contents lies on the ray
+/// before it.
+double BoxEntry(const Ray& ray, const float* box, double t0) {
+    double t = t0;
+    for (int d = 0; d < 3; ++d) {
+        if (ray.dir[d] == 0) continue;
+        const double a = (double(box[d]) - ray.origin[d]) / ray.dir[d];
+        const double b = (double(box[3 + d]) - ray.origin[d]) / ray.dir[d];
+        t = std::max(t, std::min(a, b));
+    }
+    return t;
+}
+}  // namespace
+
 void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
                            std::vector<Segment>& out, const CellFilter& filter,
-                           std::vector<SegmentSeed>* seeds) const {
+                           std::vector<SegmentSeed>* seeds, SegmentSink* sink) const {
     out.clear();
     if (seeds) seeds->clear();
     const Impl& im = *impl_;
@@ -2522,6 +2558,75 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     ++tScratch.ray;  // a new ray for the curved-face cache
     std::vector<std::int64_t>& cand = tScratch.candidates;
     im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
+    auto before = [](const Segment& a, const Segment& b) {
+        if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
+        return a.cell < b.cell;
+    };
+    if (sink) {
+        // The cells in the order of their own boxes' entries: a cell's segments start no
+        // earlier than its box, so a segment found can be passed on once every cell still
+        // to visit enters its box after the segment's start. That gives the sorted order
+        // of the search below (segments of different cells overlap in no more than an
+        // end).
+        std::vector<std::pair<double, std::int64_t>>& order = tScratch.order;
+        order.clear();
+        std::int64_t lastCell = -1;
+        for (std::int64_t i : cand) {
+            const std::int64_t c = filter.cells[i];
+            if (c == lastCell) continue;
+            lastCell = c;
+            order.push_back({BoxEntry(ray, &filter.cellBoxes[6 * i], tLo), c});
+        }
+        std::sort(order.begin(), order.end());
+        auto& waiting = tScratch.waiting;  // sorted by `before`
+        waiting.clear();
+        std::vector<Segment>& found = tScratch.cellSegments;
+        std::vector<SegmentSeed>& foundSeeds = tScratch.cellSeeds;
+        auto pass = [&](const Segment& g, const SegmentSeed* sd) {
+            out.push_back(g);
+            if (seeds) seeds->push_back(*sd);
+            return sink->Take(out.size() - 1);
+        };
+        for (std::size_t k = 0; k < order.size(); ++k) {
+            found.clear();
+            foundSeeds.clear();
+            if (!im.CellSegments(order[k].second, frame, tLo, tHi, found,
+                                 seeds ? &foundSeeds : nullptr)) {
+                // As below: the walk decides the ray. Its segments of the kept cells
+                // after those already passed on follow them.
+                im.unpairedRays.fetch_add(1, std::memory_order_relaxed);
+                std::vector<Segment> all;
+                std::vector<SegmentSeed> allSeeds;
+                Trace(ray, tMin, tMax, all, nullptr, seeds ? &allSeeds : nullptr);
+                const bool any = !out.empty();
+                const Segment last = any ? out.back() : Segment{};
+                for (std::size_t j = 0; j < all.size(); ++j)
+                    if (filter.keep[all[j].cell] && (!any || before(last, all[j])) &&
+                        !pass(all[j], seeds ? &allSeeds[j] : nullptr))
+                        return;
+                return;
+            }
+            for (std::size_t j = 0; j < found.size(); ++j) {
+                std::pair<Segment, SegmentSeed> w{found[j],
+                                                  seeds ? foundSeeds[j] : SegmentSeed{}};
+                auto at = std::upper_bound(waiting.begin(), waiting.end(), w,
+                                           [&](const auto& a, const auto& b) {
+                                               return before(a.first, b.first);
+                                           });
+                waiting.insert(at, w);
+            }
+            const double next = k + 1 < order.size()
+                                    ? order[k + 1].first
+                                    : std::numeric_limits<double>::infinity();
+            std::size_t passed = 0;
+            while (passed < waiting.size() && waiting[passed].first.tEnter < next) {
+                if (!pass(waiting[passed].first, &waiting[passed].second)) return;
+                ++passed;
+            }
+            waiting.erase(waiting.begin(), waiting.begin() + std::ptrdiff_t(passed));
+        }
+        return;
+    }
     bool closed = true;
     std::int64_t last = -1;
     for (std::int64_t i : cand) {
@@ -2547,10 +2652,6 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
             }
         return;
     }
-    auto before = [](const Segment& a, const Segment& b) {
-        if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
-        return a.cell < b.cell;
-    };
     if (!seeds) {
         std::sort(out.begin(), out.end(), before);
         return;

@@ -182,6 +182,17 @@ struct SegmentSeed {
 /// only needs the cells whose range holds its value.
 class CellFilter;
 
+/// Receives a ray's segments one at a time, in t order, while a Trace finds them (see
+/// BrickTraverser::Trace): a renderer whose ray ends at an opaque surface stops the walk
+/// there instead of walking the cells behind it.
+class SegmentSink {
+  public:
+    virtual ~SegmentSink() = default;
+    /// Segment `index` of the Trace's `out` (and of its `seeds`) is found, and so are all
+    /// before it; they will not change. False stops the Trace: `out` then ends there.
+    virtual bool Take(std::size_t index) = 0;
+};
+
 class BrickTraverser {
   public:
     /// Builds the traverser. Throws InputError for meshes it cannot traverse (a face
@@ -200,16 +211,22 @@ class BrickTraverser {
     /// leaves its cell (`ends`, cleared first, one entry per segment). They are Valid
     /// where a planar tetrahedron was walked from face to face and the brick's points
     /// are its mesh's (FacePoints() is true); the segments are those of the plain Trace.
+    /// With a `sink` (and no `ends`), each segment goes to it as soon as it is found, and
+    /// the walk stops where the sink says so.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
-               std::vector<SegmentEnds>* ends,
-               std::vector<SegmentSeed>* seeds = nullptr) const;
+               std::vector<SegmentEnds>* ends, std::vector<SegmentSeed>* seeds = nullptr,
+               SegmentSink* sink = nullptr) const;
     /// The segments of the cells of `filter` only (built by this traverser), in [tMin,
     /// tMax] sorted by t: for each cell whose box (or one of whose given boxes) the ray
     /// meets, its faces' crossings
     /// paired as the walk pairs them, so a segment is the walk's segment of that cell
-    /// (without walking the cells in between). Thread-safe.
+    /// (without walking the cells in between). Thread-safe. With a `sink`, the cells are
+    /// visited in the order of their boxes along the ray, and each segment goes to the
+    /// sink as soon as no cell still to visit can hold an earlier one (the same segments
+    /// in the same order); the search stops where the sink says so.
     void Trace(const Ray& ray, double tMin, double tMax, std::vector<Segment>& out,
-               const CellFilter& filter, std::vector<SegmentSeed>* seeds = nullptr) const;
+               const CellFilter& filter, std::vector<SegmentSeed>* seeds = nullptr,
+               SegmentSink* sink = nullptr) const;
     /// Whether the brick has faces whose crossings give SegmentSeeds (bilinear or
     /// curved faces): the `seeds` of the Trace calls above (one per segment) are then
     /// worth asking for.

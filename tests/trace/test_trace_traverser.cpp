@@ -1380,5 +1380,122 @@ TEST(BrickTraverser, SegmentSeedsMapToTheRaysCrossingPoints) {
     }
 }
 
+// A sink (SegmentSink) takes each segment as soon as it is found: in order, final when
+// taken (what it saw then is what the Trace ends with), the same segments and seeds as
+// without a sink, and stopping where the sink says so; for the walk and for cell filters
+// (of whole cells and of sub-boxes, whose cells' segments start before their boxes), on
+// straight, curved and mixed meshes.
+TEST(BrickTraverser, SinksTakeEachSegmentAsFoundAndStopTheTrace) {
+    for (const auto& [name, mesh] : StartMeshesAndTets()) {
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        const Box box = Brick::WholeMesh(mesh).box;
+        const std::int64_t cells = mesh.CellCount();
+        std::vector<std::uint8_t> every(cells, 1), some(cells, 0);
+        for (std::int64_t c = 0; c < cells; ++c) some[c] = c % 3 != 1;
+        // Sub-boxes: the upper half (in z) of each kept cell's box, and its lower
+        // quarter.
+        std::vector<std::int64_t> boxStart(cells + 1, 0);
+        std::vector<float> boxes;
+        for (std::int64_t c = 0; c < cells; ++c) {
+            boxStart[c + 1] = boxStart[c];
+            if (!some[c] || c % 2 == 0) continue;
+            double lo[3] = {INFINITY, INFINITY, INFINITY},
+                   hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+            const std::int64_t* nodes = mesh.CellNodes(c);
+            for (int k = 0; k < mesh.CellNodeCount(c); ++k)
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], mesh.points[3 * nodes[k] + d]);
+                    hi[d] = std::max(hi[d], mesh.points[3 * nodes[k] + d]);
+                }
+            const double mid = 0.5 * (lo[2] + hi[2]),
+                         quarter = 0.75 * lo[2] + 0.25 * hi[2];
+            const double parts[2][2] = {{mid, hi[2]}, {lo[2], quarter}};
+            for (const auto& z : parts) {
+                for (double v : {lo[0], lo[1], z[0], hi[0], hi[1], z[1]})
+                    boxes.push_back(float(v));
+                boxStart[c + 1] += 1;
+            }
+        }
+        const auto all = tr.MakeCellFilter(every);
+        const auto kept = tr.MakeCellFilter(some);
+        const auto parts = tr.MakeCellFilter(some, &boxStart, &boxes);
+        std::mt19937_64 rng(53);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> want, got;
+        std::vector<SegmentSeed> wantSeeds, gotSeeds;
+        std::size_t taken = 0, stopped = 0;
+        for (int i = 0; i < 1500; ++i) {
+            const Ray ray = RayIntoBox(box, i, rng);
+            const double tMin = i % 2 ? 0.0 : 1.0 + uni(rng);
+            for (int way = 0; way < 4; ++way) {
+                const CellFilter* filter = way == 1   ? all.get()
+                                           : way == 2 ? kept.get()
+                                           : way == 3 ? parts.get()
+                                                      : nullptr;
+                auto trace = [&](std::vector<Segment>& out, std::vector<SegmentSeed>& sd,
+                                 SegmentSink* sink) {
+                    if (filter)
+                        tr.Trace(ray, tMin, INFINITY, out, *filter, &sd, sink);
+                    else
+                        tr.Trace(ray, tMin, INFINITY, out, nullptr, &sd, sink);
+                };
+                trace(want, wantSeeds, nullptr);
+                ASSERT_EQ(wantSeeds.size(), want.size());
+                // Stop at the last segment (or never, for a ray with none), else halfway.
+                const std::size_t stop = i % 3 == 0 ? want.size() : want.size() / 2;
+                struct Recorder final : SegmentSink {
+                    std::vector<Segment>* out = nullptr;
+                    std::vector<SegmentSeed>* seeds = nullptr;
+                    std::vector<Segment> seen;
+                    std::vector<SegmentSeed> seenSeeds;
+                    std::size_t stopAt = 0;
+                    bool inOrder = true;
+                    bool Take(std::size_t index) override {
+                        inOrder = inOrder && index == seen.size() &&
+                                  out->size() == index + 1 && seeds->size() == index + 1;
+                        seen.push_back((*out)[index]);
+                        seenSeeds.push_back((*seeds)[index]);
+                        return index != stopAt;
+                    }
+                } sink;
+                sink.out = &got;
+                sink.seeds = &gotSeeds;
+                sink.stopAt = stop;
+                trace(got, gotSeeds, &sink);
+                const std::string what =
+                    name + " way " + std::to_string(way) + " ray " + std::to_string(i);
+                EXPECT_TRUE(sink.inOrder) << what;
+                const std::size_t expect = std::min(want.size(), stop + 1);
+                ASSERT_EQ(got.size(), expect) << what;
+                ASSERT_EQ(sink.seen.size(), expect) << what;
+                for (std::size_t k = 0; k < expect; ++k) {
+                    for (const Segment* g : {&got[k], &sink.seen[k]}) {
+                        EXPECT_EQ(g->cell, want[k].cell) << what;
+                        EXPECT_EQ(g->tEnter, want[k].tEnter) << what;
+                        EXPECT_EQ(g->tExit, want[k].tExit) << what;
+                    }
+                    for (const SegmentSeed* sd : {&gotSeeds[k], &sink.seenSeeds[k]}) {
+                        EXPECT_EQ(sd->tEnter, wantSeeds[k].tEnter) << what;
+                        EXPECT_EQ(sd->tExit, wantSeeds[k].tExit) << what;
+                        for (int d = 0; d < 3; ++d) {
+                            EXPECT_EQ(std::isnan(sd->enter[d]),
+                                      std::isnan(wantSeeds[k].enter[d]))
+                                << what;
+                            if (!std::isnan(sd->enter[d]))
+                                EXPECT_EQ(sd->enter[d], wantSeeds[k].enter[d]) << what;
+                            if (!std::isnan(sd->exit[d]))
+                                EXPECT_EQ(sd->exit[d], wantSeeds[k].exit[d]) << what;
+                        }
+                    }
+                }
+                taken += expect;
+                stopped += expect < want.size();
+            }
+        }
+        EXPECT_GT(taken, 3000u) << name;
+        EXPECT_GT(stopped, 1000u) << name;
+    }
+}
+
 }  // namespace
 }  // namespace hpray
