@@ -95,6 +95,10 @@ BrickSetup MakeBrickSetup(const Mesh& mesh, const MeshGeometry& geometry,
         iso.residualTarget = acc.targetResidual * (r[1] - r[0]);
     }
     s.projection.tolerance = acc.projectionTolerance;
+    // A residual target loosens the projection (SceneParser: its tolerance follows the
+    // target): a piece whose tail is three orders of magnitude below that needs no
+    // checks.
+    if (acc.targetResidual > 0) s.projection.checkMargin = 1e-3;
     if (acc.projectionOrder > 0) {
         s.projection.startDegree = acc.projectionOrder;
         s.projection.maxDegree = acc.projectionOrder;

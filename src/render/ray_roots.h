@@ -53,6 +53,12 @@ struct ProjectionOptions {
     /// The scale the tolerance is relative to is at least this (e.g. the magnitude of the
     /// field over the whole mesh), so pieces where the field is nearly zero converge.
     double scaleFloor = 0;
+    /// Where > 0: a piece of degree 6 or more whose tail (its last two coefficients) is
+    /// below checkMargin times the tolerance is taken without the checks that measure its
+    /// miss (four more samples; its error is then twice the tail). For loose tolerances
+    /// (accuracy.target_residual), where a tail that many orders of magnitude below what
+    /// is asked leaves the checks nothing to decide.
+    double checkMargin = 0;
 };
 
 /// A projected piece of the segment: p approximates f on [p.a, p.b] with |f - p| <= eps.
@@ -230,6 +236,12 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
             // ProjectionOptions::exclude), right after a raise to a degree of 6 or more:
             // `previous` then holds the level before's interpolant.
             LegendreSeries previous;
+            // Whether piece.p (degree n) is taken without the checks (see checkMargin).
+            auto trusted = [&](int n, double scale) {
+                return options.checkMargin > 0 && n >= 6 &&
+                       std::abs(piece.p.c[n]) + std::abs(piece.p.c[n - 1]) <=
+                           options.checkMargin * options.tolerance * scale;
+            };
             auto stopsFar = [&](int n, double scale) {
                 double change = 0;
                 for (int k = 0; k <= n; ++k)
@@ -246,7 +258,8 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                 if (!far(eps)) return false;
                 // Measured as a converged piece is (the checks are not kept where they
                 // disagree: they are few, and this is rare).
-                const double measured = std::max(eps, 2 * measure(n));
+                const double measured =
+                    trusted(n, scale) ? eps : std::max(eps, 2 * measure(n));
                 if (!far(measured)) return false;
                 piece.eps = measured;
                 piece.converged = true;
@@ -265,7 +278,7 @@ void ProjectSegment(F&& f, double a, double b, const ProjectionOptions& options,
                     64 * (n + 1) * std::numeric_limits<double>::epsilon() * scale;
                 const bool converged = tail <= options.tolerance * scale;
                 if (converged || n >= options.maxDegree) {
-                    const double discrepancy = measure(n);
+                    const double discrepancy = trusted(n, scale) ? 0.0 : measure(n);
                     piece.eps = 2 * std::max({tail, discrepancy, floor});
                     piece.converged = converged;
                     break;

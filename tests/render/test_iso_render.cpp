@@ -712,7 +712,11 @@ camera: {position: [2.2, 1.6, 2.6],
         const Image image = render(target, stats);
         EXPECT_EQ(stats.counters.rootFailures, 0);
         EXPECT_LE(stats.counters.isoResidualMax, target * range) << target;
-        EXPECT_LT(stats.counters.fieldEvaluations, exactStats.counters.fieldEvaluations)
+        // A quarter of the samples or more saved: the projection's checks (four of
+        // about twelve samples a segment) are skipped where its tail is 1e-3 of the
+        // loosened tolerance.
+        EXPECT_LT(stats.counters.fieldEvaluations,
+                  0.75 * exactStats.counters.fieldEvaluations)
             << target;
         for (int y = 0; y < 48; ++y)
             for (int x = 0; x < 48; ++x) {
