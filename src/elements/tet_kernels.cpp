@@ -11,6 +11,7 @@
 #include "elements/silvester.h"
 #include "mesh/cell.h"
 #include "util/check.h"
+#include "util/lanes.h"
 
 namespace hpray {
 namespace {
@@ -139,9 +140,60 @@ void Map(const double* xyz, const double ref[3], double world[3], double* jacobi
 #endif
 }
 
+#if defined(HPRAY_LANES)
+// Value<P> at four points, point q in lane q: Silvester's factors and the sums over the
+// nodes with the same products and sums in the same order (the build does not fuse them),
+// so each lane is bitwise Value<P> at its point.
+template <int P>
+lanes::D<4> Value4(const double* u, lanes::D<4> r0, lanes::D<4> r1, lanes::D<4> r2) {
+    using V = lanes::D<4>;
+    // Silvester<double>(P, x, s, ds)'s s.
+    auto silvester = [](V x, V* s) {
+        const V px = double(P) * x;
+        s[0] = lanes::Splat<4>(1.0);
+        for (int m = 0; m < P; ++m) {
+            const double inv = 1.0 / double(m + 1);
+            const V f = (px - double(m)) * inv;
+            s[m + 1] = s[m] * f;
+        }
+    };
+    V a[P + 1], b[P + 1], c[P + 1], e[P + 1];
+    silvester(r0, a);
+    silvester(r1, b);
+    silvester(r2, c);
+    silvester(1.0 - r0 - r1 - r2, e);
+    V f = lanes::Splat<4>(0.0);
+    int m = 0;
+    for (int k = 0; k <= P; ++k)
+        for (int j = 0; j + k <= P; ++j)
+            for (int i = 0; i + j + k <= P; ++i, ++m) {
+                const int l = P - i - j - k;
+                const V bc = b[j] * c[k];
+                const V value = a[i] * bc * e[l];
+                f += u[m] * value;
+            }
+    return f;
+}
+#endif
+
+template <int P>
+void Values(const double* u, const double* refs, int n, double* out) {
+    int first = 0;
+#if defined(HPRAY_LANES)
+    for (; first + 4 <= n; first += 4) {
+        const double* q = refs + 3 * first;
+        const lanes::D<4> r0 = {q[0], q[3], q[6], q[9]}, r1 = {q[1], q[4], q[7], q[10]},
+                          r2 = {q[2], q[5], q[8], q[11]};
+        const lanes::D<4> f = Value4<P>(u, r0, r1, r2);
+        std::memcpy(out + first, &f, sizeof f);
+    }
+#endif
+    for (int s = first; s < n; ++s) out[s] = Value<P>(u, refs + 3 * s);
+}
+
 template <int P>
 constexpr TetKernels Make() {
-    return {P, &Value<P>, &ValueGradient<P>, &Map<P>};
+    return {P, &Value<P>, &ValueGradient<P>, &Map<P>, &Values<P>};
 }
 
 constexpr TetKernels kTable[kMaxOrder + 1] = {

@@ -21,6 +21,9 @@ struct TetKernels {
     /// map with interleaved node coordinates xyz.
     void (*map)(const double* xyz, const double ref[3], double world[3],
                 double* jacobian) = nullptr;
+    /// value at n points (refs: x, y, z of each in turn) into out[0..n): bitwise `value`
+    /// at each, four at a time in the lanes of vectors where the build has them.
+    void (*values)(const double* u, const double* refs, int n, double* out) = nullptr;
 };
 
 /// The kernels of order p, 1 <= p <= kMaxOrder (mesh/cell.h).

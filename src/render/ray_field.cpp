@@ -15,6 +15,7 @@
 #include "elements/bounds.h"
 #include "elements/field.h"
 #include "elements/tensor_eval.h"
+#include "elements/tet_kernels.h"
 #include "mesh/cell.h"
 #include "util/check.h"
 #include "util/lanes.h"
@@ -926,6 +927,17 @@ void SegmentField::SampleBatch(const double* t, int n, double* out) {
             out[s] = pyramid ? LinearPyramidValue(scalar_.nodal, ref)
                              : LinearWedgeValue(scalar_.nodal, ref);
         }
+        evaluations_ += n;
+        return;
+    }
+    if (!linearTet_ && scalar_.nodal && cell_->basis->kind == BasisKind::TetLagrange &&
+        cell_->basis->order >= 2) {
+        // Curved (or high-order) tetrahedra: the points inverted in order, as one by one,
+        // then their values together (bitwise FieldValue's, four at a time).
+        batchScratch_.resize(3 * std::size_t(n));
+        double* refs = batchScratch_.data();
+        for (int s = 0; s < n; ++s) RefAt(t[s], refs + 3 * s);
+        TetKernelsFor(cell_->basis->order).values(scalar_.nodal, refs, n, out);
         evaluations_ += n;
         return;
     }

@@ -1084,6 +1084,7 @@ struct FieldAlongRays {
     const BrickTraverser traverser;
     std::vector<Segment> segs;
     SegmentField sf;
+    CellScratch scratch;
 };
 
 // A point field "u" on mesh, its values uniform in [-amplitude, amplitude] from rng.
@@ -1302,6 +1303,45 @@ TEST(VolumePyramids, SampleBatchIsTheFieldPointByPointBitwise) {
         }
         EXPECT_GT(compared, 40);
     }
+}
+
+// Curved quadratic tetrahedra (ball-p2, its points bent further): SampleBatch inverts the
+// points in order and takes their values together (four at a time in vector lanes) —
+// bitwise the field point by point from the same start (the inversions' warm starts
+// depend on the points before).
+TEST(VolumeCurvedTets, SampleBatchIsTheFieldPointByPointBitwise) {
+    Mesh mesh = MakeBuiltin("builtin:ball-p2?n=3");
+    for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+        double* x = &mesh.points[3 * i];
+        x[2] += 0.2 * (x[0] * x[0] - x[1] * x[1]);
+    }
+    mesh.pointFields.clear();
+    std::mt19937_64 rng(19);
+    std::uniform_real_distribution<double> uni(-0.5, 0.5), along(0, 1);
+    std::normal_distribution<double> gauss;
+    AddUniformPointField(mesh, rng, 1);
+    FieldAlongRays rig(mesh);
+    int compared = 0, curved = 0;
+    for (int trial = 0; trial < 60; ++trial) {
+        const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
+                                            {gauss(rng), gauss(rng), gauss(rng)});
+        rig.ForEachSegment(ray, 0, [&](const Segment& seg) {
+            const int n = 1 + (compared % 11);
+            std::vector<double> t(n), batch(n);
+            for (double& x : t) x = seg.tEnter + along(rng) * (seg.tExit - seg.tEnter);
+            rig.sf.SampleBatch(t.data(), n, batch.data());
+            rig.sf.Begin(mesh, rig.geometry, rig.sel, seg.cell, ray, InversionOptions{});
+            for (int k = 0; k < n; ++k) {
+                const double single = rig.sf(t[k]);
+                ASSERT_EQ(std::memcmp(&batch[k], &single, sizeof single), 0)
+                    << batch[k] << " " << single << " at " << k << " of " << n;
+            }
+            curved += !rig.geometry.Cell(seg.cell, rig.scratch).affine;
+            ++compared;
+        });
+    }
+    EXPECT_GT(compared, 100);
+    EXPECT_GT(curved, 50);
 }
 
 // The decomposition RationalPole gives: along a line through an affine linear pyramid the
