@@ -707,10 +707,34 @@ void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3],
     for (int c = 0; c < 3; ++c) value[c] = f[c], dU[c] = fu[c], dV[c] = fv[c];
 }
 
+// Binomial coefficients, exact in double (kMaxOrder is far below where they stop being).
+constexpr double Binomial(int n, int k) {
+    double r = 1;
+    for (int i = 1; i <= k; ++i) r = r * (n - k + i) / i;
+    return r;
+}
+
+// The triangle net's weights as EvalTriangleNet multiplies them: value[i][j] =
+// C(P, i) C(P - i, j) and slope[i][j] = P C(P - 1, i) C(P - 1 - i, j), products of
+// integers, so exactly the values the products give at run time.
+template <int P>
+struct TriangleWeights {
+    double value[P + 1][P + 1] = {};
+    double slope[P + 1][P + 1] = {};
+    constexpr TriangleWeights() {
+        for (int j = 0; j <= P; ++j)
+            for (int i = 0; i + j <= P; ++i)
+                value[i][j] = Binomial(P, i) * Binomial(P - i, j);
+        for (int j = 0; j < P; ++j)
+            for (int i = 0; i + j < P; ++i)
+                slope[i][j] = P * Binomial(P - 1, i) * Binomial(P - 1 - i, j);
+    }
+};
+
 template <int P>
 void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3],
                      double dU[3], double dV[3]) {
-    const Tables& tab = GetTables();
+    static constexpr TriangleWeights<P> kWeights{};
     const double w = 1 - u - v;
     double pu[P + 1], pv[P + 1], pw[P + 1];
     pu[0] = pv[0] = pw[0] = 1;
@@ -720,10 +744,11 @@ void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3
         pw[k] = pw[k - 1] * w;
     }
     double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
+#pragma GCC unroll 66
     for (int j = 0; j <= P; ++j)
+#pragma GCC unroll 11
         for (int i = 0; i <= P - j; ++i) {
-            const double b =
-                tab.binom[P][i] * tab.binom[P - i][j] * pu[i] * pv[j] * pw[P - i - j];
+            const double b = kWeights.value[i][j] * pu[i] * pv[j] * pw[P - i - j];
             const ShearedPoint& q = net[TriIndex(P, i, j)];
             f[0] += b * q.x;
             f[1] += b * q.y;
@@ -731,10 +756,11 @@ void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3
         }
     // Derivatives: P * sum over the degree P - 1 basis of the forward differences.
     constexpr int Q = P - 1;
+#pragma GCC unroll 55
     for (int j = 0; j <= Q; ++j)
+#pragma GCC unroll 10
         for (int i = 0; i <= Q - j; ++i) {
-            const double b =
-                P * tab.binom[Q][i] * tab.binom[Q - i][j] * pu[i] * pv[j] * pw[Q - i - j];
+            const double b = kWeights.slope[i][j] * pu[i] * pv[j] * pw[Q - i - j];
             const ShearedPoint& o = net[TriIndex(P, i, j)];
             const ShearedPoint& a = net[TriIndex(P, i + 1, j)];
             const ShearedPoint& c = net[TriIndex(P, i, j + 1)];
