@@ -679,12 +679,49 @@ inline void BernsteinWithDerivative(double s, double* b, double* db) {
     }
 }
 
+#if defined(__AVX2__)
+// The net evaluations below with a point's x, y, z in the first three lanes of a vector
+// (the fourth zero; a masked load reads nothing past the point): each lane takes the
+// scalar code's products and sums in the same order, nothing fused, so the results are
+// bitwise the same.
+static_assert(sizeof(ShearedPoint) == 3 * sizeof(double));
+inline __m256d NetXyz(const ShearedPoint& q) {
+    return _mm256_maskload_pd(&q.x, _mm256_setr_epi64x(-1, -1, -1, 0));
+}
+inline void StoreXyz(__m256d v, double out[3]) {
+    alignas(32) double lanes[4];
+    _mm256_store_pd(lanes, v);
+    for (int c = 0; c < 3; ++c) out[c] = lanes[c];
+}
+#endif
+
 template <int P>
 void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3],
                  double dU[3], double dV[3]) {
     double bu[P + 1], du[P + 1], bv[P + 1], dv[P + 1];
     BernsteinWithDerivative<P>(u, bu, du);
     BernsteinWithDerivative<P>(v, bv, dv);
+#if defined(__AVX2__)
+    {
+        __m256d f = _mm256_setzero_pd(), fu = f, fv = f;
+        for (int j = 0; j <= P; ++j) {
+            __m256d r = _mm256_setzero_pd(), dr = r;
+            for (int i = 0; i <= P; ++i) {
+                const __m256d q = NetXyz(net[j * (P + 1) + i]);
+                r = _mm256_add_pd(r, _mm256_mul_pd(_mm256_set1_pd(bu[i]), q));
+                dr = _mm256_add_pd(dr, _mm256_mul_pd(_mm256_set1_pd(du[i]), q));
+            }
+            const __m256d b = _mm256_set1_pd(bv[j]);
+            f = _mm256_add_pd(f, _mm256_mul_pd(b, r));
+            fu = _mm256_add_pd(fu, _mm256_mul_pd(b, dr));
+            fv = _mm256_add_pd(fv, _mm256_mul_pd(_mm256_set1_pd(dv[j]), r));
+        }
+        StoreXyz(f, value);
+        StoreXyz(fu, dU);
+        StoreXyz(fv, dV);
+        return;
+    }
+#endif
     double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
     for (int j = 0; j <= P; ++j) {
         // Row j contracted along u, then weighted along v.
@@ -743,6 +780,36 @@ void EvalTriangleNet(const ShearedPoint* net, double u, double v, double value[3
         pv[k] = pv[k - 1] * v;
         pw[k] = pw[k - 1] * w;
     }
+#if defined(__AVX2__)
+    {
+        __m256d f = _mm256_setzero_pd(), fu = f, fv = f;
+#pragma GCC unroll 66
+        for (int j = 0; j <= P; ++j)
+#pragma GCC unroll 11
+            for (int i = 0; i <= P - j; ++i) {
+                const double b = kWeights.value[i][j] * pu[i] * pv[j] * pw[P - i - j];
+                f = _mm256_add_pd(
+                    f, _mm256_mul_pd(_mm256_set1_pd(b), NetXyz(net[TriIndex(P, i, j)])));
+            }
+        constexpr int Q = P - 1;
+#pragma GCC unroll 55
+        for (int j = 0; j <= Q; ++j)
+#pragma GCC unroll 10
+            for (int i = 0; i <= Q - j; ++i) {
+                const __m256d b =
+                    _mm256_set1_pd(kWeights.slope[i][j] * pu[i] * pv[j] * pw[Q - i - j]);
+                const __m256d o = NetXyz(net[TriIndex(P, i, j)]);
+                const __m256d a = NetXyz(net[TriIndex(P, i + 1, j)]);
+                const __m256d c = NetXyz(net[TriIndex(P, i, j + 1)]);
+                fu = _mm256_add_pd(fu, _mm256_mul_pd(b, _mm256_sub_pd(a, o)));
+                fv = _mm256_add_pd(fv, _mm256_mul_pd(b, _mm256_sub_pd(c, o)));
+            }
+        StoreXyz(f, value);
+        StoreXyz(fu, dU);
+        StoreXyz(fv, dV);
+        return;
+    }
+#endif
     double f[3] = {0, 0, 0}, fu[3] = {0, 0, 0}, fv[3] = {0, 0, 0};
 #pragma GCC unroll 66
     for (int j = 0; j <= P; ++j)
