@@ -191,9 +191,192 @@ void Values(const double* u, const double* refs, int n, double* out) {
     for (int s = first; s < n; ++s) out[s] = Value<P>(u, refs + 3 * s);
 }
 
+// Order 3, the curved tetrahedra of most meshes: the map sums its 20 nodes in four
+// interleaved partial sums, node m into sum m mod 4, each in order of m, and adds them as
+// (s0 + s1) + (s2 + s3). The basis values and derivatives of a node are those of
+// ForEachNode (the same operations); only the order of the sums differs from the other
+// orders', so that four nodes go through the lanes of a vector together. MapBlocked is
+// the scalar form (builds without vectors, and the tests' reference).
+constexpr int kTet3Nodes = 20;
+struct TetLattice {
+    int i[kTet3Nodes] = {}, j[kTet3Nodes] = {}, k[kTet3Nodes] = {}, l[kTet3Nodes] = {};
+    constexpr TetLattice() {
+        int m = 0;
+        for (int kk = 0; kk <= 3; ++kk)
+            for (int jj = 0; jj + kk <= 3; ++jj)
+                for (int ii = 0; ii + jj + kk <= 3; ++ii, ++m) {
+                    i[m] = ii;
+                    j[m] = jj;
+                    k[m] = kk;
+                    l[m] = 3 - ii - jj - kk;
+                }
+    }
+};
+constexpr TetLattice kTet3{};
+
+void MapBlocked3(const double* xyz, const double ref[3], double world[3],
+                 double* jacobian) {
+    double x[4][3] = {}, j0[4][3] = {}, j1[4][3] = {}, j2[4][3] = {};
+    ForEachNode<3, true>(ref, [&](int m, double v, const double* d) {
+        const int t = m % 4;
+        for (int c = 0; c < 3; ++c) {
+            const double p = xyz[3 * m + c];
+            x[t][c] = x[t][c] + v * p;
+            if (jacobian) {
+                j0[t][c] = j0[t][c] + d[0] * p;
+                j1[t][c] = j1[t][c] + d[1] * p;
+                j2[t][c] = j2[t][c] + d[2] * p;
+            }
+        }
+    });
+    auto total = [](const double(*s)[3], int c) {
+        return (s[0][c] + s[1][c]) + (s[2][c] + s[3][c]);
+    };
+    for (int c = 0; c < 3; ++c) {
+        world[c] = total(x, c);
+        if (jacobian) {
+            jacobian[3 * c] = total(j0, c);
+            jacobian[3 * c + 1] = total(j1, c);
+            jacobian[3 * c + 2] = total(j2, c);
+        }
+    }
+}
+
+#if defined(HPRAY_LANES)
+using V4 = lanes::D<4>;
+
+// Lanes t of the vectors of nodes 4q .. 4q + 3 (q a constant): their lattice indices
+// looked up in a 4-vector of per-index factors.
+template <int Q>
+inline V4 PickI(V4 a) {
+    return __builtin_shufflevector(a, a, kTet3.i[4 * Q], kTet3.i[4 * Q + 1],
+                                   kTet3.i[4 * Q + 2], kTet3.i[4 * Q + 3]);
+}
+template <int Q>
+inline V4 PickJ(V4 a) {
+    return __builtin_shufflevector(a, a, kTet3.j[4 * Q], kTet3.j[4 * Q + 1],
+                                   kTet3.j[4 * Q + 2], kTet3.j[4 * Q + 3]);
+}
+template <int Q>
+inline V4 PickK(V4 a) {
+    return __builtin_shufflevector(a, a, kTet3.k[4 * Q], kTet3.k[4 * Q + 1],
+                                   kTet3.k[4 * Q + 2], kTet3.k[4 * Q + 3]);
+}
+template <int Q>
+inline V4 PickL(V4 a) {
+    return __builtin_shufflevector(a, a, kTet3.l[4 * Q], kTet3.l[4 * Q + 1],
+                                   kTet3.l[4 * Q + 2], kTet3.l[4 * Q + 3]);
+}
+
+struct Tet3Factors {
+    V4 a, b, c, e, da, db, dc, de;  // Silvester's factors by index 0..3, and slopes
+};
+
+struct Tet3Sums {
+    V4 x[3], j0[3], j1[3], j2[3];  // per coordinate; lane t: partial sum t
+};
+
+// Nodes 4Q .. 4Q + 3 added to the partial sums.
+template <int Q, bool Jacobian>
+inline void AddNodes3(const double* xyz, const Tet3Factors& f, Tet3Sums& s) {
+    const V4 a = PickI<Q>(f.a), da = PickI<Q>(f.da);
+    const V4 b = PickJ<Q>(f.b), db = PickJ<Q>(f.db);
+    const V4 c = PickK<Q>(f.c), dc = PickK<Q>(f.dc);
+    const V4 e = PickL<Q>(f.e), de = PickL<Q>(f.de);
+    // ForEachNode's expressions, lane by lane.
+    const V4 bc = b * c;
+    const V4 value = a * bc * e;
+    // The nodes' coordinates, x, y and z of the four in turn (12 doubles from 12 Q).
+    const V4 l0 = lanes::Load<4>(xyz + 12 * Q), l1 = lanes::Load<4>(xyz + 12 * Q + 4),
+             l2 = lanes::Load<4>(xyz + 12 * Q + 8);
+    const V4 ux = __builtin_shufflevector(l0, l1, 0, 3, 6, 0);
+    const V4 uy = __builtin_shufflevector(l0, l1, 1, 4, 7, 0);
+    const V4 uz = __builtin_shufflevector(l0, l1, 2, 5, 0, 0);
+    const V4 p[3] = {__builtin_shufflevector(ux, l2, 0, 1, 2, 5),
+                     __builtin_shufflevector(uy, l2, 0, 1, 2, 6),
+                     __builtin_shufflevector(uz, l2, 0, 1, 4, 7)};
+    for (int k = 0; k < 3; ++k) s.x[k] = s.x[k] + value * p[k];
+    if constexpr (Jacobian) {
+        const V4 ae = a * e;
+        const V4 ade = a * de;
+        const V4 d0 = (da * e - ade) * bc;
+        const V4 d1 = (db * c * ae) - ade * bc;
+        const V4 d2 = (b * dc * ae) - ade * bc;
+        for (int k = 0; k < 3; ++k) {
+            s.j0[k] = s.j0[k] + d0 * p[k];
+            s.j1[k] = s.j1[k] + d1 * p[k];
+            s.j2[k] = s.j2[k] + d2 * p[k];
+        }
+    }
+}
+
+inline double Total(V4 s) { return (s[0] + s[1]) + (s[2] + s[3]); }
+
+template <bool Jacobian>
+void MapLanes3(const double* xyz, const double ref[3], double world[3],
+               double* jacobian) {
+    // Silvester<double>(3, x, s, ds) for x = ref[0], ref[1], ref[2] and 1 - their sum, in
+    // the four lanes; then transposed to factor vectors by index.
+    const V4 X = {ref[0], ref[1], ref[2], 1.0 - ref[0] - ref[1] - ref[2]};
+    V4 S[4], dS[4];
+    const V4 px = 3.0 * X;
+    S[0] = lanes::Splat<4>(1.0);
+    dS[0] = lanes::Splat<4>(0.0);
+    for (int m = 0; m < 3; ++m) {
+        const double inv = 1.0 / double(m + 1);
+        const V4 f = (px - double(m)) * inv;
+        dS[m + 1] = dS[m] * f + S[m] * (3 * inv);
+        S[m + 1] = S[m] * f;
+    }
+    auto transpose = [](const V4* r, V4& a, V4& b, V4& c, V4& e) {
+        const V4 t0 = __builtin_shufflevector(r[0], r[1], 0, 4, 2, 6);
+        const V4 t1 = __builtin_shufflevector(r[0], r[1], 1, 5, 3, 7);
+        const V4 t2 = __builtin_shufflevector(r[2], r[3], 0, 4, 2, 6);
+        const V4 t3 = __builtin_shufflevector(r[2], r[3], 1, 5, 3, 7);
+        a = __builtin_shufflevector(t0, t2, 0, 1, 4, 5);
+        c = __builtin_shufflevector(t0, t2, 2, 3, 6, 7);
+        b = __builtin_shufflevector(t1, t3, 0, 1, 4, 5);
+        e = __builtin_shufflevector(t1, t3, 2, 3, 6, 7);
+    };
+    Tet3Factors f;
+    transpose(S, f.a, f.b, f.c, f.e);
+    transpose(dS, f.da, f.db, f.dc, f.de);
+    Tet3Sums s;
+    for (int k = 0; k < 3; ++k)
+        s.x[k] = s.j0[k] = s.j1[k] = s.j2[k] = lanes::Splat<4>(0.0);
+    AddNodes3<0, Jacobian>(xyz, f, s);
+    AddNodes3<1, Jacobian>(xyz, f, s);
+    AddNodes3<2, Jacobian>(xyz, f, s);
+    AddNodes3<3, Jacobian>(xyz, f, s);
+    AddNodes3<4, Jacobian>(xyz, f, s);
+    for (int c = 0; c < 3; ++c) {
+        world[c] = Total(s.x[c]);
+        if constexpr (Jacobian) {
+            jacobian[3 * c] = Total(s.j0[c]);
+            jacobian[3 * c + 1] = Total(s.j1[c]);
+            jacobian[3 * c + 2] = Total(s.j2[c]);
+        }
+    }
+}
+#endif
+
+void Map3(const double* xyz, const double ref[3], double world[3], double* jacobian) {
+#if defined(HPRAY_LANES)
+    if (jacobian)
+        MapLanes3<true>(xyz, ref, world, jacobian);
+    else
+        MapLanes3<false>(xyz, ref, world, nullptr);
+#else
+    MapBlocked3(xyz, ref, world, jacobian);
+#endif
+}
+
 template <int P>
 constexpr TetKernels Make() {
-    return {P, &Value<P>, &ValueGradient<P>, &Map<P>, &Values<P>};
+    if constexpr (P == 3)
+        return {P, &Value<P>, &ValueGradient<P>, &Map3, &Values<P>};
+    else
+        return {P, &Value<P>, &ValueGradient<P>, &Map<P>, &Values<P>};
 }
 
 constexpr TetKernels kTable[kMaxOrder + 1] = {
@@ -201,6 +384,11 @@ constexpr TetKernels kTable[kMaxOrder + 1] = {
     Make<6>(),    Make<7>(), Make<8>(), Make<9>(), Make<10>()};
 
 }  // namespace
+
+void TetMapBlocked3(const double* xyz, const double ref[3], double world[3],
+                    double* jacobian) {
+    MapBlocked3(xyz, ref, world, jacobian);
+}
 
 const TetKernels& TetKernelsFor(int p) {
     HPRAY_CHECK(p >= 1 && p <= kMaxOrder);

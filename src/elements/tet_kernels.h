@@ -29,4 +29,10 @@ struct TetKernels {
 /// The kernels of order p, 1 <= p <= kMaxOrder (mesh/cell.h).
 const TetKernels& TetKernelsFor(int p);
 
+/// The order-3 map as its kernel sums the nodes (four interleaved partial sums, node m in
+/// sum m mod 4, added as (s0 + s1) + (s2 + s3); the other orders sum in node order), in
+/// scalar arithmetic: the kernel's result bitwise, in any build.
+void TetMapBlocked3(const double* xyz, const double ref[3], double world[3],
+                    double* jacobian);
+
 }  // namespace hpray
