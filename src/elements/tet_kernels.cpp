@@ -4,6 +4,8 @@
 // where they are made.
 #include "elements/tet_kernels.h"
 
+#include <cmath>
+
 #if defined(__AVX2__)
 #include <immintrin.h>
 #endif
@@ -192,11 +194,12 @@ void Values(const double* u, const double* refs, int n, double* out) {
 }
 
 // Order 3, the curved tetrahedra of most meshes: the map sums its 20 nodes in four
-// interleaved partial sums, node m into sum m mod 4, each in order of m, and adds them as
-// (s0 + s1) + (s2 + s3). The basis values and derivatives of a node are those of
-// ForEachNode (the same operations); only the order of the sums differs from the other
-// orders', so that four nodes go through the lanes of a vector together. MapBlocked is
-// the scalar form (builds without vectors, and the tests' reference).
+// interleaved partial sums, node m into sum m mod 4, each in order of m by fused
+// multiply-adds, and adds them as (s0 + s1) + (s2 + s3). The basis values and derivatives
+// of a node are those of ForEachNode (the same operations); only the order of the sums
+// differs from the other orders', so that four nodes go through the lanes of a vector
+// together. MapBlocked is the scalar form (builds without vectors, and the tests'
+// reference).
 constexpr int kTet3Nodes = 20;
 struct TetLattice {
     int i[kTet3Nodes] = {}, j[kTet3Nodes] = {}, k[kTet3Nodes] = {}, l[kTet3Nodes] = {};
@@ -221,11 +224,11 @@ void MapBlocked3(const double* xyz, const double ref[3], double world[3],
         const int t = m % 4;
         for (int c = 0; c < 3; ++c) {
             const double p = xyz[3 * m + c];
-            x[t][c] = x[t][c] + v * p;
+            x[t][c] = std::fma(v, p, x[t][c]);
             if (jacobian) {
-                j0[t][c] = j0[t][c] + d[0] * p;
-                j1[t][c] = j1[t][c] + d[1] * p;
-                j2[t][c] = j2[t][c] + d[2] * p;
+                j0[t][c] = std::fma(d[0], p, j0[t][c]);
+                j1[t][c] = std::fma(d[1], p, j1[t][c]);
+                j2[t][c] = std::fma(d[2], p, j2[t][c]);
             }
         }
     });
@@ -295,7 +298,7 @@ inline void AddNodes3(const double* xyz, const Tet3Factors& f, Tet3Sums& s) {
     const V4 p[3] = {__builtin_shufflevector(ux, l2, 0, 1, 2, 5),
                      __builtin_shufflevector(uy, l2, 0, 1, 2, 6),
                      __builtin_shufflevector(uz, l2, 0, 1, 4, 7)};
-    for (int k = 0; k < 3; ++k) s.x[k] = s.x[k] + value * p[k];
+    for (int k = 0; k < 3; ++k) s.x[k] = lanes::Fma(value, p[k], s.x[k]);
     if constexpr (Jacobian) {
         const V4 ae = a * e;
         const V4 ade = a * de;
@@ -303,9 +306,9 @@ inline void AddNodes3(const double* xyz, const Tet3Factors& f, Tet3Sums& s) {
         const V4 d1 = (db * c * ae) - ade * bc;
         const V4 d2 = (b * dc * ae) - ade * bc;
         for (int k = 0; k < 3; ++k) {
-            s.j0[k] = s.j0[k] + d0 * p[k];
-            s.j1[k] = s.j1[k] + d1 * p[k];
-            s.j2[k] = s.j2[k] + d2 * p[k];
+            s.j0[k] = lanes::Fma(d0, p[k], s.j0[k]);
+            s.j1[k] = lanes::Fma(d1, p[k], s.j1[k]);
+            s.j2[k] = lanes::Fma(d2, p[k], s.j2[k]);
         }
     }
 }

@@ -91,14 +91,15 @@ TEST(TetKernels, EverySpecialisedKernelEqualsTheGenericPathBitwise) {
                         jac[3 * i + j] += xyz[3 * m + i] * d[3 * m + j];
             if (p == 3) {
                 // Order 3 sums the map's nodes in four interleaved partial sums (node m
-                // in sum m mod 4, added as (s0 + s1) + (s2 + s3)).
+                // in sum m mod 4, by fused multiply-adds, added as (s0 + s1) + (s2 +
+                // s3)).
                 double sw[4][3] = {}, sj[4][9] = {};
                 for (int m = 0; m < n; ++m)
                     for (int i = 0; i < 3; ++i) {
-                        sw[m % 4][i] = sw[m % 4][i] + v[m] * xyz[3 * m + i];
+                        sw[m % 4][i] = std::fma(v[m], xyz[3 * m + i], sw[m % 4][i]);
                         for (int j = 0; j < 3; ++j)
-                            sj[m % 4][3 * i + j] =
-                                sj[m % 4][3 * i + j] + d[3 * m + j] * xyz[3 * m + i];
+                            sj[m % 4][3 * i + j] = std::fma(d[3 * m + j], xyz[3 * m + i],
+                                                            sj[m % 4][3 * i + j]);
                     }
                 for (int i = 0; i < 3; ++i)
                     w[i] = (sw[0][i] + sw[1][i]) + (sw[2][i] + sw[3][i]);
