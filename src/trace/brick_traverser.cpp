@@ -165,6 +165,8 @@ struct Scratch {
     // A filtered Trace with a sink: its cells in order, their segments not yet passed on,
     // and one cell's segments.
     std::vector<std::pair<double, std::int64_t>> order;
+    std::vector<std::uint64_t>
+        cellMark;  // per cell: the number of the Trace that took it
     std::vector<std::pair<Segment, SegmentSeed>> waiting;
     std::vector<Segment> cellSegments;
     std::vector<SegmentSeed> cellSeeds;
@@ -508,9 +510,10 @@ struct BrickTraverser::Impl {
     // intersector appends the primitive's index to the query's candidates.
     RTCScene MakeBoxScene(const float* boxes, std::size_t count) const;
     // Cells (primitive indices of a box scene) whose boxes a float ray over [t0, t1]
-    // about the ray passes through, sorted, into `out`.
+    // about the ray passes through, sorted and each once (or, !sorted, in the order
+    // found, possibly repeated), into `out`.
     void BoxCandidates(RTCScene boxScene, const Ray& ray, double t0, double t1,
-                       std::vector<std::int64_t>& out) const;
+                       std::vector<std::int64_t>& out, bool sorted = true) const;
     // The crossings of cell c's faces along the ray line, sorted and paired entering ->
     // leaving as FindExit pairs them: visit(in, out) for each pair in order, true to stop
     // (then ForEachPair returns true).
@@ -1888,14 +1891,15 @@ RTCScene BrickTraverser::Impl::MakeBoxScene(const float* boxes, std::size_t coun
 }
 
 void BrickTraverser::Impl::BoxCandidates(RTCScene boxScene, const Ray& ray, double t0,
-                                         double t1,
-                                         std::vector<std::int64_t>& out) const {
+                                         double t1, std::vector<std::int64_t>& out,
+                                         bool sorted) const {
     out.clear();
     CellQueryContext ctx;
     rtcInitIntersectContext(&ctx.base);
     ctx.candidates = &out;
     RTCRayHit rh = QueryRay(ray, t0, t1, queryPad);
     rtcIntersect1(boxScene, &ctx.base, &rh);
+    if (!sorted) return;
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
 }
@@ -2557,7 +2561,9 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
     const RayFrame frame(ray);
     ++tScratch.ray;  // a new ray for the curved-face cache
     std::vector<std::int64_t>& cand = tScratch.candidates;
-    im.BoxCandidates(filter.scene, ray, tLo, tHi, cand);
+    // (Sorted for the search below, which visits a cell's primitives together; the
+    // incremental search orders the cells itself.)
+    im.BoxCandidates(filter.scene, ray, tLo, tHi, cand, !sink);
     auto before = [](const Segment& a, const Segment& b) {
         if (a.tEnter != b.tEnter) return a.tEnter < b.tEnter;
         return a.cell < b.cell;
@@ -2568,13 +2574,16 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
         // to visit enters its box after the segment's start. That gives the sorted order
         // of the search below (segments of different cells overlap in no more than an
         // end).
+        // Each cell once: marked with this Trace's number as it is taken.
         std::vector<std::pair<double, std::int64_t>>& order = tScratch.order;
+        std::vector<std::uint64_t>& mark = tScratch.cellMark;
+        if (mark.size() < filter.keep.size()) mark.assign(filter.keep.size(), 0);
+        const std::uint64_t stamp = tScratch.ray;
         order.clear();
-        std::int64_t lastCell = -1;
         for (std::int64_t i : cand) {
             const std::int64_t c = filter.cells[i];
-            if (c == lastCell) continue;
-            lastCell = c;
+            if (mark[c] == stamp) continue;
+            mark[c] = stamp;
             order.push_back({BoxEntry(ray, &filter.cellBoxes[6 * i], tLo), c});
         }
         std::sort(order.begin(), order.end());
