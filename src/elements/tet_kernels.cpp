@@ -248,27 +248,21 @@ void MapBlocked3(const double* xyz, const double ref[3], double world[3],
 #if defined(HPRAY_LANES)
 using V4 = lanes::D<4>;
 
-// Lanes t of the vectors of nodes 4q .. 4q + 3 (q a constant): their lattice indices
-// looked up in a 4-vector of per-index factors.
-template <int Q>
-inline V4 PickI(V4 a) {
-    return __builtin_shufflevector(a, a, kTet3.i[4 * Q], kTet3.i[4 * Q + 1],
-                                   kTet3.i[4 * Q + 2], kTet3.i[4 * Q + 3]);
+// Node m's lattice index i, j, k or l (Which = 0, 1, 2, 3).
+constexpr int LatticeIndex(int which, int m) {
+    return which == 0   ? kTet3.i[m]
+           : which == 1 ? kTet3.j[m]
+           : which == 2 ? kTet3.k[m]
+                        : kTet3.l[m];
 }
-template <int Q>
-inline V4 PickJ(V4 a) {
-    return __builtin_shufflevector(a, a, kTet3.j[4 * Q], kTet3.j[4 * Q + 1],
-                                   kTet3.j[4 * Q + 2], kTet3.j[4 * Q + 3]);
-}
-template <int Q>
-inline V4 PickK(V4 a) {
-    return __builtin_shufflevector(a, a, kTet3.k[4 * Q], kTet3.k[4 * Q + 1],
-                                   kTet3.k[4 * Q + 2], kTet3.k[4 * Q + 3]);
-}
-template <int Q>
-inline V4 PickL(V4 a) {
-    return __builtin_shufflevector(a, a, kTet3.l[4 * Q], kTet3.l[4 * Q + 1],
-                                   kTet3.l[4 * Q + 2], kTet3.l[4 * Q + 3]);
+
+// Lane t for node 4Q + t (Q a constant): its lattice index Which looked up in a 4-vector
+// of per-index factors.
+template <int Q, int Which>
+inline V4 Pick(V4 a) {
+    return __builtin_shufflevector(
+        a, a, LatticeIndex(Which, 4 * Q), LatticeIndex(Which, 4 * Q + 1),
+        LatticeIndex(Which, 4 * Q + 2), LatticeIndex(Which, 4 * Q + 3));
 }
 
 struct Tet3Factors {
@@ -282,10 +276,10 @@ struct Tet3Sums {
 // Nodes 4Q .. 4Q + 3 added to the partial sums.
 template <int Q, bool Jacobian>
 inline void AddNodes3(const double* xyz, const Tet3Factors& f, Tet3Sums& s) {
-    const V4 a = PickI<Q>(f.a), da = PickI<Q>(f.da);
-    const V4 b = PickJ<Q>(f.b), db = PickJ<Q>(f.db);
-    const V4 c = PickK<Q>(f.c), dc = PickK<Q>(f.dc);
-    const V4 e = PickL<Q>(f.e), de = PickL<Q>(f.de);
+    const V4 a = Pick<Q, 0>(f.a), da = Pick<Q, 0>(f.da);
+    const V4 b = Pick<Q, 1>(f.b), db = Pick<Q, 1>(f.db);
+    const V4 c = Pick<Q, 2>(f.c), dc = Pick<Q, 2>(f.dc);
+    const V4 e = Pick<Q, 3>(f.e), de = Pick<Q, 3>(f.de);
     // ForEachNode's expressions, lane by lane.
     const V4 bc = b * c;
     const V4 value = a * bc * e;
