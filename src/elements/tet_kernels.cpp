@@ -1,7 +1,7 @@
 // Compile-time-sized Lagrange tetrahedron kernels (see tet_kernels.h). The arithmetic
 // mirrors EvalTet of basis.cpp and the node sums of geometry.cpp and field.cpp operation
 // for operation; only the loop bounds are constants and the basis values are consumed
-// where they are made.
+// where they are made (except the order-3 map's node sums: see Map3).
 #include "elements/tet_kernels.h"
 
 #include <cmath>

@@ -4,7 +4,8 @@
 // nodes, without the basis arrays in between, and performs the same operations in the
 // same order as EvalBasis followed by those sums in elements/geometry.cpp and
 // elements/field.cpp: its results are bitwise the same
-// (tests/elements/test_hex_kernels.cpp).
+// (tests/elements/test_hex_kernels.cpp). The one exception is the order-3 map, whose node
+// sums go in another order (TetMapBlocked3 below), four nodes at a time.
 #pragma once
 
 namespace hpray {
