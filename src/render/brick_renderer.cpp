@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstdio>
 #include <mutex>
-#include <optional>
 
 #include "render/ray_field.h"
 #include "util/check.h"
@@ -435,8 +434,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                                    facePoints ? &ends_ : nullptr, seeds, sink);
     };
     if (!incremental) trace(nullptr);
-    std::optional<SegmentCostRecorder> recorder;
-    recorder.emplace(
+    // (Inactive when the walk is incremental: costs are not being measured.)
+    SegmentCostRecorder recorder(
         costSamples, ray, segments_,
         costSamples ? std::chrono::duration<double>(CostClock::now() - traceStart).count()
                     : 0.0);
@@ -484,7 +483,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
         // it leaves in the next cell is skipped.
         if (IsSpanEndSliver(seg, setup.sliverLength, tMin, tMax)) {
             counters.segmentsCulled += 1;
-            recorder->Done(si);
+            recorder.Done(si);
             return false;
         }
         // Isosurfaces whose field's guaranteed range in the cell holds their value.
@@ -514,7 +513,7 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                                   facePoints ? &ends_[si] : nullptr);
         if (!isoHere && !sliceHere && !volumeHere) {
             counters.segmentsCulled += 1;
-            recorder->Done(si);
+            recorder.Done(si);
             return false;
         }
         volumeSeen |= volumeHere;
@@ -528,8 +527,8 @@ void RayIntegrator::Integrate(const BrickSetup& setup, const Ray& ray, Pixel& ou
                                                 (a.iso == b.iso && a.slice < b.slice)));
         });
         const bool done = Composite(setup, ray, seg, cutoff, volumeHere, composite, out,
-                                    counters, *recorder);
-        recorder->Done(si);
+                                    counters, recorder);
+        recorder.Done(si);
         return done;
     };
     if (incremental) {
