@@ -41,24 +41,25 @@ long double PowL(long double x, int k) {
     return r;
 }
 
+// Binomial coefficients, exact in double (kMaxOrder is far below where they stop being).
+constexpr double Binomial(int n, int k) {
+    double r = 1;
+    for (int i = 1; i <= k; ++i) r = r * (n - k + i) / i;
+    return r;
+}
+
 struct Tables {
-    double binom[kMaxOrder + 1][kMaxOrder + 1] = {};
     std::vector<double> edgeInv[kMaxOrder + 1];  // Bernstein from nodal values, 1-D
     std::vector<double> triInv[kMaxOrder + 1];   // Bernstein from nodal values, triangle
 
     Tables() {
-        for (int n = 0; n <= kMaxOrder; ++n) {
-            binom[n][0] = binom[n][n] = 1;
-            for (int k = 1; k < n; ++k)
-                binom[n][k] = binom[n - 1][k - 1] + binom[n - 1][k];
-        }
         for (int p = 1; p <= kMaxOrder; ++p) {
             std::vector<long double> m(std::size_t(p + 1) * (p + 1));
             for (int k = 0; k <= p; ++k) {
                 const long double s = (long double)k / p;
                 for (int i = 0; i <= p; ++i)
                     m[std::size_t(k) * (p + 1) + i] =
-                        binom[p][i] * PowL(s, i) * PowL(1 - s, p - i);
+                        Binomial(p, i) * PowL(s, i) * PowL(1 - s, p - i);
             }
             edgeInv[p] = Invert(p + 1, m);
             const int n = NetSize(true, p);
@@ -71,8 +72,8 @@ struct Tables {
                     for (int j = 0; j <= p; ++j)
                         for (int i = 0; i <= p - j; ++i)
                             t[std::size_t(row) * n + TriIndex(p, i, j)] =
-                                binom[p][i] * binom[p - i][j] * PowL(u, i) * PowL(v, j) *
-                                PowL(w, p - i - j);
+                                Binomial(p, i) * Binomial(p - i, j) * PowL(u, i) *
+                                PowL(v, j) * PowL(w, p - i - j);
                 }
             triInv[p] = Invert(n, t);
         }
@@ -742,13 +743,6 @@ void EvalQuadNet(const ShearedPoint* net, double u, double v, double value[3],
         }
     }
     for (int c = 0; c < 3; ++c) value[c] = f[c], dU[c] = fu[c], dV[c] = fv[c];
-}
-
-// Binomial coefficients, exact in double (kMaxOrder is far below where they stop being).
-constexpr double Binomial(int n, int k) {
-    double r = 1;
-    for (int i = 1; i <= k; ++i) r = r * (n - k + i) / i;
-    return r;
 }
 
 // The triangle net's weights as EvalTriangleNet multiplies them: value[i][j] =
