@@ -143,27 +143,32 @@ void Map(const double* xyz, const double ref[3], double world[3], double* jacobi
 }
 
 #if defined(HPRAY_LANES)
+// Silvester<double>(P, x, s, ds) lane by lane: the same operations, nothing fused (the
+// build does not fuse them), so each lane is bitwise the scalar factors at its x.
+template <int P>
+inline void SilvesterLanes(lanes::D<4> x, lanes::D<4>* s, lanes::D<4>* ds) {
+    const lanes::D<4> px = double(P) * x;
+    s[0] = lanes::Splat<4>(1.0);
+    ds[0] = lanes::Splat<4>(0.0);
+    for (int m = 0; m < P; ++m) {
+        const double inv = 1.0 / double(m + 1);
+        const lanes::D<4> f = (px - double(m)) * inv;
+        ds[m + 1] = ds[m] * f + s[m] * (P * inv);
+        s[m + 1] = s[m] * f;
+    }
+}
+
 // Value<P> at four points, point q in lane q: Silvester's factors and the sums over the
-// nodes with the same products and sums in the same order (the build does not fuse them),
-// so each lane is bitwise Value<P> at its point.
+// nodes with the same products and sums in the same order, so each lane is bitwise
+// Value<P> at its point.
 template <int P>
 lanes::D<4> Value4(const double* u, lanes::D<4> r0, lanes::D<4> r1, lanes::D<4> r2) {
     using V = lanes::D<4>;
-    // Silvester<double>(P, x, s, ds)'s s.
-    auto silvester = [](V x, V* s) {
-        const V px = double(P) * x;
-        s[0] = lanes::Splat<4>(1.0);
-        for (int m = 0; m < P; ++m) {
-            const double inv = 1.0 / double(m + 1);
-            const V f = (px - double(m)) * inv;
-            s[m + 1] = s[m] * f;
-        }
-    };
-    V a[P + 1], b[P + 1], c[P + 1], e[P + 1];
-    silvester(r0, a);
-    silvester(r1, b);
-    silvester(r2, c);
-    silvester(1.0 - r0 - r1 - r2, e);
+    V a[P + 1], b[P + 1], c[P + 1], e[P + 1], unused[P + 1];
+    SilvesterLanes<P>(r0, a, unused);
+    SilvesterLanes<P>(r1, b, unused);
+    SilvesterLanes<P>(r2, c, unused);
+    SilvesterLanes<P>(1.0 - r0 - r1 - r2, e, unused);
     V f = lanes::Splat<4>(0.0);
     int m = 0;
     for (int k = 0; k <= P; ++k)
@@ -316,15 +321,7 @@ void MapLanes3(const double* xyz, const double ref[3], double world[3],
     // the four lanes; then transposed to factor vectors by index.
     const V4 X = {ref[0], ref[1], ref[2], 1.0 - ref[0] - ref[1] - ref[2]};
     V4 S[4], dS[4];
-    const V4 px = 3.0 * X;
-    S[0] = lanes::Splat<4>(1.0);
-    dS[0] = lanes::Splat<4>(0.0);
-    for (int m = 0; m < 3; ++m) {
-        const double inv = 1.0 / double(m + 1);
-        const V4 f = (px - double(m)) * inv;
-        dS[m + 1] = dS[m] * f + S[m] * (3 * inv);
-        S[m + 1] = S[m] * f;
-    }
+    SilvesterLanes<3>(X, S, dS);
     auto transpose = [](const V4* r, V4& a, V4& b, V4& c, V4& e) {
         const V4 t0 = __builtin_shufflevector(r[0], r[1], 0, 4, 2, 6);
         const V4 t1 = __builtin_shufflevector(r[0], r[1], 1, 5, 3, 7);

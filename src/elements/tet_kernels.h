@@ -32,8 +32,8 @@ const TetKernels& TetKernelsFor(int p);
 
 /// The order-3 map as its kernel sums the nodes (four interleaved partial sums, node m in
 /// sum m mod 4 by fused multiply-adds, added as (s0 + s1) + (s2 + s3); the other orders
-/// sum in node order, unfused), in
-/// scalar arithmetic: the kernel's result bitwise, in any build.
+/// sum in node order, unfused), in scalar arithmetic: the kernel's result bitwise, in
+/// any build.
 void TetMapBlocked3(const double* xyz, const double ref[3], double world[3],
                     double* jacobian);
 
