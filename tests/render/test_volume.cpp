@@ -1270,6 +1270,31 @@ TEST(VolumePyramids, RationalFieldAgainstTheOdeReference) {
     EXPECT_LT(counters.fieldEvaluations, 25 * counters.segments);
 }
 
+// SampleBatch on each segment of `ray` (1 to 11 points in turn, the first at the
+// segment's entry, the others at random) against the field point by point from the same
+// start (begun again: a curved cell's inversions are warm-started by the points before),
+// bitwise; `visit(segment)` after each, `compared` counting them.
+template <typename Visit>
+void ExpectSampleBatchBitwise(FieldAlongRays& rig, const Mesh& mesh, const Ray& ray,
+                              std::mt19937_64& rng, int& compared, Visit&& visit) {
+    std::uniform_real_distribution<double> along(0, 1);
+    rig.ForEachSegment(ray, 0, [&](const Segment& seg) {
+        const int n = 1 + (compared % 11);
+        std::vector<double> t(n), batch(n);
+        for (double& x : t) x = seg.tEnter + along(rng) * (seg.tExit - seg.tEnter);
+        t[0] = seg.tEnter;
+        rig.sf.SampleBatch(t.data(), n, batch.data());
+        rig.sf.Begin(mesh, rig.geometry, rig.sel, seg.cell, ray, InversionOptions{});
+        for (int k = 0; k < n; ++k) {
+            const double single = rig.sf(t[k]);
+            ASSERT_EQ(std::memcmp(&batch[k], &single, sizeof single), 0)
+                << batch[k] << " " << single << " at " << k << " of " << n;
+        }
+        visit(seg);
+        ++compared;
+    });
+}
+
 // SampleBatch of affine linear pyramids and wedges (pyramids four points at a time in
 // vector lanes) gives bitwise the values of the field point by point, for every count
 // (whole vectors and the rest).
@@ -1278,7 +1303,7 @@ TEST(VolumePyramids, SampleBatchIsTheFieldPointByPointBitwise) {
          {testing::CubeCut::Pyramids, testing::CubeCut::Wedges}) {
         Mesh mesh = testing::GridMesh(2, 0.0, [&](int, int, int) { return cut; });
         std::mt19937_64 rng(11);
-        std::uniform_real_distribution<double> uni(0.02, 0.98), along(0, 1);
+        std::uniform_real_distribution<double> uni(0.02, 0.98);
         std::normal_distribution<double> gauss;
         AddUniformPointField(mesh, rng, 1);
         FieldAlongRays rig(mesh);
@@ -1286,20 +1311,8 @@ TEST(VolumePyramids, SampleBatchIsTheFieldPointByPointBitwise) {
         for (int trial = 0; trial < 40; ++trial) {
             const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
                                                 {gauss(rng), gauss(rng), gauss(rng)});
-            rig.ForEachSegment(ray, 0, [&](const Segment& seg) {
-                const int n = 1 + (compared % 11);
-                std::vector<double> t(n), batch(n);
-                for (double& x : t)
-                    x = seg.tEnter + along(rng) * (seg.tExit - seg.tEnter);
-                t[0] = seg.tEnter;
-                rig.sf.SampleBatch(t.data(), n, batch.data());
-                for (int k = 0; k < n; ++k) {
-                    const double single = rig.sf(t[k]);
-                    ASSERT_EQ(std::memcmp(&batch[k], &single, sizeof single), 0)
-                        << batch[k] << " " << single << " at " << k << " of " << n;
-                }
-                ++compared;
-            });
+            ExpectSampleBatchBitwise(rig, mesh, ray, rng, compared,
+                                     [](const Segment&) {});
         }
         EXPECT_GT(compared, 40);
     }
@@ -1317,7 +1330,7 @@ TEST(VolumeCurvedTets, SampleBatchIsTheFieldPointByPointBitwise) {
     }
     mesh.pointFields.clear();
     std::mt19937_64 rng(19);
-    std::uniform_real_distribution<double> uni(-0.5, 0.5), along(0, 1);
+    std::uniform_real_distribution<double> uni(-0.5, 0.5);
     std::normal_distribution<double> gauss;
     AddUniformPointField(mesh, rng, 1);
     FieldAlongRays rig(mesh);
@@ -1325,19 +1338,8 @@ TEST(VolumeCurvedTets, SampleBatchIsTheFieldPointByPointBitwise) {
     for (int trial = 0; trial < 60; ++trial) {
         const Ray ray = testing::MakeRayDir({uni(rng), uni(rng), uni(rng)},
                                             {gauss(rng), gauss(rng), gauss(rng)});
-        rig.ForEachSegment(ray, 0, [&](const Segment& seg) {
-            const int n = 1 + (compared % 11);
-            std::vector<double> t(n), batch(n);
-            for (double& x : t) x = seg.tEnter + along(rng) * (seg.tExit - seg.tEnter);
-            rig.sf.SampleBatch(t.data(), n, batch.data());
-            rig.sf.Begin(mesh, rig.geometry, rig.sel, seg.cell, ray, InversionOptions{});
-            for (int k = 0; k < n; ++k) {
-                const double single = rig.sf(t[k]);
-                ASSERT_EQ(std::memcmp(&batch[k], &single, sizeof single), 0)
-                    << batch[k] << " " << single << " at " << k << " of " << n;
-            }
+        ExpectSampleBatchBitwise(rig, mesh, ray, rng, compared, [&](const Segment& seg) {
             curved += !rig.geometry.Cell(seg.cell, rig.scratch).affine;
-            ++compared;
         });
     }
     EXPECT_GT(compared, 100);

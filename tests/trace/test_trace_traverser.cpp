@@ -1481,10 +1481,12 @@ TEST(BrickTraverser, SinksTakeEachSegmentAsFoundAndStopTheTrace) {
                             EXPECT_EQ(std::isnan(sd->enter[d]),
                                       std::isnan(wantSeeds[k].enter[d]))
                                 << what;
-                            if (!std::isnan(sd->enter[d]))
+                            if (!std::isnan(sd->enter[d])) {
                                 EXPECT_EQ(sd->enter[d], wantSeeds[k].enter[d]) << what;
-                            if (!std::isnan(sd->exit[d]))
+                            }
+                            if (!std::isnan(sd->exit[d])) {
                                 EXPECT_EQ(sd->exit[d], wantSeeds[k].exit[d]) << what;
+                            }
                         }
                     }
                 }
