@@ -146,7 +146,7 @@ struct RayComposite {
 };
 
 /// out[i] = exp(-x[i]) for x[i] >= 0 (0 beyond 708), to within 3 ulps (the series
-/// pieces' quadrature nodes, eight at a time).
+/// pieces' quadrature nodes; four at a time where the build has AVX2).
 void ExpNegative(const double* x, int n, double* out);
 
 /// A sliver that a clip plane through a face leaves at an end of the ray's span [tMin,

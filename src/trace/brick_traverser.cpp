@@ -162,11 +162,10 @@ struct Scratch {
     std::vector<std::int64_t> candidates;  // cells whose box holds a located point
     std::vector<trace::FaceCrossing> face;
     std::vector<std::pair<Segment, SegmentSeed>> seeded;  // sorting filtered segments
-    // A filtered Trace with a sink: its cells in order, their segments not yet passed on,
-    // and one cell's segments.
+    // A filtered Trace with a sink: its cells in order, per cell the number of the Trace
+    // that took it, their segments not yet passed on, and one cell's segments.
     std::vector<std::pair<double, std::int64_t>> order;
-    std::vector<std::uint64_t>
-        cellMark;  // per cell: the number of the Trace that took it
+    std::vector<std::uint64_t> cellMark;
     std::vector<std::pair<Segment, SegmentSeed>> waiting;
     std::vector<Segment> cellSegments;
     std::vector<SegmentSeed> cellSeeds;
@@ -2569,12 +2568,11 @@ void BrickTraverser::Trace(const Ray& ray, double tMin, double tMax,
         return a.cell < b.cell;
     };
     if (sink) {
-        // The cells in the order of their own boxes' entries: a cell's segments start no
-        // earlier than its box, so a segment found can be passed on once every cell still
-        // to visit enters its box after the segment's start. That gives the sorted order
-        // of the search below (segments of different cells overlap in no more than an
-        // end).
-        // Each cell once: marked with this Trace's number as it is taken.
+        // The cells in the order of their own boxes' entries, each once (marked with this
+        // Trace's number as it is taken): a cell's segments start no earlier than its
+        // box, so a segment found can be passed on once every cell still to visit enters
+        // its box after the segment's start. That gives the sorted order of the search
+        // below (segments of different cells overlap in no more than an end).
         std::vector<std::pair<double, std::int64_t>>& order = tScratch.order;
         std::vector<std::uint64_t>& mark = tScratch.cellMark;
         if (mark.size() < filter.keep.size()) mark.assign(filter.keep.size(), 0);
