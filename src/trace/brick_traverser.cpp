@@ -457,7 +457,8 @@ struct BrickTraverser::Impl {
     // The crossing by which the ray leaves cell c after entering it by the crossing of
     // face entryFace at (unclamped) entryT; tIn = the walk's t there (>= entryT).
     // exitPoint (optional): the exit's face point where a planar tet is left through a
-    // triangle and meshPointIds holds, else not Valid.
+    // triangle, or another cell through a triangle into a planar tet, and meshPointIds
+    // holds; else not Valid.
     // lastFace (optional): the face the walk left its previous planar tet by, with its
     // corners in the ray frame, updated here (see TetWalkFace).
     bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
@@ -470,6 +471,10 @@ struct BrickTraverser::Impl {
     // The face point of the crossing `x` of triangular face f (not Valid if f is not a
     // triangle or its crossing is not x).
     void EntryPoint(const Crossing& x, const RayFrame& frame, FacePoint& fp) const;
+    // EntryPoint where x leads into a planar tetrahedron (one with a tet code), whose
+    // linear field the face points give (a cell of another shape left into a tet); else
+    // fp is left as it is.
+    void TetEntryPoint(const Crossing& x, const RayFrame& frame, FacePoint& fp) const;
     bool meshPointIds = false;  // merged point ids are the mesh's point indices
     // Every cell is a tetrahedron whose four faces are planar triangles (cell c's faces
     // at cellFaces[4 c]).
@@ -2028,7 +2033,10 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
             return true;
     } else if (bool planarFound = false;
                PlanarCellExit(c, cf, nf, entryFace, entryT, frame, exit, planarFound)) {
-        if (planarFound) return true;
+        if (planarFound) {
+            if (exitPoint) TetEntryPoint(exit, frame, *exitPoint);
+            return true;
+        }
     } else {
         // General cells (bilinear faces can be crossed twice, curved cells left and
         // re-entered): all crossings of the cell's faces along the whole line, sorted by
@@ -2042,7 +2050,10 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
                 exit = out;
                 return true;
             });
-        if (found) return true;
+        if (found) {
+            if (exitPoint) TetEntryPoint(exit, frame, *exitPoint);
+            return true;
+        }
     }
     if (TolerantExit(c, tIn, frame, exit)) {
         walkRepairs.fetch_add(1, std::memory_order_relaxed);
@@ -2212,6 +2223,14 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         if (CrossTriangle(a, b, d, x) && found(f, rec, a, b, d)) return true;
     }
     return false;
+}
+
+void BrickTraverser::Impl::TetEntryPoint(const Crossing& x, const RayFrame& frame,
+                                         FacePoint& fp) const {
+    const FaceRec& rec = faces[x.face];
+    if (rec.kind != FaceKind::Triangle) return;
+    const std::int64_t next = rec.cell[x.side > 0 ? 1 : 0];
+    if (next >= 0 && (tetCodes[next] & tetcode::kValid)) EntryPoint(x, frame, fp);
 }
 
 void BrickTraverser::Impl::EntryPoint(const Crossing& x, const RayFrame& frame,

@@ -569,6 +569,72 @@ TEST(BrickTraverser, FacePointsOfTetsLieOnTheRayAndAreSharedByNeighbours) {
     for (const SegmentEnds& e : ends) EXPECT_FALSE(e.enter.Valid() || e.exit.Valid());
 }
 
+// A tet entered from a wedge or a pyramid through a triangle has its face points too
+// (which let the volume take its linear field from them): the exit point of the cell
+// before, on the ray, convex in the entry face's corners. Cells of other shapes have
+// one only on a face into a tet.
+TEST(BrickTraverser, TetsEnteredFromOtherShapesHaveFacePoints) {
+    // Wedges, pyramids and pyramids split into tets (planar faces). A pyramid's base
+    // against two tets' triangles does not match: the walk ends and starts again there.
+    const Mesh mesh = GridMesh(5, 0.0, [](int a, int b, int c) {
+        switch ((a + 2 * b + c) % 3) {
+            case 0:
+                return CubeCut::Wedges;
+            case 1:
+                return CubeCut::Pyramids;
+            default:
+                return CubeCut::PyramidsTetsZ;
+        }
+    });
+    const BrickTraverser tr(Brick::WholeMesh(mesh));
+    ASSERT_TRUE(tr.FacePoints());
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> uni(0, 1);
+    std::vector<Segment> segs;
+    std::vector<SegmentEnds> ends;
+    std::size_t fromOthers = 0;
+    for (int i = 0; i < 3000; ++i) {
+        const Ray ray = MakeRay({uni(rng) * 3 - 1, uni(rng) * 3 - 1, -1.5},
+                                {uni(rng), uni(rng), uni(rng)});
+        tr.Trace(ray, -INFINITY, INFINITY, segs, &ends);
+        ASSERT_EQ(ends.size(), segs.size());
+        for (std::size_t k = 0; k + 1 < segs.size(); ++k) {
+            const Segment& s = segs[k];
+            const FacePoint& q = ends[k].exit;
+            if (mesh.cellShape[s.cell] == CellShape::Tet || !q.Valid()) continue;
+            // A face point on another cell's exit: into a tet, the next segment's entry.
+            const Segment& next = segs[k + 1];
+            ASSERT_EQ(mesh.cellShape[next.cell], CellShape::Tet) << i << " " << k;
+            ASSERT_EQ(next.tEnter, s.tExit);
+            ++fromOthers;
+            const FacePoint& p = ends[k + 1].enter;
+            ASSERT_TRUE(p.Valid() && ends[k + 1].exit.Valid()) << i << " " << k;
+            EXPECT_EQ(q.t, p.t);
+            EXPECT_EQ(p.t, next.tEnter);
+            const std::int64_t* nodes = mesh.CellNodes(next.cell);
+            const std::int64_t* before = mesh.CellNodes(s.cell);
+            const int beforeCount = mesh.CellNodeCount(s.cell);
+            double x[3] = {0, 0, 0}, sum = 0;
+            for (int m = 0; m < 3; ++m) {
+                EXPECT_EQ(q.v[m], p.v[m]);
+                EXPECT_EQ(q.w[m], p.w[m]);
+                EXPECT_GE(p.w[m], 0.0);
+                sum += p.w[m];
+                // A corner of the face the two cells share.
+                EXPECT_TRUE(std::find(nodes, nodes + 4, p.v[m]) != nodes + 4);
+                EXPECT_TRUE(std::find(before, before + beforeCount, p.v[m]) !=
+                            before + beforeCount);
+                for (int d = 0; d < 3; ++d) x[d] += p.w[m] * mesh.points[3 * p.v[m] + d];
+            }
+            EXPECT_NEAR(sum, 1.0, 1e-15);
+            for (int d = 0; d < 3; ++d)
+                EXPECT_NEAR(x[d], ray.origin[d] + p.t * ray.dir[d], 1e-14)
+                    << i << " " << k;
+        }
+    }
+    EXPECT_GT(fromOthers, 500u);
+}
+
 TEST(BrickTraverser, InvertedCellsAreTraversedLikePositiveOnes) {
     const Mesh mesh = MakeBuiltin("builtin:cube-tets-4");
     Mesh flipped = mesh;
