@@ -292,7 +292,7 @@ LegendreSeries LegendreSeries::Antiderivative() const {
     return r;
 }
 
-void LegendreSeries::Antiderivative(LegendreSeries& r) const {
+void LegendreSeries::Antiderivative(LegendreSeries& r, bool withoutMean) const {
     // integral_{-1}^x P_0 = P_1 + P_0; integral_{-1}^x P_k = (P_{k+1} - P_{k-1}) / (2k + 1)
     // for k >= 1 (zero at -1); times dt/dx = (b - a) / 2.
     HPRAY_CHECK(&r != this);
@@ -307,7 +307,7 @@ void LegendreSeries::Antiderivative(LegendreSeries& r) const {
     // where q_k = h c_k / (2k + 1) for 1 <= k <= n and there is no q beyond n. The zeros
     // the sums start from are kept (0 + x turns a -0 into +0).
     auto q = [&](int k) { return h * c[k] / (2 * k + 1); };
-    const double h0 = 0.0 + h * c[0];
+    const double h0 = 0.0 + h * (withoutMean ? 0.0 : c[0]);
     out[0] = n >= 1 ? h0 - q(1) : h0;
     out[1] = n >= 2 ? h0 - q(2) : h0;
     for (int j = 2; j <= n + 1; ++j) {

@@ -86,8 +86,9 @@ struct LegendreSeries {
     /// The antiderivative integral_a^t p as a series of degree n + 1 on the same interval
     /// (zero at t = a).
     LegendreSeries Antiderivative() const;
-    /// The same into `out` (reusing its storage; not *this).
-    void Antiderivative(LegendreSeries& out) const;
+    /// The same into `out` (reusing its storage; not *this). With withoutMean, that of
+    /// p - c_0 (the same operations as on a copy whose c_0 is zero).
+    void Antiderivative(LegendreSeries& out, bool withoutMean = false) const;
 };
 
 inline double LegendreSeries::At(double t) const {

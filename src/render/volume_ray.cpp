@@ -729,10 +729,10 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     if (mode_ == Mode::kSeries) {
         for (int f = 0; f < fieldCount_; ++f) {
             const FieldState& st = state_[f];
-            LegendreSeries& line = line_[f];
-            if (st.bySeries) {
-                line = pieces_[f][0].p;
-            } else {
+            // The projected series itself where there is one (not a copy), else line_[f].
+            LegendreSeries& line = st.bySeries ? pieces_[f][0].p : line_[f];
+            linePtr_[f] = &line;
+            if (!st.bySeries) {
                 // Constant or linear on the segment.
                 line.a = seg.tEnter;
                 line.b = seg.tExit;
@@ -1285,8 +1285,8 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     const VolumeSetup& s = *setup_;
     const bool wm = s.glow == GlowModel::WilliamsMax;
     const int fe = fieldCount_ - 1;
-    const LegendreSeries& uc = line_[0];
-    const LegendreSeries& ue = line_[fe];
+    const LegendreSeries& uc = *linePtr_[0];
+    const LegendreSeries& ue = *linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
@@ -1301,9 +1301,7 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     double tauM = ae, v0 = 0, v1 = 0;
     if (be != 0) {
         if (!haveDepthLine_) {
-            depthSource_ = ue;
-            depthSource_.c[0] = 0;
-            depthSource_.Antiderivative(depthLine_);
+            ue.Antiderivative(depthLine_, /*withoutMean=*/true);
             double sum = 0;
             for (double c : depthLine_.c) sum += std::abs(c);
             depthLineError_ = kSeriesRounding * kEps * sum;

@@ -358,10 +358,13 @@ class VolumeRayMarcher {
     /// linear one), its bound of evaluation error, and the extinction field's
     /// antiderivative (built when first needed).
     LegendreSeries line_[2];
+    /// The series SeriesPiece reads for each field: pieces_[f][0].p where the field was
+    /// projected, else line_[f] (set by BeginSegment in series mode).
+    const LegendreSeries* linePtr_[2] = {nullptr, nullptr};
     double lineError_[2] = {0, 0};
     double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
     double unresolved_[2] = {0, 0};  ///< bound of the degree not sampled
-    LegendreSeries depthLine_, depthSource_, derivative_;
+    LegendreSeries depthLine_, derivative_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated

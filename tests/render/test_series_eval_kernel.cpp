@@ -147,6 +147,15 @@ TEST(LegendreAntiderivative, IsTheIntegralFromTheStart) {
         EXPECT_EQ(r.b, p.b);
         for (std::size_t k = 0; k < want.size(); ++k)
             ASSERT_TRUE(SameBits(r.c[k], want[k])) << "seed " << seed << " k " << k;
+        // Without the mean: bitwise that of a copy whose c_0 is zero.
+        LegendreSeries zeroMean = p, rz, rm;
+        zeroMean.c[0] = 0;
+        zeroMean.Antiderivative(rz);
+        rm.c.assign(3, -5.0);
+        p.Antiderivative(rm, /*withoutMean=*/true);
+        ASSERT_EQ(rm.c.size(), rz.c.size());
+        for (std::size_t k = 0; k < rz.c.size(); ++k)
+            ASSERT_TRUE(SameBits(rm.c[k], rz.c[k])) << "seed " << seed << " k " << k;
         double scale = 0;
         for (double c : p.c) scale += std::abs(c);
         for (double frac : {0.0, 0.3, 0.77, 1.0}) {
