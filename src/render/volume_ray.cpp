@@ -1282,9 +1282,23 @@ void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
 }
 
 void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
+    // The glow model and whether one field drives both transfer functions as constants:
+    // the branches on them compiled out of the piece's loops.
+    const bool wm = setup_->glow == GlowModel::WilliamsMax, one = fieldCount_ == 1;
+    if (wm && one)
+        SeriesPieceOf<true, true>(p0, p1, composite);
+    else if (wm)
+        SeriesPieceOf<true, false>(p0, p1, composite);
+    else if (one)
+        SeriesPieceOf<false, true>(p0, p1, composite);
+    else
+        SeriesPieceOf<false, false>(p0, p1, composite);
+}
+
+template <bool wm, bool oneField>
+void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composite) {
     const VolumeSetup& s = *setup_;
-    const bool wm = s.glow == GlowModel::WilliamsMax;
-    const int fe = fieldCount_ - 1;
+    constexpr int fe = oneField ? 0 : 1;
     const LegendreSeries& uc = *linePtr_[0];
     const LegendreSeries& ue = *linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);

@@ -315,6 +315,9 @@ class VolumeRayMarcher {
     std::vector<LinearPieceIntegrals> pieceIntegrals_;
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
+    /// SeriesPiece for Williams-Max glow (wm) or not, and one field (oneField) or two.
+    template <bool wm, bool oneField>
+    void SeriesPieceOf(double p0, double p1, RayComposite& composite);
     bool Terminate(double t, RayComposite& composite);
     /// Field f (a point field) along a linear tetrahedron's segment from the face points
     /// `ends`: its values at the segment's ends and the bound of their error. False (and
