@@ -170,8 +170,8 @@ struct Scratch {
     std::vector<Segment> cellSegments;
     std::vector<SegmentSeed> cellSeeds;
     std::uint64_t ray = 0;  // id of the current Trace call on this thread
-    // A planar face that PlanarCellExit found the ray line of Trace call singleRay to
-    // cross exactly once, at singleT (see PlanarCellExit).
+    // A planar face that PlanarCellExit or PlanarTetExit found the ray line of Trace
+    // call singleRay to cross exactly once, at singleT (see PlanarCellExit).
     std::uint64_t singleRay = 0;
     std::int32_t singleFace = -1;
     double singleT = 0;
@@ -370,10 +370,11 @@ class BuildArray {
 };
 }  // namespace
 
-// The triangle a walk last left a planar tetrahedron by, with its corners in the ray
-// frame in the face record's order: the next cell's entry face, whose corners need not
-// be transformed again (Transform is a pure function of the point, so a kept corner is
-// bitwise the one a new transform would give).
+// The triangle a walk last left a planar tetrahedron or another cell with planar faces
+// by, with its corners in the ray frame in the face record's order: the next cell's
+// entry face, whose corners a planar tet need not transform again (Transform is a pure
+// function of the point, so a kept corner is bitwise the one a new transform would
+// give).
 struct TetWalkFace {
     std::int32_t face = -1;
     int side = 0;  ///< the crossing's side: the sign of each of the face's edges
@@ -449,9 +450,11 @@ struct BrickTraverser::Impl {
     // FindExit for a cell whose nf faces cf[] are all planar (triangles, planar quads or
     // degenerate) and that the ray line crosses exactly twice: false where that is not
     // so (the general pairing then decides); else true, with found as ForEachPair's.
+    // exitPoint and lastFace as FindExit's (set where c is left through a triangle).
     bool PlanarCellExit(std::int64_t c, const std::int32_t* cf, int nf,
                         std::int32_t entryFace, double entryT, const RayFrame& frame,
-                        Crossing& exit, bool& found) const;
+                        Crossing& exit, bool& found, FacePoint* exitPoint,
+                        TetWalkFace* lastFace) const;
     void AppendCurvedCrossings(std::int32_t f, const RayFrame& frame,
                                std::vector<Crossing>& out) const;
     // The crossing by which the ray leaves cell c after entering it by the crossing of
@@ -459,8 +462,8 @@ struct BrickTraverser::Impl {
     // exitPoint (optional): the exit's face point where a planar tet is left through a
     // triangle, or another cell through a triangle into a planar tet, and meshPointIds
     // holds; else not Valid.
-    // lastFace (optional): the face the walk left its previous planar tet by, with its
-    // corners in the ray frame, updated here (see TetWalkFace).
+    // lastFace (optional): the triangle the walk left its previous planar tet or other
+    // planar cell by, with its corners in the ray frame, updated here (see TetWalkFace).
     bool FindExit(std::int64_t c, std::int32_t entryFace, double entryT, double tIn,
                   const RayFrame& frame, Crossing& exit, FacePoint* exitPoint = nullptr,
                   TetWalkFace* lastFace = nullptr) const;
@@ -2032,11 +2035,9 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
         if (PlanarTetExit(c, cf, entryFace, frame, exit, exitPoint, lastFace))
             return true;
     } else if (bool planarFound = false;
-               PlanarCellExit(c, cf, nf, entryFace, entryT, frame, exit, planarFound)) {
-        if (planarFound) {
-            if (exitPoint) TetEntryPoint(exit, frame, *exitPoint);
-            return true;
-        }
+               PlanarCellExit(c, cf, nf, entryFace, entryT, frame, exit, planarFound,
+                              exitPoint, lastFace)) {
+        if (planarFound) return true;
     } else {
         // General cells (bilinear faces can be crossed twice, curved cells left and
         // re-entered): all crossings of the cell's faces along the whole line, sorted by
@@ -2069,51 +2070,150 @@ bool BrickTraverser::Impl::FindExit(std::int64_t c, std::int32_t entryFace, doub
 // pair the entering one with the leaving one. So where there are two, that pair is the
 // outcome without the list, the sort and the pairing's bookkeeping; any other count
 // (a ray along a fold of a quad that rounding left slightly bent) goes to ForEachPair.
-bool BrickTraverser::Impl::PlanarCellExit(std::int64_t c, const std::int32_t* cf, int nf,
-                                          std::int32_t entryFace, double entryT,
-                                          const RayFrame& frame, Crossing& exit,
-                                          bool& found) const {
+//
+// Here the decisions come first: for every face, which of its triangles the ray
+// crosses, by CrossTriangle's rule (the three edge signs of (A, B, C), and of (A, C, D)
+// for a quad, are equal and not 0); then only the crossed triangles' crossings are
+// computed, by FinishCrossing on the same corners in the same order as CrossTriangle's.
+// Each edge sign of a face is evaluated once (the diagonal serves both triangles,
+// negated: EdgeSign is exactly antisymmetric), without branches on its value where the
+// static filter decides it. A face whose sheared corners all lie on one side of the ray
+// (x > 0, x < 0, y > 0 or y < 0 for all of them) needs none: the perturbed ray (eps,
+// eps^2) lies outside the box of its corners as eps -> 0, so it is outside both
+// triangles, which is what their exact edge signs say.
+//
+// Kept out of line: inlined into FindExit, and so into the walk's loop, it made the
+// compiler leave PlanarTetExit out of line instead, which costs the tet steps more than
+// the call costs here.
+[[gnu::noinline]] bool BrickTraverser::Impl::PlanarCellExit(
+    std::int64_t c, const std::int32_t* cf, int nf, std::int32_t entryFace, double entryT,
+    const RayFrame& frame, Crossing& exit, bool& found, FacePoint* exitPoint,
+    TetWalkFace* lastFace) const {
     constexpr int kMaxFaces = 8;
     if (nf > kMaxFaces) return false;
     for (int k = 0; k < nf; ++k) __builtin_prefetch(&faces[cf[k]]);
     // Every face's kind first: a cell with a bilinear or curved face computes nothing
     // here that ForEachPair would compute again.
+    const FaceRec* recs[kMaxFaces];
     for (int k = 0; k < nf; ++k) {
-        const FaceKind kind = faces[cf[k]].kind;
+        recs[k] = &faces[cf[k]];
+        const FaceKind kind = recs[k]->kind;
         if (kind != FaceKind::Triangle && kind != FaceKind::PlanarQuad &&
             kind != FaceKind::Degenerate)
             return false;
     }
     // Where the previous cell of this walk found the entry face crossed exactly once, at
-    // entryT (that cell's two crossings lay on two faces), the same computation here
-    // gives that one crossing again: it is the entering one, and the other faces' count
-    // decides alone (one more crossing makes the two of the full count).
+    // entryT (that cell's two crossings lay on two faces, or it was a tet), the same
+    // computation here gives that one crossing again: it is the entering one, and the
+    // other faces' count decides alone (one more crossing makes the two of the full
+    // count).
     Scratch& scratch = tScratch;
     const bool entryKnown = scratch.singleRay == scratch.ray &&
                             scratch.singleFace == entryFace && scratch.singleT == entryT;
-    Crossing xs[2 * kMaxFaces];
-    int n = 0;
+    // Face k's sheared corners in its record's order (plain doubles: ShearedPoint's
+    // initialisers would zero the whole array on every call). Bit 2 k of `crossed`: its
+    // triangle (A, B, C) is crossed, with side side[2 k]; bit 2 k + 1: its (A, C, D).
+    struct Corner {
+        double x, y, z;
+    };
+    Corner corner[kMaxFaces][4];
+    int side[2 * kMaxFaces];
+    std::uint32_t crossed = 0;
+    const auto transform = [&](std::int32_t id, Corner& out) {
+        const ShearedPoint q = frame.Transform(P(id));
+        out = {q.x, q.y, q.z};
+    };
+    const auto edge = [](const Corner& p, const Corner& q) {
+        const int s = trace::FilteredCrossSign(p.x, p.y, q.x, q.y);
+        return s != 0 ? s : trace::EdgeSign({p.x, p.y, p.z}, {q.x, q.y, q.z});
+    };
+    const auto crosses = [](int sa, int sb, int sc) {
+        return std::uint32_t((sa != 0) & (sa == sb) & (sa == sc));
+    };
     for (int k = 0; k < nf; ++k) {
-        const FaceRec& rec = faces[cf[k]];
-        if (rec.kind != FaceKind::Degenerate && !(entryKnown && cf[k] == entryFace))
-            n += PlanarCrossings(cf[k], rec, frame, xs + n);
+        const FaceRec& rec = *recs[k];
+        if (rec.kind == FaceKind::Degenerate || (entryKnown && cf[k] == entryFace))
+            continue;
+        const bool quad = rec.kind == FaceKind::PlanarQuad;
+        Corner* q = corner[k];
+        transform(rec.v[0], q[0]);
+        transform(rec.v[1], q[1]);
+        transform(rec.v[2], q[2]);
+        if (quad) transform(rec.v[3], q[3]);
+        const Corner& d = q[quad ? 3 : 0];
+        const double xMin = std::min(std::min(q[0].x, q[1].x), std::min(q[2].x, d.x));
+        const double xMax = std::max(std::max(q[0].x, q[1].x), std::max(q[2].x, d.x));
+        const double yMin = std::min(std::min(q[0].y, q[1].y), std::min(q[2].y, d.y));
+        const double yMax = std::max(std::max(q[0].y, q[1].y), std::max(q[2].y, d.y));
+        if ((xMin > 0) | (xMax < 0) | (yMin > 0) | (yMax < 0)) continue;
+        const int sab = edge(q[0], q[1]), sbc = edge(q[1], q[2]), sca = edge(q[2], q[0]);
+        crossed |= crosses(sbc, sca, sab) << 2 * k;
+        side[2 * k] = sbc;
+        if (quad) {
+            const int scd = edge(q[2], q[3]), sda = edge(q[3], q[0]);
+            crossed |= crosses(scd, sda, -sca) << (2 * k + 1);
+            side[2 * k + 1] = scd;
+        }
     }
     found = false;
+    if (__builtin_popcount(crossed) != (entryKnown ? 1 : 2)) return false;
+    // The crossings in PlanarCrossings' order (faces in cf's order, (A, B, C) before
+    // (A, C, D)), with their triangles (bit index into `crossed`).
+    Crossing xs[2];
+    TriangleCrossing txs[2];
+    int tri[2] = {0, 0};
+    int n = 0;
+    for (int b = 0; b < 2 * nf; ++b) {
+        if (!(crossed >> b & 1)) continue;
+        const int k = b >> 1;
+        const Corner& a = corner[k][0];
+        const Corner& p = corner[k][(b & 1) + 1];
+        const Corner& q = corner[k][(b & 1) + 2];
+        TriangleCrossing& x = txs[n];
+        trace::FinishCrossing({a.x, a.y, a.z}, {p.x, p.y, p.z}, {q.x, q.y, q.z}, side[b],
+                              x);
+        // (u, v) as PlanarCrossings gives them.
+        double u = x.bary[1], v = x.bary[2];
+        if (recs[k]->kind == FaceKind::PlanarQuad) {
+            if (b & 1)
+                v = x.bary[1] + x.bary[2];
+            else
+                u = x.bary[1] + x.bary[2];
+        }
+        tri[n] = b;
+        xs[n++] = {x.t, cf[k], x.side, u, v};
+    }
+    int e = 0;  // the exit's index in xs
     if (entryKnown) {
         // The entry crossing leaves the previous cell, so it enters this one: a pair
         // exactly when the other crossing leaves.
-        if (n != 1) return false;
         if (!Leaves(xs[0], c)) return true;
-        exit = xs[0];
     } else {
-        if (n != 2) return false;
         const bool leaves0 = Leaves(xs[0], c), leaves1 = Leaves(xs[1], c);
         if (leaves0 == leaves1) return true;  // no pair: as ForEachPair
         const Crossing& in = leaves0 ? xs[1] : xs[0];
         if (in.face != entryFace || in.t != entryT) return true;
-        exit = leaves0 ? xs[0] : xs[1];
+        e = leaves0 ? 0 : 1;
     }
+    exit = xs[e];
     found = true;
+    // Left through a triangle: the next cell, if a planar tet, is entered by it with its
+    // corners in the ray frame already (see TetWalkFace), and its entry face point is
+    // made from them and this crossing, as TetEntryPoint would make it (EntryPoint's
+    // CrossTriangle on these corners is the test that found the crossing).
+    const int k = tri[e] >> 1;
+    if (recs[k]->kind == FaceKind::Triangle) {
+        const Corner* q = corner[k];
+        const ShearedPoint a{q[0].x, q[0].y, q[0].z}, b{q[1].x, q[1].y, q[1].z},
+            d{q[2].x, q[2].y, q[2].z};
+        if (lastFace) *lastFace = {exit.face, exit.side, {a, b, d}};
+        if (exitPoint && meshPointIds) {
+            const std::int64_t next = recs[k]->cell[exit.side > 0 ? 1 : 0];
+            if (next >= 0 && (tetCodes[next] & tetcode::kValid))
+                MakeFacePoint(recs[k]->v, a, b, d, txs[e], std::abs(frame.dir[frame.kz]),
+                              *exitPoint);
+        }
+    }
     if (exit.face != entryFace) {
         scratch.singleRay = scratch.ray;
         scratch.singleFace = exit.face;
@@ -2152,6 +2252,12 @@ bool BrickTraverser::Impl::PlanarTetExit(std::int64_t c, const std::int32_t* cf,
         const Crossing cand{x.t, f, x.side, x.bary[1], x.bary[2]};
         if (!Leaves(cand, c)) return false;
         exit = cand;
+        // A triangle is crossed at most once: the next cell, if it has other shapes,
+        // knows its entering crossing (see PlanarCellExit).
+        Scratch& scratch = tScratch;
+        scratch.singleRay = scratch.ray;
+        scratch.singleFace = f;
+        scratch.singleT = x.t;
         if (exitPoint && meshPointIds)
             MakeFacePoint(rec.v, a, b, d, x, std::abs(frame.dir[frame.kz]), *exitPoint);
         if (lastFace) *lastFace = {f, x.side, {a, b, d}};

@@ -103,12 +103,24 @@ inline int ExactSumSign(const double p[4]) {
 
 }  // namespace detail
 
+/// Shewchuk's orient2d static filter, (3 eps + 16 eps^2) (|a| + |b|): px * qy - py * qx
+/// computed in floating point as a - b is of its exact sign when beyond this bound.
+constexpr double kCrossSignFilter = 3.3306690738754716e-16;
+
+/// The sign of px * qy - py * qx where the static filter decides it (then it is the exact
+/// sign), else 0 (ExactCrossSign decides it), without branches.
+inline int FilteredCrossSign(double px, double py, double qx, double qy) {
+    const double a = px * qy, b = py * qx;
+    const double e = a - b;
+    const double bound = kCrossSignFilter * (std::fabs(a) + std::fabs(b));
+    return int(e > bound) - int(e < -bound);
+}
+
 /// Exact sign of the 2-D cross product px * qy - py * qx.
 inline int ExactCrossSign(double px, double py, double qx, double qy) {
     const double a = px * qy, b = py * qx;
     const double e = a - b;
-    // Shewchuk's orient2d static filter, (3 eps + 16 eps^2) (|a| + |b|).
-    const double bound = 3.3306690738754716e-16 * (std::fabs(a) + std::fabs(b));
+    const double bound = kCrossSignFilter * (std::fabs(a) + std::fabs(b));
     if (e > bound) return 1;
     if (e < -bound) return -1;
     const double terms[4] = {a, std::fma(px, qy, -a), -b, -std::fma(py, qx, -b)};

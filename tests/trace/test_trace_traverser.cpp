@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <functional>
 #include <random>
 #include <string>
@@ -1368,6 +1369,103 @@ TEST(BrickTraverser, FilteredTraceGivesTheWalksSegmentsOfTheKeptCells) {
             total += segs.size();
         }
         EXPECT_GT(total, 2000u) << name;
+    }
+}
+
+// Hexahedra, wedges and pyramids with planar faces (unjittered grids; with tetrahedra
+// too) are left by their faces' crossings decided together: each walk step must pair
+// bitwise the crossings (t and face parameters, as the segments' seeds give them) that
+// the cell's faces crossed one by one give (a filter of every cell), for random rays and
+// for rays through grid vertices, along grid lines and in grid planes, where edge signs
+// tie. (The segments' ends may differ: the walk never steps back in t.)
+TEST(BrickTraverser, PlanarCellsAreLeftAsTheirFacesCrossingsPair) {
+    struct Grid {
+        std::string name;
+        int n;
+        Mesh mesh;
+    };
+    std::vector<Grid> meshes;
+    meshes.push_back(
+        {"hexes", 5, GridMesh(5, 0.0, [](int, int, int) { return CubeCut::Hex; })});
+    meshes.push_back(
+        {"wedges", 5, GridMesh(5, 0.0, [](int, int, int) { return CubeCut::Wedges; })});
+    meshes.push_back({"pyramids", 4,
+                      GridMesh(4, 0.0, [](int, int, int) { return CubeCut::Pyramids; })});
+    meshes.push_back({"mixed", 6, GridMesh(6, 0.0, [](int a, int b, int c) {
+                          switch ((a + 2 * b + c) % 4) {
+                              case 0:
+                                  return CubeCut::Hex;
+                              case 1:
+                                  return CubeCut::Wedges;
+                              case 2:
+                                  return CubeCut::Pyramids;
+                              default:
+                                  return CubeCut::PyramidsTetsZ;
+                          }
+                      })});
+    const auto same = [](double a, double b) {
+        return std::memcmp(&a, &b, sizeof a) == 0;
+    };
+    for (const auto& [name, n, mesh] : meshes) {
+        const BrickTraverser tr(Brick::WholeMesh(mesh));
+        ASSERT_EQ(tr.Stats().bilinearFaces, 0) << name;
+        // The grid's coordinates as GridMesh computes them.
+        const auto grid = [n = n](int k) { return k % (n + 1) * (1.0 / n); };
+        const auto filter =
+            tr.MakeCellFilter(std::vector<std::uint8_t>(mesh.CellCount(), 1));
+        std::mt19937_64 rng(53);
+        std::uniform_real_distribution<double> uni(0, 1);
+        std::vector<Segment> segs, filtered;
+        std::vector<SegmentSeed> seeds, filteredSeeds;
+        std::size_t total = 0;
+        for (int i = 0; i < 4000; ++i) {
+            Vec3 through{uni(rng), uni(rng), uni(rng)};
+            Vec3 dir{uni(rng) - 0.5, uni(rng) - 0.5, uni(rng) - 0.5};
+            const int axis = i % 3, other = (axis + 1) % 3, third = (axis + 2) % 3;
+            switch ((i / 3) % 4) {
+                case 0:  // random
+                    break;
+                case 1:  // through a grid vertex
+                    for (int d = 0; d < 3; ++d) through[d] = grid(i / (7 + d));
+                    break;
+                case 2:  // along a grid line
+                    through[other] = grid(i);
+                    through[third] = grid(i / 7);
+                    dir = {0, 0, 0};
+                    dir[axis] = i % 2 ? 1 : -1;
+                    break;
+                default:  // in a grid plane
+                    through[axis] = grid(i);
+                    dir[axis] = 0;
+            }
+            const Ray ray = MakeRayDir(through, dir);
+            tr.Trace(ray, -INFINITY, INFINITY, segs, nullptr, &seeds);
+            tr.Trace(ray, -INFINITY, INFINITY, filtered, *filter, &filteredSeeds);
+            const std::string what = name + " ray " + std::to_string(i);
+            ASSERT_EQ(seeds.size(), segs.size()) << what;
+            ASSERT_EQ(filteredSeeds.size(), filtered.size()) << what;
+            // Each walk segment is a pair of the filter's, with the same crossings (the
+            // walk may drop a pair that it would step back in t for, and so may start
+            // the next one later: compare the crossings, not the segments' ends).
+            for (std::size_t k = 0; k < segs.size(); ++k) {
+                const SegmentSeed& a = seeds[k];
+                std::size_t j = 0;
+                while (j < filtered.size() && !(filtered[j].cell == segs[k].cell &&
+                                                same(filteredSeeds[j].tEnter, a.tEnter)))
+                    ++j;
+                ASSERT_LT(j, filtered.size()) << what << " segment " << k;
+                const SegmentSeed& b = filteredSeeds[j];
+                EXPECT_TRUE(same(a.tExit, b.tExit)) << what;
+                for (int d = 0; d < 3; ++d) {
+                    EXPECT_TRUE(same(a.enter[d], b.enter[d])) << what;
+                    EXPECT_TRUE(same(a.exit[d], b.exit[d])) << what;
+                }
+            }
+            total += segs.size();
+            if (::testing::Test::HasFailure()) return;
+        }
+        EXPECT_GT(total, 10000u) << name;
+        EXPECT_EQ(tr.Counters().walkFailures, 0) << name;
     }
 }
 
