@@ -306,13 +306,24 @@ void LegendreSeries::Antiderivative(LegendreSeries& r, bool withoutMean) const {
     // r_0 = (0 + h c_0) - q_1, r_1 = (0 + h c_0) - q_2 and r_j = (0 + q_{j-1}) - q_{j+1},
     // where q_k = h c_k / (2k + 1) for 1 <= k <= n and there is no q beyond n. The zeros
     // the sums start from are kept (0 + x turns a -0 into +0).
+    // Each q_k enters two sums: computed once (the divisions are most of the cost), and
+    // kept while the sums two terms on still need it.
     auto q = [&](int k) { return h * c[k] / (2 * k + 1); };
     const double h0 = 0.0 + h * (withoutMean ? 0.0 : c[0]);
-    out[0] = n >= 1 ? h0 - q(1) : h0;
-    out[1] = n >= 2 ? h0 - q(2) : h0;
+    double qLo = n >= 1 ? q(1) : 0, qHi = n >= 2 ? q(2) : 0;  // q_{j-1}, q_j for j = 2
+    out[0] = n >= 1 ? h0 - qLo : h0;
+    out[1] = n >= 2 ? h0 - qHi : h0;
     for (int j = 2; j <= n + 1; ++j) {
-        const double up = 0.0 + q(j - 1);
-        out[j] = j + 1 <= n ? up - q(j + 1) : up;
+        const double up = 0.0 + qLo;
+        double qNext = 0;
+        if (j + 1 <= n) {
+            qNext = q(j + 1);
+            out[j] = up - qNext;
+        } else {
+            out[j] = up;
+        }
+        qLo = qHi;
+        qHi = qNext;
     }
 }
 

@@ -207,6 +207,50 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
     return t;
 }
 
+#if defined(__AVX2__) && defined(__FMA__)
+/// ExpNegative's four lanes: exp(-x) of each lane of xv (see ExpNegative).
+inline __m256d ExpNegativeLanes(__m256d xv) {
+    constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
+                     kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
+    // 1 / k!, k = 0..13.
+    const double* kCoef = kInverseFactorial;
+    const __m256d big = _mm256_cmp_pd(xv, _mm256_set1_pd(708.0), _CMP_GT_OQ);
+    const __m256d y =
+        _mm256_sub_pd(_mm256_setzero_pd(), _mm256_min_pd(xv, _mm256_set1_pd(708.0)));
+    // k = round(y / ln 2) in the low bits of kd.
+    const __m256d kd =
+        _mm256_fmadd_pd(y, _mm256_set1_pd(kLog2e), _mm256_set1_pd(kShifter));
+    const __m256d k = _mm256_sub_pd(kd, _mm256_set1_pd(kShifter));
+    __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Hi), y);
+    r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Lo), r);
+    // The polynomial by Estrin's scheme (pairs, then pairs of pairs in r^2, r^4, r^8):
+    // four levels of multiply-adds instead of Horner's chain of thirteen, whose latency
+    // each series piece waited for.
+    auto pair = [&](int c) {
+        return _mm256_fmadd_pd(_mm256_set1_pd(kCoef[c + 1]), r, _mm256_set1_pd(kCoef[c]));
+    };
+    const __m256d r2 = _mm256_mul_pd(r, r), r4 = _mm256_mul_pd(r2, r2),
+                  r8 = _mm256_mul_pd(r4, r4);
+    const __m256d s0 = _mm256_fmadd_pd(pair(2), r2, pair(0));
+    const __m256d s1 = _mm256_fmadd_pd(pair(6), r2, pair(4));
+    const __m256d s2 = _mm256_fmadd_pd(pair(10), r2, pair(8));
+    const __m256d s3 = pair(12);
+    const __m256d u0 = _mm256_fmadd_pd(s1, r4, s0), u1 = _mm256_fmadd_pd(s3, r4, s2);
+    const __m256d poly = _mm256_fmadd_pd(u1, r8, u0);
+    // 2^k: (k + 1023) << 52, with k the integer in kd's low bits.
+    const __m256i ki = _mm256_sub_epi64(_mm256_castpd_si256(kd),
+                                        _mm256_castpd_si256(_mm256_set1_pd(kShifter)));
+    const __m256i bits =
+        _mm256_slli_epi64(_mm256_add_epi64(ki, _mm256_set1_epi64x(1023)), 52);
+    const __m256d result = _mm256_mul_pd(poly, _mm256_castsi256_pd(bits));
+    return _mm256_andnot_pd(big, result);
+}
+
+inline void ExpNegative4(const double* in, double* result4) {
+    _mm256_storeu_pd(result4, ExpNegativeLanes(_mm256_loadu_pd(in)));
+}
+#endif
+
 }  // namespace
 
 // x = k ln 2 - r with |r| <= ln 2 / 2, e^-r by its Taylor polynomial of degree 13 (error
@@ -214,49 +258,14 @@ double MonotoneRoot(const LegendreSeries& p, double level, double lo, double hi,
 // available (all of them, the last partly filled: out[i] depends on x[i] alone, not on n
 // or i).
 void ExpNegative(const double* x, int n, double* out) {
-    constexpr double kLog2e = 1.4426950408889634074, kLn2Hi = 6.93147180369123816490e-01,
-                     kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0;
-    // 1 / k!, k = 0..13.
-    const double* kCoef = kInverseFactorial;
 #if defined(__AVX2__) && defined(__FMA__)
-    auto lanes = [&](const double* in, double* result4) {
-        const __m256d xv = _mm256_loadu_pd(in);
-        const __m256d big = _mm256_cmp_pd(xv, _mm256_set1_pd(708.0), _CMP_GT_OQ);
-        const __m256d y = _mm256_sub_pd(_mm256_setzero_pd(), _mm256_min_pd(xv, _mm256_set1_pd(708.0)));
-        // k = round(y / ln 2) in the low bits of kd.
-        const __m256d kd = _mm256_fmadd_pd(y, _mm256_set1_pd(kLog2e), _mm256_set1_pd(kShifter));
-        const __m256d k = _mm256_sub_pd(kd, _mm256_set1_pd(kShifter));
-        __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Hi), y);
-        r = _mm256_fnmadd_pd(k, _mm256_set1_pd(kLn2Lo), r);
-        // The polynomial by Estrin's scheme (pairs, then pairs of pairs in r^2, r^4,
-        // r^8): four levels of multiply-adds instead of Horner's chain of thirteen, whose
-        // latency each series piece waited for.
-        auto pair = [&](int c) {
-            return _mm256_fmadd_pd(_mm256_set1_pd(kCoef[c + 1]), r,
-                                   _mm256_set1_pd(kCoef[c]));
-        };
-        const __m256d r2 = _mm256_mul_pd(r, r), r4 = _mm256_mul_pd(r2, r2),
-                      r8 = _mm256_mul_pd(r4, r4);
-        const __m256d s0 = _mm256_fmadd_pd(pair(2), r2, pair(0));
-        const __m256d s1 = _mm256_fmadd_pd(pair(6), r2, pair(4));
-        const __m256d s2 = _mm256_fmadd_pd(pair(10), r2, pair(8));
-        const __m256d s3 = pair(12);
-        const __m256d u0 = _mm256_fmadd_pd(s1, r4, s0), u1 = _mm256_fmadd_pd(s3, r4, s2);
-        const __m256d poly = _mm256_fmadd_pd(u1, r8, u0);
-        // 2^k: (k + 1023) << 52, with k the integer in kd's low bits.
-        const __m256i ki = _mm256_sub_epi64(_mm256_castpd_si256(kd),
-                                            _mm256_castpd_si256(_mm256_set1_pd(kShifter)));
-        const __m256i bits = _mm256_slli_epi64(_mm256_add_epi64(ki, _mm256_set1_epi64x(1023)), 52);
-        const __m256d result = _mm256_mul_pd(poly, _mm256_castsi256_pd(bits));
-        _mm256_storeu_pd(result4, _mm256_andnot_pd(big, result));
-    };
     int i = 0;
-    for (; i + 4 <= n; i += 4) lanes(x + i, out + i);
+    for (; i + 4 <= n; i += 4) ExpNegative4(x + i, out + i);
     if (i < n) {
         // The last n % 4 through the same lanes: each value independent of its position.
         alignas(32) double in4[4] = {0, 0, 0, 0}, out4[4];
         for (int k = i; k < n; ++k) in4[k - i] = x[k];
-        lanes(in4, out4);
+        ExpNegative4(in4, out4);
         for (int k = i; k < n; ++k) out[k] = out4[k - i];
     }
 #else
@@ -1324,8 +1333,12 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         }
         tauM = ae + be * ue.c[0];
         // Pieces follow each other along the segment: the last end is this start.
-        v0 = p0 == depthLineT_ ? depthLineV_ : depthLine_.At(p0);
-        v1 = depthLine_.At(p1);
+        if (p0 == depthLineT_) {
+            v0 = depthLineV_;
+            v1 = depthLine_.At(p1);
+        } else {
+            AtTwo(depthLine_, p0, p1, v0, v1);
+        }
         depthLineT_ = p1;
         depthLineV_ = v1;
     }
@@ -1356,12 +1369,6 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
     double tauMin = std::numeric_limits<double>::infinity();
     if (needQ || needJ) {
         const double budgetPerLength = 0.5 * s.tolerance / pathLength_;
-        stack_.clear();
-        stack_.push_back({p0, p1, 0, kStartLevel});
-        int evaluations = 0;
-        // The integrands at the nodes of the interval last evaluated: the first `cached`
-        // nested nodes of [cachedLo, cachedHi]. A rung climbed on the same interval (the
-        // next work item) evaluates only the nodes its rule adds.
         const NestedQuadratureRules& rules = kQuadratureRules;
         // Padded to whole blocks of eight: a rung's nodes end at 2^r - 1 <= 31 and its
         // new ones start at 0, 7 or 15, so the blocks from any rung's first new node fit.
@@ -1369,104 +1376,180 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         static_assert(kNodes % 8 == 0);
         alignas(32) double nodeT[kNodes], nodeU[kNodes], nodeE[kNodes], nodeDepth[kNodes],
             att[kNodes], gq[kNodes];
-        double cachedLo = 0, cachedHi = 0;
-        int cached = 0;
-        while (!stack_.empty()) {
-            const Work w = stack_.back();
-            stack_.pop_back();
-            ++evaluations;
-            const int n = NestedQuadratureRules::Size(w.level + 1);
-            const double half = 0.5 * (w.hi - w.lo), m = 0.5 * (w.lo + w.hi);
-            if (cached == 0 || w.lo != cachedLo || w.hi != cachedHi) {
-                cached = 0;
-                cachedLo = w.lo;
-                cachedHi = w.hi;
+        double* ueAt = fe == 0 ? nodeU : nodeE;
+        // The integrands at nodes first..n-1 of the interval of midpoint m and half-width
+        // half. Inlined into both of its uses below, so that the first rung's (nodes
+        // 0..6, known at compile time) runs as straight-line code.
+        auto evaluate = [&](int first, int n, double m, double half)
+            __attribute__((always_inline)) {
+            const int count = n - first;
+            for (int i = first; i < n; ++i) nodeT[i] = m + half * rules.nodes[i];
+            // Whole blocks of eight in place (the arrays are padded; what lies past the
+            // rule's nodes is not read, and the next rung overwrites it).
+            const int whole = (count + 7) / 8 * 8;
+            for (int i = first + count; i < first + whole; ++i) nodeT[i] = m;
+            // The vectorised evaluations where the build has them (bitwise the same).
+            auto many = [&](const LegendreSeries& p, double* out) {
+                if (!EvalManyKernelWhole(p, nodeT + first, whole, out))
+                    p.EvalMany(nodeT + first, count, out);
+            };
+            auto pair = [&](const LegendreSeries& p, double* outP) {
+                if (!EvalPairKernelWhole(p, depthLine_, nodeT + first, whole, outP,
+                                         nodeDepth + first))
+                    EvalPair(p, depthLine_, nodeT + first, count, outP,
+                             nodeDepth + first);
+            };
+            if (be == 0) {
+                many(uc, nodeU + first);
+            } else if (fe == 0) {
+                pair(uc, nodeU + first);
+            } else {
+                many(uc, nodeU + first);
+                pair(ue, nodeE + first);
             }
-            if (cached < n) {
-                const int first = cached, count = n - cached;
-                for (int i = first; i < n; ++i) nodeT[i] = m + half * rules.nodes[i];
-                // Whole blocks of eight in place (the arrays are padded; what lies past
-                // the rule's nodes is not read, and the next rung overwrites it).
-                const int whole = (count + 7) / 8 * 8;
-                for (int i = first + count; i < first + whole; ++i) nodeT[i] = m;
-                double* ueAt = fe == 0 ? nodeU : nodeE;
-                // The vectorised evaluations where the build has them (bitwise the same).
-                auto many = [&](const LegendreSeries& p, double* out) {
-                    if (!EvalManyKernelWhole(p, nodeT + first, whole, out))
-                        p.EvalMany(nodeT + first, count, out);
-                };
-                auto pair = [&](const LegendreSeries& p, double* outP) {
-                    if (!EvalPairKernelWhole(p, depthLine_, nodeT + first, whole, outP,
-                                             nodeDepth + first))
-                        EvalPair(p, depthLine_, nodeT + first, count, outP,
-                                 nodeDepth + first);
-                };
-                if (be == 0) {
-                    many(uc, nodeU + first);
-                } else if (fe == 0) {
-                    pair(uc, nodeU + first);
-                } else {
-                    many(uc, nodeU + first);
-                    pair(ue, nodeE + first);
-                }
-                quadratureNodes_ += count;
-                for (int i = first; i < n; ++i) {
-                    const double dt = nodeT[i] - p0;
-                    att[i] = std::max(
-                        0.0, be != 0 ? tauM * dt + be * (nodeDepth[i] - v0) : tauM * dt);
-                }
-                // Whole vectors of four (the arrays are padded; the filler's results
-                // are not read): the same lanes, without a partial one's copies.
-                const int padded = (count + 3) / 4 * 4;
-                for (int i = first + count; i < first + padded; ++i) att[i] = 0;
-                ExpNegative(att + first, padded, att + first);
-                for (int i = first; i < n; ++i) {
-                    const double tau = be != 0 ? ae + be * ueAt[i] : ae;
-                    tauMin = std::min(tauMin, tau);
-                    gq[i] = (nodeU[i] - c0) * (wm ? tau : 1.0) * att[i];
-                }
-                cached = n;
+            quadratureNodes_ += count;
+            // Whole vectors of four (the arrays are padded; the filler's results are not
+            // read).
+            const int padded = (count + 3) / 4 * 4;
+#if defined(__AVX2__) && defined(__FMA__)
+            // The scalar loops' operations lane by lane (std::max(0.0, x) is MAXPD(x, 0):
+            // 0 where x is NaN or -0 too). The filler lanes are the nodes' midpoint m
+            // (nodeT above) and its evaluations: finite, and not read.
+            alignas(32) double tauAt[kNodes];
+            const __m256d vp0 = _mm256_set1_pd(p0), vv0 = _mm256_set1_pd(v0),
+                          vTauM = _mm256_set1_pd(tauM), vae = _mm256_set1_pd(ae),
+                          vbe = _mm256_set1_pd(be), vc0 = _mm256_set1_pd(c0);
+            for (int i = first; i < first + padded; i += 4) {
+                const __m256d dt = _mm256_sub_pd(_mm256_loadu_pd(nodeT + i), vp0);
+                __m256d phi = _mm256_mul_pd(vTauM, dt);
+                if (be != 0)
+                    phi = _mm256_add_pd(
+                        phi,
+                        _mm256_mul_pd(
+                            vbe, _mm256_sub_pd(_mm256_loadu_pd(nodeDepth + i), vv0)));
+                const __m256d a =
+                    ExpNegativeLanes(_mm256_max_pd(phi, _mm256_setzero_pd()));
+                const __m256d tau =
+                    be != 0 ? _mm256_add_pd(vae,
+                                            _mm256_mul_pd(vbe, _mm256_loadu_pd(ueAt + i)))
+                            : vae;
+                __m256d g = _mm256_sub_pd(_mm256_loadu_pd(nodeU + i), vc0);
+                if (wm) g = _mm256_mul_pd(g, tau);
+                _mm256_storeu_pd(att + i, a);
+                _mm256_storeu_pd(gq + i, _mm256_mul_pd(g, a));
+                _mm256_storeu_pd(tauAt + i, tau);
             }
-            // Rung w.level: the result by rule L, its error estimated by rule L + 1.
-            const double* lower = rules.weights[w.level].data();
-            const double* upper = rules.weights[w.level + 1].data();
-            const int nLower = NestedQuadratureRules::Size(w.level);
-            double qK = 0, qG = 0, jK = 0, jG = 0, qAbs = 0;
+            for (int i = first; i < n; ++i) tauMin = std::min(tauMin, tauAt[i]);
+#else
+            for (int i = first; i < n; ++i) {
+                const double dt = nodeT[i] - p0;
+                att[i] = std::max(
+                    0.0, be != 0 ? tauM * dt + be * (nodeDepth[i] - v0) : tauM * dt);
+            }
+            for (int i = first + count; i < first + padded; ++i) att[i] = 0;
+            ExpNegative(att + first, padded, att + first);
+            for (int i = first; i < n; ++i) {
+                const double tau = be != 0 ? ae + be * ueAt[i] : ae;
+                tauMin = std::min(tauMin, tau);
+                gq[i] = (nodeU[i] - c0) * (wm ? tau : 1.0) * att[i];
+            }
+#endif
+        };
+        // Rung `level` on an interval of half-width half: the result by rule L, its error
+        // estimated by rule L + 1.
+        struct Rung {
+            double qK, qG, jK, jG, qAbs, sQ, sJ, estimate;
+        };
+        auto rung = [&](int level, double half) __attribute__((always_inline)) {
+            const double* lower = rules.weights[level].data();
+            const double* upper = rules.weights[level + 1].data();
+            const int nLower = NestedQuadratureRules::Size(level);
+            const int n = NestedQuadratureRules::Size(level + 1);
+            Rung r{0, 0, 0, 0, 0, 0, 0, 0};
             for (int i = 0; i < nLower; ++i) {
-                qG += lower[i] * gq[i];
-                jG += lower[i] * att[i];
+                r.qG += lower[i] * gq[i];
+                r.jG += lower[i] * att[i];
             }
             for (int i = 0; i < n; ++i) {
-                qK += upper[i] * gq[i];
-                qAbs += upper[i] * std::abs(gq[i]);
-                jK += upper[i] * att[i];
+                r.qK += upper[i] * gq[i];
+                r.qAbs += upper[i] * std::abs(gq[i]);
+                r.jK += upper[i] * att[i];
             }
-            const double jAbs = jK;
-            const double sQ = half * (qK - qG), sJ = half * (jK - jG);
-            const double estimate =
-                T * (1 + kKronrodMargin) * (wQmax * std::abs(sQ) + wJmax * std::abs(sJ));
-            const double allowed = budgetPerLength * (w.hi - w.lo);
-            if (estimate > allowed && w.depth < kMaxKronrodDepth &&
-                evaluations < kMaxKronrodEvaluations) {
-                if (w.level < kTopLevel) {
-                    // Far from the budget: skip a rung.
-                    const int step = estimate > 1e6 * allowed ? 2 : 1;
-                    stack_.push_back({w.lo, w.hi, w.depth, std::min(kTopLevel, w.level + step)});
-                } else {
-                    stack_.push_back({m, w.hi, w.depth + 1, kTopLevel - 1});
-                    stack_.push_back({w.lo, m, w.depth + 1, kTopLevel - 1});
-                }
-                continue;
-            }
+            r.sQ = half * (r.qK - r.qG);
+            r.sJ = half * (r.jK - r.jG);
+            r.estimate = T * (1 + kKronrodMargin) *
+                         (wQmax * std::abs(r.sQ) + wJmax * std::abs(r.sJ));
+            return r;
+        };
+        auto accept = [&](const Rung& r, double half) __attribute__((always_inline)) {
+            const double jAbs = r.jK;
             ++kronrodIntervals_;
-            Q += half * qG;
-            J += half * jG;
-            sigQ += sQ;
-            sigJ += sJ;
-            absQ += std::abs(sQ);
-            absJ += std::abs(sJ);
-            magQ += half * qAbs;
+            Q += half * r.qG;
+            J += half * r.jG;
+            sigQ += r.sQ;
+            sigJ += r.sJ;
+            absQ += std::abs(r.sQ);
+            absJ += std::abs(r.sJ);
+            magQ += half * r.qAbs;
             magJ += half * jAbs;
+        };
+        // An interval not accepted: the next rung on it (two if far from the budget), or
+        // above the top rung its halves.
+        auto climb = [&](const Work& w, double estimate, double allowed) {
+            if (w.level < kTopLevel) {
+                const int step = estimate > 1e6 * allowed ? 2 : 1;
+                stack_.push_back(
+                    {w.lo, w.hi, w.depth, std::min(kTopLevel, w.level + step)});
+            } else {
+                const double m = 0.5 * (w.lo + w.hi);
+                stack_.push_back({m, w.hi, w.depth + 1, kTopLevel - 1});
+                stack_.push_back({w.lo, m, w.depth + 1, kTopLevel - 1});
+            }
+        };
+        // The piece itself on the first rung, which most pieces stop at: the work stack
+        // and the node cache below only where it climbs or bisects.
+        constexpr int kFirstNodes = NestedQuadratureRules::Size(kStartLevel + 1);
+        const double half = 0.5 * (p1 - p0), m = 0.5 * (p0 + p1);
+        evaluate(0, kFirstNodes, m, half);
+        const Rung first = rung(kStartLevel, half);
+        const double allowed = budgetPerLength * (p1 - p0);
+        // The first work item is within the caps of depth and evaluations.
+        static_assert(0 < kMaxKronrodDepth && 1 < kMaxKronrodEvaluations);
+        if (!(first.estimate > allowed)) {
+            accept(first, half);
+        } else {
+            stack_.clear();
+            climb({p0, p1, 0, kStartLevel}, first.estimate, allowed);
+            // The integrands at the nodes of the interval last evaluated: the first
+            // `cached` nested nodes of [cachedLo, cachedHi]. A rung climbed on the same
+            // interval (the next work item) evaluates only the nodes its rule adds.
+            double cachedLo = p0, cachedHi = p1;
+            int cached = kFirstNodes;
+            int evaluations = 1;
+            while (!stack_.empty()) {
+                const Work w = stack_.back();
+                stack_.pop_back();
+                ++evaluations;
+                const int n = NestedQuadratureRules::Size(w.level + 1);
+                const double wHalf = 0.5 * (w.hi - w.lo), wMid = 0.5 * (w.lo + w.hi);
+                if (cached == 0 || w.lo != cachedLo || w.hi != cachedHi) {
+                    cached = 0;
+                    cachedLo = w.lo;
+                    cachedHi = w.hi;
+                }
+                if (cached < n) {
+                    evaluate(cached, n, wMid, wHalf);
+                    cached = n;
+                }
+                const Rung r = rung(w.level, wHalf);
+                const double wAllowed = budgetPerLength * (w.hi - w.lo);
+                if (r.estimate > wAllowed && w.depth < kMaxKronrodDepth &&
+                    evaluations < kMaxKronrodEvaluations) {
+                    climb(w, r.estimate, wAllowed);
+                    continue;
+                }
+                accept(r, wHalf);
+            }
         }
     }
     if (!wm && !needJ) {

@@ -54,6 +54,75 @@ TEST(SeriesEvalKernel, BitwiseTheGenericEvaluations) {
     EXPECT_GT(compared, 30000);
 }
 
+// The whole-block kernels of the volume pieces, whose low degrees (a series and its
+// antiderivative, one degree higher) run with their degrees known at compile time:
+// bitwise EvalPair and EvalMany at every degree around those, and at random ones.
+TEST(SeriesEvalKernel, WholeBlocksAtEveryLowDegreeAreTheGenericEvaluations) {
+#if !(defined(__AVX2__) && defined(__FMA__))
+    GTEST_SKIP() << "the kernels are built with AVX2 and FMA only";
+#endif
+    int compared = 0;
+    for (int seed = 0; seed < 600; ++seed) {
+        std::mt19937_64 rng(seed);
+        std::uniform_real_distribution<double> u(-1, 1);
+        LegendreSeries p, q;
+        p.a = q.a = 3 * u(rng);
+        p.b = q.b = p.a + 1e-3 + std::abs(u(rng));
+        // Degrees 0..7 in turn with the antiderivative's one above (the specialised
+        // pairs and their neighbours), then random pairs.
+        const int np = seed < 400 ? seed % 8 : int(rng() % 30);
+        const int nq = seed < 200   ? np + 1
+                       : seed < 400 ? np + int(rng() % 3)
+                                    : int(rng() % 30);
+        p.c.resize(np + 1);
+        q.c.resize(nq + 1);
+        for (double& c : p.c) c = u(rng);
+        for (double& c : q.c) c = u(rng) * 1e3;
+        if (seed % 7 == 3) p.c.back() = -0.0;
+        const int count = 8 * (1 + seed % 4);
+        std::vector<double> t(count);
+        for (double& v : t) v = p.a + (p.b - p.a) * (0.5 + 0.55 * u(rng));
+        std::vector<double> gp(count), gq(count), gm(count), kp(count, 7), kq(count, 7),
+            km(count, 7);
+        EvalPair(p, q, t.data(), count, gp.data(), gq.data());
+        p.EvalMany(t.data(), count, gm.data());
+        ASSERT_TRUE(EvalPairKernelWhole(p, q, t.data(), count, kp.data(), kq.data()));
+        ASSERT_TRUE(EvalManyKernelWhole(p, t.data(), count, km.data()));
+        for (int s = 0; s < count; ++s) {
+            ASSERT_TRUE(SameBits(gp[s], kp[s]))
+                << seed << " " << np << " " << nq << " " << s;
+            ASSERT_TRUE(SameBits(gq[s], kq[s]))
+                << seed << " " << np << " " << nq << " " << s;
+            ASSERT_TRUE(SameBits(gm[s], km[s])) << seed << " " << np << " " << s;
+            ++compared;
+        }
+    }
+    EXPECT_GT(compared, 10000);
+}
+
+// Two points in the lanes of one vector: bitwise LegendreSeries::At at each.
+TEST(SeriesEvalKernel, AtTwoIsAtAtEachPoint) {
+    int compared = 0;
+    for (int seed = 0; seed < 1000; ++seed) {
+        std::mt19937_64 rng(seed);
+        std::uniform_real_distribution<double> u(-1, 1);
+        LegendreSeries p;
+        p.a = 3 * u(rng);
+        p.b = p.a + 1e-3 + std::abs(u(rng));
+        p.c.resize(1 + seed % 41);
+        for (double& c : p.c) c = u(rng) * (seed % 5 == 0 ? 1e-3 : 1.0);
+        const double t0 = p.a + (p.b - p.a) * (0.5 + 0.55 * u(rng));
+        const double t1 = seed % 9 == 0 ? t0 : p.a + (p.b - p.a) * (0.5 + 0.55 * u(rng));
+        double v0 = 7, v1 = 7;
+        AtTwo(p, t0, t1, v0, v1);
+        ASSERT_TRUE(SameBits(v0, p.At(t0))) << seed;
+        ASSERT_TRUE(SameBits(v1, p.At(t1))) << seed;
+        ASSERT_TRUE(SameBits(v0, p(t0))) << seed;
+        ++compared;
+    }
+    EXPECT_EQ(compared, 1000);
+}
+
 TEST(SeriesEvalKernel, RefusesSeriesOnDifferentIntervals) {
     LegendreSeries p, q;
     p.c = {1, 2};
