@@ -6,6 +6,7 @@
 #endif
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -97,13 +98,22 @@ LglRule BuildRule(int n) {
 
 }  // namespace
 
-const LglRule& LglNodes(int n) {
+namespace detail {
+std::atomic<const LglRule*> lglBuilt[kMaxLegendreDegree + 1];
+
+const LglRule& BuildLglNodes(int n) {
     HPRAY_CHECK(n >= 1 && n <= kMaxLegendreDegree);
     static std::once_flag flags[kMaxLegendreDegree + 1];
     static std::unique_ptr<LglRule> rules[kMaxLegendreDegree + 1];
-    std::call_once(flags[n], [n] { rules[n] = std::make_unique<LglRule>(BuildRule(n)); });
+    // Published for LglNodes' lookup once built (std::call_once sets thread-locals and
+    // calls pthread_once on every call: not for the per-segment path).
+    std::call_once(flags[n], [n] {
+        rules[n] = std::make_unique<LglRule>(BuildRule(n));
+        lglBuilt[n].store(rules[n].get(), std::memory_order_release);
+    });
     return *rules[n];
 }
+}  // namespace detail
 
 namespace {}  // namespace
 

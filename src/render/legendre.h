@@ -1,6 +1,7 @@
 // Legendre series on an interval: Legendre–Gauss–Lobatto nodes, interpolation, evaluation.
 #pragma once
 
+#include <atomic>
 #include <cmath>
 #include <vector>
 
@@ -24,7 +25,17 @@ struct LglRule {
     int transformStride = 0;
 };
 inline constexpr int kMaxLegendreDegree = 64;
-const LglRule& LglNodes(int n);
+namespace detail {
+/// The rules built so far (null: not yet), and the call that builds one.
+extern std::atomic<const LglRule*> lglBuilt[kMaxLegendreDegree + 1];
+const LglRule& BuildLglNodes(int n);
+}  // namespace detail
+/// Looked up for every exact series of a segment: once built, one acquire load.
+inline const LglRule& LglNodes(int n) {
+    HPRAY_CHECK(n >= 1 && n <= kMaxLegendreDegree);
+    if (const LglRule* r = detail::lglBuilt[n].load(std::memory_order_acquire)) return *r;
+    return detail::BuildLglNodes(n);
+}
 
 /// The three-term recurrence P_k = a[k] x P_{k-1} - b[k] P_{k-2} with a[k] = (2k - 1) / k
 /// and b[k] = (k - 1) / k as products (no division per term): the one table of every

@@ -677,7 +677,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         }
         SegmentField& sf = field_[f];
         truncated_[f] = unresolved_[f] = 0;
-        sampleV_[f].clear();
+        sampleCount_[f] = 0;
         // The exact series' coefficients keep their storage for the next segment's.
         if (!pieces_[f].empty() &&
             pieces_[f][0].p.c.capacity() > spareCoefficients_[f].capacity())
@@ -774,12 +774,12 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
                                     const Segment& seg) {
     const VolumeSetup& s = *setup_;
     SegmentField& sf = field_[f];
-    ProjectionOptions projection = s.projection;
-    projection.scaleFloor = s.fieldScale[f];
-    projection.exactDegree = sf.LineDegree();
     int n = std::min(sf.LineDegree(), kMaxLegendreDegree);
-    if (projection.startDegree == projection.maxDegree || n < 1) {
+    if (s.projection.startDegree == s.projection.maxDegree || n < 1) {
         // A pinned projection order (order studies): as the isosurfaces do.
+        ProjectionOptions projection = s.projection;
+        projection.scaleFloor = s.fieldScale[f];
+        projection.exactDegree = sf.LineDegree();
         projectionStats_ = ProjectionStats{};
         ProjectSegment(sf, seg.tEnter, seg.tExit, projection, pieces_[f],
                        projectionStats_, scratch_);
@@ -874,31 +874,29 @@ void VolumeRayMarcher::ProjectExact(int f, const MeshGeometry& geometry,
     // The interpolant at the n + 1 Legendre-Gauss-Lobatto nodes, sampled together.
     const LglRule& rule = LglNodes(n);
     const double mid = 0.5 * (seg.tEnter + seg.tExit), half = 0.5 * (seg.tExit - seg.tEnter);
-    scratch_.resize(2 * (n + 1));
-    double* ts = scratch_.data() + n + 1;
+    double* values = samples_[f];
+    double* ts = values + n + 1;
     for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
     bool sampled = false;
     if (hexKernel) {
         const FieldCellData& data = *s.data[f];
-        sampled = SampleAffineHexLine(cell.basis->order,
-                                      data.values.data() + data.mesh->cellOffsets[seg.cell],
-                                      ref0, dref, ts, n + 1, scratch_.data());
+        sampled = SampleAffineHexLine(
+            cell.basis->order, data.values.data() + data.mesh->cellOffsets[seg.cell],
+            ref0, dref, ts, n + 1, values);
         if (sampled) fieldSamples_ += n + 1;
     }
-    if (!sampled) sf.SampleBatch(ts, n + 1, scratch_.data());
+    if (!sampled) sf.SampleBatch(ts, n + 1, values);
     SeriesFromSamples(f, seg, n);
 }
 
 void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
-    const double* ts = scratch_.data() + n + 1;
+    const double* values = samples_[f];
     double scale = 0;
-    for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(scratch_[i]));
-    sampleT_.assign(ts, ts + n + 1);
-    sampleV_[f].assign(scratch_.data(), scratch_.data() + n + 1);
-    pieces_[f].resize(1);
-    ProjectedPiece& piece = pieces_[f][0];
+    for (int i = 0; i <= n; ++i) scale = std::max(scale, std::abs(values[i]));
+    sampleCount_[f] = n + 1;
+    ProjectedPiece& piece = OnlyPiece(f);
     std::swap(piece.p.c, spareCoefficients_[f]);
-    InterpolateLgl(scratch_.data(), n, seg.tEnter, seg.tExit, piece.p);
+    InterpolateLgl(values, n, seg.tEnter, seg.tExit, piece.p);
     // As ProjectSegment's exact projection: rounding in the samples and the transform.
     piece.eps = 64 * (n + 1) * kEps * scale;
     piece.converged = true;
@@ -909,54 +907,59 @@ void VolumeRayMarcher::SeriesFromSamples(int f, const Segment& seg, int n) {
     DropNoiseTail(f, seg, piece.p.c);
 }
 
-void VolumeRayMarcher::DropNoiseTail(int f, const Segment& seg, std::vector<double>& c) {
+int VolumeRayMarcher::KeptCoefficients(int f, const Segment& seg, const double* c,
+                                       int size) {
     const Interval& range = (*setup_->ranges[f])[seg.cell];
     const double noise =
         kTruncation * kEps * std::max(std::abs(range.lo), std::abs(range.hi));
     double dropped = 0;
-    while (c.size() > 2 && dropped + std::abs(c.back()) <= noise) {
-        dropped += std::abs(c.back());
-        c.pop_back();
+    while (size > 2 && dropped + std::abs(c[size - 1]) <= noise) {
+        dropped += std::abs(c[size - 1]);
+        --size;
     }
     truncated_[f] = dropped;
+    return size;
+}
+
+void VolumeRayMarcher::DropNoiseTail(int f, const Segment& seg, std::vector<double>& c) {
+    c.resize(std::size_t(KeptCoefficients(f, seg, c.data(), int(c.size()))));
 }
 
 void VolumeRayMarcher::SeriesFromPolynomial(int f, const Segment& seg, int n,
                                             const double* mono, double magnitude) {
     // x^2 = (2 P2 + P0) / 3 and x^3 = (2 P3 + 3 P1) / 5: the Legendre coefficients.
     const double m2 = n >= 2 ? mono[2] : 0.0, m3 = n >= 3 ? mono[3] : 0.0;
-    pieces_[f].resize(1);
-    ProjectedPiece& piece = pieces_[f][0];
+    ProjectedPiece& piece = OnlyPiece(f);
     std::swap(piece.p.c, spareCoefficients_[f]);
     piece.p.a = seg.tEnter;
     piece.p.b = seg.tExit;
-    std::vector<double>& c = piece.p.c;
-    c.resize(n + 1);
-    c[0] = mono[0] + m2 / 3;
-    c[1] = mono[1] + 0.6 * m3;
-    if (n >= 2) c[2] = (2.0 / 3.0) * m2;
-    if (n >= 3) c[3] = 0.4 * m3;
+    const double coefficients[4] = {mono[0] + m2 / 3, mono[1] + 0.6 * m3,
+                                    n >= 2 ? (2.0 / 3.0) * m2 : 0.0,
+                                    n >= 3 ? 0.4 * m3 : 0.0};
     // The values at the Legendre-Gauss-Lobatto nodes of degree n, where the sampled
     // series has its samples (SeriesCrossings brackets crossings between them).
     const LglRule& rule = LglNodes(n);
     const double mid = 0.5 * (seg.tEnter + seg.tExit),
                  half = 0.5 * (seg.tExit - seg.tEnter);
-    sampleT_.resize(n + 1);
-    sampleV_[f].resize(n + 1);
+    double* values = samples_[f];
+    double* ts = values + n + 1;
+    sampleCount_[f] = n + 1;
     double scale = magnitude;
     for (int i = 0; i <= n; ++i) {
         const double x = rule.nodes[i];
         double v = mono[n];
         for (int k = n - 1; k >= 0; --k) v = v * x + mono[k];
-        sampleT_[i] = mid + half * x;
-        sampleV_[f][i] = v;
+        ts[i] = mid + half * x;
+        values[i] = v;
         scale = std::max(scale, std::abs(v));
     }
     // Every term of the sum factorisation and of the conversion is at most the largest
     // nodal value: the same bound as the sampled series' rounding.
     piece.eps = 64 * (n + 1) * kEps * scale;
     piece.converged = true;
-    DropNoiseTail(f, seg, c);
+    // As DropNoiseTail, on the local coefficients: only those kept are stored.
+    piece.p.c.assign(coefficients,
+                     coefficients + KeptCoefficients(f, seg, coefficients, n + 1));
 }
 
 bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
@@ -995,10 +998,9 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
     const LglRule& rule = LglNodes(n);
     const double mid = 0.5 * (seg.tEnter + seg.tExit),
                  half = 0.5 * (seg.tExit - seg.tEnter);
-    scratch_.resize(2 * (n + 1));
-    double* ts = scratch_.data() + n + 1;
+    double* ts = samples_[f] + n + 1;
     for (int i = 0; i <= n; ++i) ts[i] = mid + half * rule.nodes[i];
-    field_[f].SampleBatch(ts, n + 1, scratch_.data());
+    field_[f].SampleBatch(ts, n + 1, samples_[f]);
     SeriesFromSamples(f, seg, n);
     pieces_[f][0].eps += miss;
     unresolved_[f] = miss;
@@ -1077,8 +1079,20 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
     const std::vector<double>& ascending =
         f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
                : s.extinctionTf.Scalars();
+    // Those in (lo, hi) run from the first one > lo to the last one < hi: counted where
+    // the list is short (often there are none).
+    std::size_t first = 0, last = ascending.size();
+    const ShortAscending& few =
+        f == 0 ? (s.sameField ? s.shortBreakpoints : s.colorTf.ShortScalars())
+               : s.extinctionTf.ShortScalars();
+    if (few.valid && range.lo <= range.hi) {
+        first = std::size_t(few.CountAtMost(range.lo));
+        last = std::size_t(few.CountBelow(range.hi));
+        if (first >= last) return;
+    }
     levels_.clear();
-    for (const double b : ascending) {
+    for (std::size_t i = first; i < last; ++i) {
+        const double b = ascending[i];
         if (!(b < range.hi)) break;
         if (b > range.lo && (levels_.empty() || levels_.back() != b))
             levels_.push_back(b);
@@ -1104,7 +1118,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
             std::max(s.roots.rootTolerance * (seg.tExit - seg.tEnter),
                      4 * kEps * std::max(std::abs(seg.tEnter), std::abs(seg.tExit)));
         SeriesCrossings(pieces_[f][0].p, levels_.data(), int(levels_.size()), tol,
-                        sampleT_.data(), sampleV_[f].data(), int(sampleV_[f].size()),
+                        samples_[f] + sampleCount_[f], samples_[f], sampleCount_[f],
                         scratch_, points_, derivative_, crossings_);
         return;
     }

@@ -341,8 +341,11 @@ class VolumeRayMarcher {
     /// level of its rounding (kTruncation eps of the cell's largest |value|), keeping
     /// their sum in truncated_[f].
     void DropNoiseTail(int f, const Segment& seg, std::vector<double>& c);
+    /// How many of c[0..size) DropNoiseTail keeps (the sum of the others into
+    /// truncated_[f]).
+    int KeptCoefficients(int f, const Segment& seg, const double* c, int size);
     /// The series of field f on the segment from the values at the n + 1 Legendre-Gauss-
-    /// Lobatto nodes in scratch_ (values, then the nodes' t): pieces_[f], its rounding
+    /// Lobatto nodes in samples_[f] (values, then the nodes' t): pieces_[f], its rounding
     /// as eps, trailing coefficients below the noise dropped into truncated_[f].
     void SeriesFromSamples(int f, const Segment& seg, int n);
     /// A linear pyramid's field (SegmentField::RationalPole) as one series whose miss,
@@ -350,6 +353,15 @@ class VolumeRayMarcher {
     /// miss in its eps and unresolved_[f]. False (nothing set) where that needs a degree
     /// above kMaxRationalDegree.
     bool ProjectRational(int f, const Segment& seg, double gap, double residue);
+    /// pieces_[f] (empty when a segment begins) as one piece, for an exact series.
+    ProjectedPiece& OnlyPiece(int f) {
+        std::vector<ProjectedPiece>& pieces = pieces_[f];
+        if (pieces.empty())
+            pieces.emplace_back();
+        else
+            pieces.resize(1);
+        return pieces[0];
+    }
 
     const VolumeSetup* setup_ = nullptr;
     Ray ray_;
@@ -411,7 +423,11 @@ class VolumeRayMarcher {
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
     std::vector<double> levels_, points_;
-    std::vector<double> sampleT_, sampleV_[2];  ///< the exact series' samples
+    /// Per field, the exact series' samples: the values at [0, sampleCount_[f]), the
+    /// nodes' t after them. Fixed storage (degree <= kMaxLegendreDegree): written in
+    /// place by the sampling, read in place by SeriesCrossings, never resized.
+    double samples_[2][2 * (kMaxLegendreDegree + 1)];
+    int sampleCount_[2] = {0, 0};
     std::vector<double> bounds_;
     struct Work {
         double lo, hi;

@@ -1497,6 +1497,75 @@ TEST(VolumeLinearCells, LinearCellLineIsTheFieldAlongTheRay) {
 // The volume over linear hexahedra, whose field (the closed form along each ray) is the
 // trilinear interpolant of the grid values in each cube, written here independently,
 // against the ODE reference: the error bar holds and the tolerance is met.
+// Linear hexahedra, wedges and pyramids (the exact and rational series): their
+// breakpoint crossings, found among the breakpoints counted in the short list, are those
+// of the general scan of the whole list (the short list marked invalid): bitwise the same
+// pixels, errors and counters.
+TEST(VolumeLinearCells, ShortBreakpointListGivesTheGeneralScansCrossings) {
+    using testing::CubeCut;
+    for (const CubeCut cut : {CubeCut::Hex, CubeCut::Wedges, CubeCut::Pyramids}) {
+        Mesh mesh = testing::GridMesh(4, 0.0, [cut](int, int, int) { return cut; });
+        Field u{"u", Association::Point, 1, {}};
+        for (std::int64_t i = 0; i < mesh.PointCount(); ++i) {
+            const double* x = &mesh.points[3 * i];
+            u.values.push_back(x[0] + 2 * x[1] + 3 * x[2] +
+                               0.6 * std::sin(7 * x[0] * x[1]));
+        }
+        mesh.pointFields.push_back(std::move(u));
+        const MeshGeometry geometry = MeshGeometry::Build(mesh);
+        const BrickTraverser traverser(Brick::WholeMesh(mesh));
+        Scene scene = MakeScene(kLinearScene);
+        scene.volume->extinctionField = "u";
+        // Seven breakpoints in all (a short list), most inside the field's range.
+        scene.volume->extinctionTf = {{0.0, 0.3}, {2.2, 6.0}, {4.0, 2.0}};
+        const BrickSetup setup = MakeBrickSetup(mesh, geometry, traverser, scene);
+        ASSERT_TRUE(setup.volume.has_value());
+        ASSERT_TRUE(setup.volume->sameField);
+        ASSERT_TRUE(setup.volume->shortBreakpoints.valid);
+        VolumeSetup scan = *setup.volume;
+        scan.shortBreakpoints.valid = false;
+        const Camera camera(scene.camera);
+        VolumeRayMarcher counted, scanned;
+        RenderCounters countersA, countersB;
+        std::vector<Segment> segments;
+        int rays = 0;
+        for (int j = 0; j < 24; ++j)
+            for (int i = 0; i < 28; ++i) {
+                const CameraRay cr = camera.PixelRay(i, j);
+                Ray ray;
+                for (int d = 0; d < 3; ++d) {
+                    ray.origin[d] = cr.origin[d];
+                    ray.dir[d] = cr.direction[d];
+                }
+                traverser.Trace(ray, 0, 1e30, segments);
+                if (segments.empty()) continue;
+                ++rays;
+                double rgbaA[4] = {0, 0, 0, 0}, rgbaB[4] = {0, 0, 0, 0};
+                RayComposite a, b;
+                a.rgba = rgbaA;
+                b.rgba = rgbaB;
+                const double t0 = segments.front().tEnter, t1 = segments.back().tExit;
+                counted.BeginRay(*setup.volume, ray, t0, t1);
+                scanned.BeginRay(scan, ray, t0, t1);
+                bool stopA = false, stopB = false;
+                for (const Segment& seg : segments) {
+                    if (!stopA && counted.BeginSegment(mesh, geometry, seg, countersA))
+                        stopA = counted.Integrate(seg.tEnter, seg.tExit, a, countersA);
+                    if (!stopB && scanned.BeginSegment(mesh, geometry, seg, countersB))
+                        stopB = scanned.Integrate(seg.tEnter, seg.tExit, b, countersB);
+                }
+                EXPECT_EQ(stopA, stopB);
+                counted.FinishRay(a);
+                scanned.FinishRay(b);
+                for (int c = 0; c < 4; ++c) EXPECT_EQ(rgbaA[c], rgbaB[c]);
+                for (int c = 0; c < 3; ++c) EXPECT_EQ(a.error[c], b.error[c]);
+            }
+        EXPECT_GT(rays, 250);
+        EXPECT_EQ(countersA.fieldEvaluations, countersB.fieldEvaluations);
+        EXPECT_EQ(countersA.volumeNodes, countersB.volumeNodes);
+    }
+}
+
 TEST(VolumeLinearCells, TrilinearFieldAgainstTheOdeReference) {
     const int n = 3;
     Mesh mesh =
