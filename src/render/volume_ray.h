@@ -373,9 +373,6 @@ class VolumeRayMarcher {
     /// linear one), its bound of evaluation error, and the extinction field's
     /// antiderivative (built when first needed).
     LegendreSeries line_[2];
-    /// The series SeriesPiece reads for each field: pieces_[f][0].p where the field was
-    /// projected, else line_[f] (set by BeginSegment in series mode).
-    const LegendreSeries* linePtr_[2] = {nullptr, nullptr};
     double lineError_[2] = {0, 0};
     double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
     double unresolved_[2] = {0, 0};  ///< bound of the degree not sampled
@@ -423,11 +420,6 @@ class VolumeRayMarcher {
     std::vector<double> scratch_;
     std::vector<double> crossings_;  ///< breakpoint crossings in (tEnter, tExit), sorted
     std::vector<double> levels_, points_;
-    /// Per field, the exact series' samples: the values at [0, sampleCount_[f]), the
-    /// nodes' t after them. Fixed storage (degree <= kMaxLegendreDegree): written in
-    /// place by the sampling, read in place by SeriesCrossings, never resized.
-    double samples_[2][2 * (kMaxLegendreDegree + 1)];
-    int sampleCount_[2] = {0, 0};
     std::vector<double> bounds_;
     struct Work {
         double lo, hi;
@@ -438,6 +430,15 @@ class VolumeRayMarcher {
     int kronrodIntervals_ = 0;
     double startTau_ = 0, startEmission_[3] = {0, 0, 0};
     double endEmission_[3] = {0, 0, 0};  ///< times the transmittance there
+    /// Per field, the exact series' samples: the values at [0, sampleCount_[f]), the
+    /// nodes' t after them. Fixed storage (degree <= kMaxLegendreDegree): written in
+    /// place by the sampling, read in place by SeriesCrossings, never resized. Last: its
+    /// 2 kB kept out of the way of the members the linear tets' path reads.
+    int sampleCount_[2] = {0, 0};
+    double samples_[2][2 * (kMaxLegendreDegree + 1)];
+    /// The series SeriesPiece reads for each field: pieces_[f][0].p where the field was
+    /// projected, else line_[f] (set by BeginSegment in series mode).
+    const LegendreSeries* linePtr_[2] = {nullptr, nullptr};
 };
 
 }  // namespace hpray
