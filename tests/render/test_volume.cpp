@@ -29,6 +29,17 @@
 namespace hpray {
 namespace {
 
+// The camera's ray through pixel (i, j), as the traverser takes it.
+Ray PixelRay(const Camera& camera, int i, int j) {
+    const CameraRay cr = camera.PixelRay(i, j);
+    Ray ray;
+    for (int d = 0; d < 3; ++d) {
+        ray.origin[d] = cr.origin[d];
+        ray.dir[d] = cr.direction[d];
+    }
+    return ray;
+}
+
 using testing::LD;
 using testing::RefPixel;
 using testing::RefSurface;
@@ -730,12 +741,7 @@ TEST(VolumeLinear, LinearTetPathEqualsTheGeneralPathBitwise) {
         int taken = 0, other = 0, rays = 0, stopped = 0, runs = 0;
         for (int j = 0; j < 24; ++j)
             for (int i = 0; i < 28; ++i) {
-                const CameraRay cr = camera.PixelRay(i, j);
-                Ray ray;
-                for (int d = 0; d < 3; ++d) {
-                    ray.origin[d] = cr.origin[d];
-                    ray.dir[d] = cr.direction[d];
-                }
+                const Ray ray = PixelRay(camera, i, j);
                 traverser.Trace(ray, 0, 1e30, segments, &ends);
                 if (segments.empty()) continue;
                 ++rays;
@@ -1531,12 +1537,7 @@ TEST(VolumeLinearCells, ShortBreakpointListGivesTheGeneralScansCrossings) {
         int rays = 0;
         for (int j = 0; j < 24; ++j)
             for (int i = 0; i < 28; ++i) {
-                const CameraRay cr = camera.PixelRay(i, j);
-                Ray ray;
-                for (int d = 0; d < 3; ++d) {
-                    ray.origin[d] = cr.origin[d];
-                    ray.dir[d] = cr.direction[d];
-                }
+                const Ray ray = PixelRay(camera, i, j);
                 traverser.Trace(ray, 0, 1e30, segments);
                 if (segments.empty()) continue;
                 ++rays;
