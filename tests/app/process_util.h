@@ -3,9 +3,11 @@
 #pragma once
 
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 
 namespace hpray::test {
@@ -24,10 +26,32 @@ inline int RunCommand(const std::string& cmd, std::string* out = nullptr) {
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+/// "--mca orte_tmpdir_base DIR" with a directory of this test process's own for Open
+/// MPI's session files: mpiruns that tests running in parallel (ctest -j) start at the
+/// same moment race to create the default one (/tmp/ompi.HOST.UID), and the loser fails
+/// ("mkdir ... File exists", orte_init failed). This process's mpiruns run one at a time.
+inline const std::string& MpiSessionOption() {
+    // Removed when the process ends (Open MPI leaves it empty).
+    struct Dir {
+        std::filesystem::path path;
+        std::string option;
+        ~Dir() {
+            std::error_code ec;
+            std::filesystem::remove_all(path, ec);
+        }
+    };
+    static const Dir dir = [] {
+        const auto path = std::filesystem::temp_directory_path() /
+                          ("hpray-test-ompi-" + std::to_string(getpid()));
+        return Dir{path, " --mca orte_tmpdir_base " + path.string() + " "};
+    }();
+    return dir.option;
+}
+
 /// "mpiexec -n RANKS ..." with the options a root, 2-core machine needs.
 inline std::string Mpirun(int ranks) {
     return std::string(HPRAY_MPIEXEC) + " -n " + std::to_string(ranks) +
-           " --allow-run-as-root --oversubscribe --bind-to none ";
+           " --allow-run-as-root --oversubscribe --bind-to none" + MpiSessionOption();
 }
 
 }  // namespace hpray::test

@@ -27,6 +27,7 @@ const std::filesystem::path kDir = std::filesystem::temp_directory_path() /
                                    ("hpray_test_mpi_render_" + std::to_string(getpid()));
 
 using test::Mpirun;
+using test::MpiSessionOption;
 using test::RunCommand;
 
 struct Camera {
@@ -182,7 +183,8 @@ TEST_F(MpiRender, ThreadsBeyondTheBoundCoresAreReported) {
     const std::string warning = "threads is 2 but this process may run on 1 core";
     std::string out;
     ASSERT_EQ(RunCommand(std::string(HPRAY_MPIEXEC) +
-                             " -n 1 --allow-run-as-root --bind-to core " + render,
+                             " -n 1 --allow-run-as-root --bind-to core" +
+                             MpiSessionOption() + render,
                          &out),
               0)
         << out;
