@@ -1007,6 +1007,24 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
     return true;
 }
 
+VolumeRayMarcher::BreakpointSpan VolumeRayMarcher::BreakpointsIn(int f, double lo,
+                                                                 double hi) const {
+    const VolumeSetup& s = *setup_;
+    // The one list merged in the set-up where one field drives both transfer functions.
+    const std::vector<double>& points =
+        f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
+               : s.extinctionTf.Scalars();
+    const ShortAscending& few =
+        f == 0 ? (s.sameField ? s.shortBreakpoints : s.colorTf.ShortScalars())
+               : s.extinctionTf.ShortScalars();
+    // Those in (lo, hi) run from the first one > lo to the last one < hi (not counted
+    // where lo or hi is NaN).
+    if (few.valid && lo <= hi)
+        return {points, std::size_t(few.CountAtMost(lo)),
+                std::size_t(few.CountBelow(hi))};
+    return {points, 0, points.size()};
+}
+
 void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
     const VolumeSetup& s = *setup_;
     const FieldState& st = state_[f];
@@ -1016,23 +1034,11 @@ void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
     // Only a breakpoint strictly between the end values can be crossed (x in (0, 1)). The
     // control points this field drives, ascending: t is monotone in them (the same
     // rounded operations), so the crossings come out in their order.
-    const std::vector<double>& breakpoints =
-        f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
-               : s.extinctionTf.Scalars();
     const double lo = std::min(st.valueEnter, st.valueExit);
     const double hi = std::max(st.valueEnter, st.valueExit);
-    const ShortAscending& few =
-        f == 0 ? (s.sameField ? s.shortBreakpoints : s.colorTf.ShortScalars())
-               : s.extinctionTf.ShortScalars();
-    // The breakpoints in (lo, hi) are those from the first one > lo to the last one <
-    // hi: found by counting where the list is short (mostly there are none).
-    std::size_t first = 0, last = breakpoints.size();
-    if (few.valid) {
-        first = std::size_t(few.CountAtMost(lo));
-        last = std::size_t(few.CountBelow(hi));
-    }
-    for (std::size_t i = first; i < last; ++i) {
-        const double b = breakpoints[i];
+    const BreakpointSpan span = BreakpointsIn(f, lo, hi);
+    for (std::size_t i = span.first; i < span.last; ++i) {
+        const double b = span.points[i];
         if (b >= hi) break;
         if (!(b > lo)) continue;
         const double x = (b - st.valueEnter) / dv;
@@ -1074,25 +1080,12 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];
-    // The same control points ascending, without repeats: those of the one list, merged
-    // once in the set-up, that this field drives.
-    const std::vector<double>& ascending =
-        f == 0 ? (s.sameField ? s.breakpoints : s.colorTf.Scalars())
-               : s.extinctionTf.Scalars();
-    // Those in (lo, hi) run from the first one > lo to the last one < hi: counted where
-    // the list is short (often there are none).
-    std::size_t first = 0, last = ascending.size();
-    const ShortAscending& few =
-        f == 0 ? (s.sameField ? s.shortBreakpoints : s.colorTf.ShortScalars())
-               : s.extinctionTf.ShortScalars();
-    if (few.valid && range.lo <= range.hi) {
-        first = std::size_t(few.CountAtMost(range.lo));
-        last = std::size_t(few.CountBelow(range.hi));
-        if (first >= last) return;
-    }
+    // The control points in the cell's range (often none), without repeats.
+    const BreakpointSpan span = BreakpointsIn(f, range.lo, range.hi);
+    if (span.first >= span.last) return;
     levels_.clear();
-    for (std::size_t i = first; i < last; ++i) {
-        const double b = ascending[i];
+    for (std::size_t i = span.first; i < span.last; ++i) {
+        const double b = span.points[i];
         if (!(b < range.hi)) break;
         if (b > range.lo && (levels_.empty() || levels_.back() != b))
             levels_.push_back(b);

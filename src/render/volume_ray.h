@@ -329,6 +329,14 @@ class VolumeRayMarcher {
     void BeginConstantCell(std::int64_t cell);
     /// FindCrossings of a linear field f (state_[f].linear).
     void LinearCrossings(int f, const Segment& seg);
+    /// The control points of the transfer functions field f drives, ascending, and the
+    /// span [first, last) of them that may lie in (lo, hi): exactly those where the list
+    /// is short enough to count them (ShortAscending), else the whole list.
+    struct BreakpointSpan {
+        const std::vector<double>& points;
+        std::size_t first, last;
+    };
+    BreakpointSpan BreakpointsIn(int f, double lo, double hi) const;
     /// The exact Legendre series of field f (a polynomial along the ray) on the segment
     /// into pieces_[f].
     void ProjectExact(int f, const MeshGeometry& geometry, const Segment& seg);
