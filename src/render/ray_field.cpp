@@ -636,6 +636,39 @@ bool SegmentField::RationalPole(double t0, double t1, double& pole, double& gap,
     return std::isfinite(pole) && std::isfinite(gap) && std::isfinite(residue);
 }
 
+bool SegmentField::PyramidLineOn(double t0, double t1, PyramidLine& out) const {
+    if (linearTet_ || !affine_ || !scalar_.nodal || scalar_.hexOrder != 0 ||
+        cell_->basis->kind != BasisKind::PyramidLagrange || cell_->basis->order != 1)
+        return false;
+    const double mid = 0.5 * (t0 + t1), half = 0.5 * (t1 - t0);
+    if (!(half > 0)) return false;
+    // The reference point at x: m + h x.
+    double m[3], h[3];
+    for (int d = 0; d < 3; ++d) {
+        m[d] = ref0_[d] + mid * dref_[d];
+        h[d] = half * dref_[d];
+    }
+    const double* v = scalar_.nodal;
+    out.mid = mid;
+    out.half = half;
+    out.inverseHalf = 1 / half;
+    out.u0 = 1.0 - m[2];
+    out.u1 = -h[2];
+    out.r0 = m[0] - 0.5 * m[2];
+    out.r1 = h[0] - 0.5 * h[2];
+    out.s0 = m[1] - 0.5 * m[2];
+    out.s1 = h[1] - 0.5 * h[2];
+    const double d1 = v[1] - v[0], d2 = v[2] - v[0];
+    out.l0 = v[0] * out.u0 + d1 * out.r0 + d2 * out.s0 + v[4] * m[2];
+    out.l1 = v[0] * out.u1 + d1 * out.r1 + d2 * out.s1 + v[4] * h[2];
+    out.k = v[0] - v[1] - v[2] + v[3];
+    // Below the apex plane at both ends (and so between them).
+    const double uLo = 1.0 - (ref0_[2] + t0 * dref_[2]),
+                 uHi = 1.0 - (ref0_[2] + t1 * dref_[2]);
+    return uLo > 0 && uHi > 0 && std::isfinite(out.l0) && std::isfinite(out.l1) &&
+           std::isfinite(out.k) && std::isfinite(out.u1);
+}
+
 bool SegmentField::LinearCellLine(double t0, double t1, double mono[4], int& degree,
                                   double& magnitude) const {
     if (linearTet_ || !affine_ || !scalar_.nodal || cell_->basis->order != 1)

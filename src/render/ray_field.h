@@ -148,6 +148,23 @@ inline double EdgeCofactors(const double e[3][3], double c[3][3]) {
     return e[0][0] * c[0][0] + e[0][1] * c[0][1] + e[0][2] * c[0][2];
 }
 
+/// A linear pyramid's field along a segment [t0, t1] of an affine pyramid, in closed form
+/// (SegmentField::PyramidLineOn). With x = (t - mid) / half in [-1, 1] and the reference
+/// point moving linearly, R = r - h / 2 = r0 + r1 x, S = s - h / 2 = s0 + s1 x and U = 1
+/// - h = u0 + u1 x (h the reference height; U > 0 below the apex, 0 <= R, S <= U inside),
+/// the field is l0 + l1 x + k R S / U: LinearPyramidValue's basis expanded, with l the
+/// affine part v0 U + (v1 - v0) R + (v2 - v0) S + v4 h and k = v0 - v1 - v2 + v3 (the
+/// base's twist). Where the cell holds the segment, each of |R / U|, |S / U| and |R S /
+/// U| is at most 1: evaluating it this way adds no cancellation.
+struct PyramidLine {
+    double mid = 0, half = 0, inverseHalf = 0;
+    double l0 = 0, l1 = 0, r0 = 0, r1 = 0, s0 = 0, s1 = 0, u0 = 0, u1 = 0, k = 0;
+    double AtX(double x) const {
+        return l0 + l1 * x + k * (((r0 + r1 * x) * (s0 + s1 * x)) / (u0 + u1 * x));
+    }
+    double At(double t) const { return AtX((t - mid) * inverseHalf); }
+};
+
 /// Per-thread evaluator of one scalar field along a ray inside one cell. Reused across
 /// segments without allocation once its buffers have grown to the largest cell.
 class SegmentField {
@@ -204,6 +221,12 @@ public:
     /// reaches the apex plane. `gap` is |pole| - 1, computed without cancellation.
     bool RationalPole(double t0, double t1, double& pole, double& gap,
                       double& residue) const;
+    /// The same linear pyramid's field on [t0, t1] in closed form (see PyramidLine): the
+    /// basis expanded, not split into partial fractions. False where RationalPole is, and
+    /// where 1 - t (reference) is not positive at both ends.
+    bool PyramidLineOn(double t0, double t1, PyramidLine& out) const;
+    /// The cell's nodal values of a point field (null otherwise).
+    const double* NodalValues() const { return scalar_.nodal; }
 
     /// For an affine linear hexahedron (a trilinear field: degree 3 along a line) or
     /// wedge (degree 2): the field along the ray on [t0, t1] as a polynomial in x in

@@ -75,6 +75,12 @@ constexpr int kSampledDegrees[] = {3, 7, 11, 15, 19, 23, 27};
 /// Highest degree of the series of a linear pyramid's (rational) field along a ray; a
 /// segment that needs more (one passing near the apex plane) takes the general path.
 constexpr int kMaxRationalDegree = 32;
+/// A linear pyramid's field is taken in closed form (BeginPyramidLine) where its pole
+/// lies between kPyramidNearPole and 1 / kPyramidFarPole - 1 half-lengths beyond the
+/// segment, and the rounding bounds of the closed forms stay within kPyramidRounding eps
+/// of the cell's values (their sum), about what the series' own come to.
+constexpr double kPyramidFarPole = 1.0 / 64, kPyramidNearPole = 1.0 / 1024;
+constexpr double kPyramidRounding = 256;
 /// The nested rules, looked up once (GetNestedQuadratureRules builds them on first use).
 const NestedQuadratureRules& kQuadratureRules = GetNestedQuadratureRules();
 
@@ -249,6 +255,44 @@ inline __m256d ExpNegativeLanes(__m256d xv) {
 inline void ExpNegative4(const double* in, double* result4) {
     _mm256_storeu_pd(result4, ExpNegativeLanes(_mm256_loadu_pd(in)));
 }
+
+/// NaturalLog's four lanes: ln of each lane of wv (positive and normal; see NaturalLog).
+inline __m256d LogLanes(__m256d wv) {
+    constexpr double kLn2Hi = 6.93147180369123816490e-01,
+                     kLn2Lo = 1.90821492927058770002e-10, kTwo52 = 4503599627370496.0;
+    const __m256i bits = _mm256_castpd_si256(wv);
+    // w = 2^(E - 1023) m, m in [1, 2) (E the biased exponent), then m in [sqrt(1/2),
+    // sqrt(2)) with E one larger where it was halved.
+    const __m256i biased = _mm256_srli_epi64(bits, 52);
+    __m256d m = _mm256_castsi256_pd(
+        _mm256_or_si256(_mm256_and_si256(bits, _mm256_set1_epi64x(0x000FFFFFFFFFFFFFLL)),
+                        _mm256_set1_epi64x(0x3FF0000000000000LL)));
+    const __m256d halve =
+        _mm256_cmp_pd(m, _mm256_set1_pd(1.4142135623730951), _CMP_GT_OQ);
+    m = _mm256_blendv_pd(m, _mm256_mul_pd(m, _mm256_set1_pd(0.5)), halve);
+    // E as a double: its bits in the mantissa of 2^52 (exact), less 2^52 + 1023.
+    __m256d e = _mm256_sub_pd(_mm256_castsi256_pd(_mm256_or_si256(
+                                  biased, _mm256_castpd_si256(_mm256_set1_pd(kTwo52)))),
+                              _mm256_set1_pd(kTwo52 + 1023.0));
+    e = _mm256_add_pd(e, _mm256_and_pd(halve, _mm256_set1_pd(1.0)));
+    // ln m = 2 atanh(s) = 2 s sum z^j / (2 j + 1), s = (m - 1) / (m + 1), z = s^2 <=
+    // 0.0295: terms to j = 10 (the rest below 1e-18 relative), by Estrin's scheme.
+    const __m256d one = _mm256_set1_pd(1.0);
+    const __m256d sv = _mm256_div_pd(_mm256_sub_pd(m, one), _mm256_add_pd(m, one));
+    const __m256d z = _mm256_mul_pd(sv, sv), z2 = _mm256_mul_pd(z, z),
+                  z4 = _mm256_mul_pd(z2, z2), z8 = _mm256_mul_pd(z4, z4);
+    auto pair = [&](int j) {
+        return _mm256_fmadd_pd(_mm256_set1_pd(1.0 / (2 * j + 3)), z,
+                               _mm256_set1_pd(1.0 / (2 * j + 1)));
+    };
+    const __m256d a0 = _mm256_fmadd_pd(pair(2), z2, pair(0));
+    const __m256d a1 = _mm256_fmadd_pd(pair(6), z2, pair(4));
+    const __m256d a2 = _mm256_fmadd_pd(_mm256_set1_pd(1.0 / 21), z2, pair(8));
+    const __m256d poly = _mm256_fmadd_pd(a2, z8, _mm256_fmadd_pd(a1, z4, a0));
+    const __m256d lnm = _mm256_mul_pd(_mm256_add_pd(sv, sv), poly);
+    return _mm256_fmadd_pd(e, _mm256_set1_pd(kLn2Hi),
+                           _mm256_fmadd_pd(e, _mm256_set1_pd(kLn2Lo), lnm));
+}
 #endif
 
 }  // namespace
@@ -271,6 +315,175 @@ void ExpNegative(const double* x, int n, double* out) {
 #else
     for (int i = 0; i < n; ++i) out[i] = x[i] > 708.0 ? 0.0 : std::exp(-x[i]);
 #endif
+}
+
+// ln w = E ln 2 + ln m, E the binary exponent and m in [sqrt(1/2), sqrt(2)): ln m by the
+// series of 2 atanh((m - 1) / (m + 1)); the rounding is that of the few last operations.
+void NaturalLog(const double* x, int n, double* out) {
+#if defined(__AVX2__) && defined(__FMA__)
+    int i = 0;
+    for (; i + 4 <= n; i += 4)
+        _mm256_storeu_pd(out + i, LogLanes(_mm256_loadu_pd(x + i)));
+    if (i < n) {
+        alignas(32) double in4[4] = {1, 1, 1, 1}, out4[4];
+        for (int k = i; k < n; ++k) in4[k - i] = x[k];
+        _mm256_store_pd(out4, LogLanes(_mm256_load_pd(in4)));
+        for (int k = i; k < n; ++k) out[k] = out4[k - i];
+    }
+#else
+    for (int i = 0; i < n; ++i) out[i] = std::log(x[i]);
+#endif
+}
+
+bool MakePyramidDepthLine(const PyramidLine& p, double cellScale, double sumV,
+                          PyramidDepthLine& out) {
+    if (p.k == 0 || !(p.u0 > 0) || !(p.half > 0)) return false;
+    // The pole, where U = 0, at x = -1 / rho. Far from the segment the field is nearly a
+    // quadratic whose series is short (and the partial fractions below lose what it
+    // gains); within 1/1024 of the segment's half-length the depth's logarithm runs away.
+    const double rho = p.u1 / p.u0, arho = std::abs(rho);
+    if (!(arho >= kPyramidFarPole && arho <= 1 - kPyramidNearPole)) return false;
+    // R S / U = alpha x + beta + gamma / U, so the field is mean + (l1 + k alpha) x + k
+    // gamma / U with mean = l0 + k beta, and its antiderivative less the mean, in t, is V
+    // = half (a2 x^2 + g ln(U / u0)) with a2 = (l1 + k alpha) / 2, g = k gamma / u1.
+    const double alpha = p.r1 * p.s1 / p.u1;
+    const double beta = (p.r0 * p.s1 + p.r1 * p.s0 - alpha * p.u0) / p.u1;
+    const double gamma = p.r0 * p.s0 - beta * p.u0;
+    out.a2 = 0.5 * (p.l1 + p.k * alpha);
+    out.g = p.k * gamma / p.u1;
+    out.rho = rho;
+    out.mean = p.l0 + p.k * beta;
+    // The rounding of V, from the magnitudes of the terms each quantity sums (ma, mb, mc
+    // for alpha, beta, gamma; each computed within a few eps of its magnitude): of a2, of
+    // g, of the logarithm (NaturalLog's, and 1 + rho x within eps / (1 - |rho|) of its
+    // relative size), of the sum, and of the mean (which moves V by half its error at
+    // most). Twice that.
+    const double au1 = std::abs(p.u1), ak = std::abs(p.k);
+    const double ma = std::abs(alpha);
+    const double mb = (std::abs(p.r0 * p.s1) + std::abs(p.r1 * p.s0) + ma * p.u0) / au1;
+    const double mc = std::abs(p.r0 * p.s0) + mb * p.u0;
+    // The largest |ln(1 + rho x)| on [-1, 1], -ln(1 - |rho|), is at most |rho| / (1 -
+    // |rho|).
+    const double lnMax = arho / (1 - arho);
+    const double g = std::abs(out.g);
+    const double dA2 = 4 * kEps * (std::abs(p.l1) + ak * ma);
+    const double dG = 24 * kEps * ak * mc / au1;
+    const double dLn = 4 * kEps + 2 * kEps / (1 - arho);
+    const double dMean = 12 * kEps * (std::abs(p.l0) + ak * mb);
+    out.depthError =
+        2 * p.half *
+        (dA2 + dG * lnMax + g * dLn + 4 * kEps * (std::abs(out.a2) + g * lnMax) + dMean);
+    // The field at a point of the segment: R / U, S / U and R S / U are at most 1 there,
+    // so each product and quotient adds a few eps of the terms l0, l1 x and k; the
+    // coefficients are rounded as a sampled point's reference coordinates are
+    // (kSampleRounding of the cell's values, as for the series).
+    const double terms = std::abs(p.l0) + std::abs(p.l1) +
+                         ak * (3 + std::abs(p.r0) + std::abs(p.r1) + std::abs(p.s0) +
+                               std::abs(p.s1) + p.u0 + au1);
+    out.fieldError = kSampleRounding * kEps * cellScale + 8 * kEps * terms;
+    // No worse than the series: its depth line is rounded to kSeriesRounding eps of its
+    // coefficients, about half the cell's values.
+    return out.depthError <= kPyramidRounding * kEps * p.half * sumV &&
+           out.fieldError <=
+               kSampleRounding * kEps * cellScale + kPyramidRounding * kEps * sumV;
+}
+
+namespace {
+#if defined(__AVX2__) && defined(__FMA__)
+/// PyramidLineAt for four points t[0..3].
+inline void PyramidLineAt4(const PyramidLine& p, const PyramidDepthLine& d,
+                           const double* t, double* out, double* depth) {
+    const __m256d x =
+        _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(t), _mm256_set1_pd(p.mid)),
+                      _mm256_set1_pd(p.inverseHalf));
+    // PyramidLine::AtX's operations lane by lane (no fused multiply-adds).
+    const __m256d rs = _mm256_mul_pd(
+        _mm256_add_pd(_mm256_set1_pd(p.r0), _mm256_mul_pd(_mm256_set1_pd(p.r1), x)),
+        _mm256_add_pd(_mm256_set1_pd(p.s0), _mm256_mul_pd(_mm256_set1_pd(p.s1), x)));
+    const __m256d q = _mm256_div_pd(
+        rs, _mm256_add_pd(_mm256_set1_pd(p.u0), _mm256_mul_pd(_mm256_set1_pd(p.u1), x)));
+    _mm256_storeu_pd(out,
+                     _mm256_add_pd(_mm256_add_pd(_mm256_set1_pd(p.l0),
+                                                 _mm256_mul_pd(_mm256_set1_pd(p.l1), x)),
+                                   _mm256_mul_pd(_mm256_set1_pd(p.k), q)));
+    if (depth) {
+        const __m256d ln = LogLanes(
+            _mm256_add_pd(_mm256_set1_pd(1.0), _mm256_mul_pd(_mm256_set1_pd(d.rho), x)));
+        const __m256d sum =
+            _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(d.a2), _mm256_mul_pd(x, x)),
+                          _mm256_mul_pd(_mm256_set1_pd(d.g), ln));
+        _mm256_storeu_pd(depth, _mm256_mul_pd(_mm256_set1_pd(p.half), sum));
+    }
+}
+#endif
+}  // namespace
+
+void PyramidLineAt(const PyramidLine& p, const PyramidDepthLine& d, const double* t,
+                   int n, double* out, double* depth) {
+#if defined(__AVX2__) && defined(__FMA__)
+    int i = 0;
+    for (; i + 4 <= n; i += 4)
+        PyramidLineAt4(p, d, t + i, out + i, depth ? depth + i : nullptr);
+    if (i < n) {
+        // The rest through the same lanes: each value independent of its position.
+        const int rest = std::min(n - i, 3);
+        alignas(32) double t4[4] = {p.mid, p.mid, p.mid, p.mid}, out4[4], depth4[4];
+        for (int k = 0; k < rest; ++k) t4[k] = t[i + k];
+        PyramidLineAt4(p, d, t4, out4, depth ? depth4 : nullptr);
+        for (int k = 0; k < rest; ++k) {
+            out[i + k] = out4[k];
+            if (depth) depth[i + k] = depth4[k];
+        }
+    }
+#else
+    for (int i = 0; i < n; ++i) {
+        const double x = (t[i] - p.mid) * p.inverseHalf;
+        out[i] = p.AtX(x);
+        double ln;
+        const double w = 1.0 + d.rho * x;
+        NaturalLog(&w, 1, &ln);
+        if (depth) depth[i] = p.half * (d.a2 * (x * x) + d.g * ln);
+    }
+#endif
+}
+
+void PyramidLevelCrossings(const PyramidLine& p, double level, double tEnter,
+                           double tExit, std::vector<double>& out) {
+    // f = level where h(x) = (l0 - level + l1 x) U + k R S = 0 (U > 0 on the segment): a
+    // quadratic a2 x^2 + a1 x + a0, its roots by the stable formula, each polished by
+    // Newton's method on h in product form.
+    const double c = p.l0 - level;
+    const double a2 = p.l1 * p.u1 + p.k * (p.r1 * p.s1);
+    const double a1 = c * p.u1 + p.l1 * p.u0 + p.k * (p.r0 * p.s1 + p.r1 * p.s0);
+    const double a0 = c * p.u0 + p.k * (p.r0 * p.s0);
+    double roots[2];
+    int count = 0;
+    if (a2 == 0) {
+        if (a1 != 0) roots[count++] = -a0 / a1;
+    } else {
+        const double disc = a1 * a1 - 4 * a2 * a0;
+        if (disc >= 0) {
+            const double q = -0.5 * (a1 + std::copysign(std::sqrt(disc), a1));
+            roots[count++] = q / a2;
+            if (q != 0) roots[count++] = a0 / q;
+        }
+    }
+    for (int r = 0; r < count; ++r) {
+        double x = roots[r];
+        if (!(std::abs(x) < 1.001)) continue;
+        for (int step = 0; step < 2; ++step) {
+            const double R = p.r0 + p.r1 * x, S = p.s0 + p.s1 * x, U = p.u0 + p.u1 * x;
+            const double line = c + p.l1 * x;
+            const double h = line * U + p.k * (R * S);
+            const double dh = p.l1 * U + line * p.u1 + p.k * (p.r1 * S + R * p.s1);
+            if (h == 0 || dh == 0) break;
+            const double next = x - h / dh;
+            if (!(std::abs(next - x) < 1e-3)) break;
+            x = next;
+        }
+        const double t = p.mid + p.half * x;
+        if (t > tEnter && t < tExit) out.push_back(t);
+    }
 }
 
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
@@ -659,6 +872,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     kind_ = s.cellKind[seg.cell];
     crossings_.clear();
     mode_ = Mode::kClosed;
+    pyramidLine_ = false;
     if (kind_ == VolumeSetup::kEmpty) return false;
     if (kind_ == VolumeSetup::kConstant) {
         BeginConstantCell(seg.cell);
@@ -722,6 +936,10 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
                     st.valueExit = p.p(seg.tExit);
                 }
             }
+        } else if (fieldCount_ == 1 && BeginPyramidLine(f, seg)) {
+            // A linear pyramid in closed form (one field drives both transfer functions).
+            st.pyramid = true;
+            st.error = std::max(st.error, lineError_[f]);
         } else if (double pole, gap, residue;
                    sf.RationalPole(seg.tEnter, seg.tExit, pole, gap, residue) &&
                    ProjectRational(f, seg, gap, residue)) {
@@ -730,7 +948,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             st.error = std::max(st.error, pieces_[f][0].eps);
         }
         allLinear = allLinear && st.linear;
-        allSeries = allSeries && (st.linear || st.bySeries);
+        allSeries = allSeries && (st.linear || st.bySeries || st.pyramid);
         FindCrossings(f, seg, counters);
         sf.AddCountersTo(counters);
     }
@@ -738,6 +956,11 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     if (mode_ == Mode::kSeries) {
         for (int f = 0; f < fieldCount_; ++f) {
             const FieldState& st = state_[f];
+            if (st.pyramid) {
+                // lineError_[f] and the depth line set by BeginPyramidLine.
+                pyramidLine_ = true;
+                continue;
+            }
             // The projected series itself where there is one (not a copy), else line_[f].
             LegendreSeries& line = st.bySeries ? pieces_[f][0].p : line_[f];
             linePtr_[f] = &line;
@@ -1007,6 +1230,33 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
     return true;
 }
 
+bool VolumeRayMarcher::BeginPyramidLine(int f, const Segment& seg) {
+    if (!field_[f].PyramidLineOn(seg.tEnter, seg.tExit, pyramid_)) return false;
+    const Interval& range = (*setup_->ranges[f])[seg.cell];
+    const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
+    const double* v = field_[f].NodalValues();
+    double sumV = 0;
+    for (int i = 0; i < 5; ++i) sumV += std::abs(v[i]);
+    if (!MakePyramidDepthLine(pyramid_, cellScale, sumV, pyramidDepth_)) return false;
+    depthLineError_ = pyramidDepth_.depthError;
+    lineError_[f] = pyramidDepth_.fieldError;
+    depthLineT_ = std::numeric_limits<double>::quiet_NaN();
+    return true;
+}
+
+void VolumeRayMarcher::PyramidCrossings(int f, const Segment& seg) {
+    const Interval& range = (*setup_->ranges[f])[seg.cell];
+    const BreakpointSpan span = BreakpointsIn(f, range.lo, range.hi);
+    double last = std::numeric_limits<double>::quiet_NaN();
+    for (std::size_t i = span.first; i < span.last; ++i) {
+        const double b = span.points[i];
+        if (!(b < range.hi)) break;
+        if (!(b > range.lo) || b == last) continue;
+        last = b;
+        PyramidLevelCrossings(pyramid_, b, seg.tEnter, seg.tExit, crossings_);
+    }
+}
+
 VolumeRayMarcher::BreakpointSpan VolumeRayMarcher::BreakpointsIn(int f, double lo,
                                                                  double hi) const {
     const VolumeSetup& s = *setup_;
@@ -1026,7 +1276,6 @@ VolumeRayMarcher::BreakpointSpan VolumeRayMarcher::BreakpointsIn(int f, double l
 }
 
 void VolumeRayMarcher::LinearCrossings(int f, const Segment& seg) {
-    const VolumeSetup& s = *setup_;
     const FieldState& st = state_[f];
     const double dv = st.valueExit - st.valueEnter;
     if (dv == 0) return;
@@ -1077,6 +1326,10 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
     };
     if (st.linear) {
         LinearCrossings(f, seg);
+        return;
+    }
+    if (st.pyramid) {
+        PyramidCrossings(f, seg);
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];
@@ -1130,6 +1383,7 @@ double VolumeRayMarcher::FieldAt(int f, double t) {
         return (1 - x) * st.valueEnter + x * st.valueExit;
     }
     if (st.bySeries) return pieces_[f][0].p(t);
+    if (st.pyramid) return pyramid_.At(t);
     return field_[f](t);
 }
 
@@ -1301,7 +1555,12 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     // The glow model and whether one field drives both transfer functions as constants:
     // the branches on them compiled out of the piece's loops.
     const bool wm = setup_->glow == GlowModel::WilliamsMax, one = fieldCount_ == 1;
-    if (wm && one)
+    if (pyramidLine_) {
+        if (wm)
+            SeriesPieceOf<true, true, true>(p0, p1, composite);
+        else
+            SeriesPieceOf<false, true, true>(p0, p1, composite);
+    } else if (wm && one)
         SeriesPieceOf<true, true>(p0, p1, composite);
     else if (wm)
         SeriesPieceOf<true, false>(p0, p1, composite);
@@ -1311,16 +1570,18 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         SeriesPieceOf<false, false>(p0, p1, composite);
 }
 
-template <bool wm, bool oneField>
+template <bool wm, bool oneField, bool pyramid>
 void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composite) {
+    static_assert(oneField || !pyramid);
     const VolumeSetup& s = *setup_;
     constexpr int fe = oneField ? 0 : 1;
+    // (Not read where pyramid.)
     const LegendreSeries& uc = *linePtr_[0];
     const LegendreSeries& ue = *linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
-    const double c0 = uc.At(mid);
+    const double c0 = pyramid ? pyramid_.At(mid) : uc.At(mid);
     const double em = fe == 0 ? c0 : ue.At(mid);
     double ac[3], bc[3], ae, be;
     s.colorTf.AffineOn3(s.colorTf.IntervalOf(c0), ac, bc);
@@ -1329,7 +1590,22 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
     // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
     // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
     double tauM = ae, v0 = 0, v1 = 0;
-    if (be != 0) {
+    if (pyramid && be != 0) {
+        tauM = ae + be * pyramidDepth_.mean;
+        // Pieces follow each other along the segment: the last end is this start. (V at
+        // both ends in one call otherwise: the same lanes as at the nodes.)
+        const bool known = p0 == depthLineT_;
+        alignas(32) double ends[4] = {p0, p1, p1, p1}, f4[4], v4[4];
+#if defined(__AVX2__) && defined(__FMA__)
+        PyramidLineAt4(pyramid_, pyramidDepth_, ends, f4, v4);
+#else
+        PyramidLineAt(pyramid_, pyramidDepth_, ends, 2, f4, v4);
+#endif
+        v0 = known ? depthLineV_ : v4[0];
+        v1 = v4[1];
+        depthLineT_ = p1;
+        depthLineV_ = v1;
+    } else if (be != 0) {
         if (!haveDepthLine_) {
             ue.Antiderivative(depthLine_, /*withoutMean=*/true);
             double sum = 0;
@@ -1406,7 +1682,10 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
                     EvalPair(p, depthLine_, nodeT + first, count, outP,
                              nodeDepth + first);
             };
-            if (be == 0) {
+            if constexpr (pyramid) {
+                PyramidLineAt(pyramid_, pyramidDepth_, nodeT + first, whole,
+                              nodeU + first, be != 0 ? nodeDepth + first : nullptr);
+            } else if (be == 0) {
                 many(uc, nodeU + first);
             } else if (fe == 0) {
                 pair(uc, nodeU + first);
@@ -1606,7 +1885,8 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         double tau[2], emission[2][3];
         const double ends[2] = {p0, p1};
         for (int k = 0; k < 2; ++k) {
-            const double vc = uc(ends[k]), ve = fe == 0 ? vc : ue(ends[k]);
+            const double vc = pyramid ? pyramid_.At(ends[k]) : uc(ends[k]);
+            const double ve = fe == 0 ? vc : ue(ends[k]);
             tau[k] = std::max(0.0, ae + be * ve);
             for (int c = 0; c < 3; ++c)
                 emission[k][c] = std::max(0.0, ac[c] + bc[c] * vc) * (wm ? tau[k] : 1.0);

@@ -149,6 +149,36 @@ struct RayComposite {
 /// pieces' quadrature nodes; four at a time where the build has AVX2).
 void ExpNegative(const double* x, int n, double* out);
 
+/// out[i] = ln(x[i]) for positive normal x[i], within 2 eps of its larger of 1 and |ln
+/// x[i]| (a linear pyramid's optical depth at the series pieces' quadrature nodes; four
+/// at a time where the build has AVX2).
+void NaturalLog(const double* x, int n, double* out);
+
+/// A linear pyramid's field along a segment in closed form (PyramidLine) as the volume
+/// integrates it: the antiderivative in t of the field less `mean`, V = half (a2 x^2 + g
+/// ln(1 + rho x)) at x = (t - mid) / half (the basis' R S / U in partial fractions), and
+/// bounds of the rounding.
+struct PyramidDepthLine {
+    double a2 = 0, g = 0, rho = 0, mean = 0;
+    double depthError = 0;  ///< of V anywhere on the segment (the mean's error included)
+    double fieldError = 0;  ///< of PyramidLine::At (and PyramidLineAt) against the field
+};
+/// The depth line of `p` and its bounds (cellScale: the largest |value| of the field in
+/// the cell; sumV: the sum of the |nodal values|). False where the closed form is not to
+/// be used: no twist (a quadratic), the pole more than 63 half-lengths or less than
+/// 1/1024 of one beyond the segment, or the bounds above about what a series' rounding
+/// comes to.
+bool MakePyramidDepthLine(const PyramidLine& p, double cellScale, double sumV,
+                          PyramidDepthLine& out);
+/// The field at the n points t (out) and, where depth is not null, V there (depth): four
+/// at a time in vector lanes where the build has AVX2 (each value independent of n).
+void PyramidLineAt(const PyramidLine& p, const PyramidDepthLine& d, const double* t,
+                   int n, double* out, double* depth);
+/// Appends to `out` the t in (tEnter, tExit) where p's field equals `level`: the roots of
+/// a quadratic (U > 0 on the segment), polished on its product form.
+void PyramidLevelCrossings(const PyramidLine& p, double level, double tEnter,
+                           double tExit, std::vector<double>& out);
+
 /// A sliver that a clip plane through a face leaves at an end of the ray's span [tMin,
 /// tMax]: a segment at most sliverLength long that starts at tMin or ends at tMax. It
 /// holds nothing visible (sliverLength is about 1e-12 of the mesh size) but would cost as
@@ -246,6 +276,7 @@ class VolumeRayMarcher {
         bool constant = false;  ///< cell field: value fixed on the cell
         bool linear = false;    ///< value linear in t on the segment
         bool bySeries = false;  ///< exact Legendre series available (affine polynomial)
+        bool pyramid = false;   ///< a linear pyramid's field in closed form (pyramid_)
         double valueEnter = 0, valueExit = 0;  ///< at tEnter and tExit (linear fields)
         double error = 0;  ///< bound of the absolute error of the values on the segment
     };
@@ -316,8 +347,18 @@ class VolumeRayMarcher {
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
     /// SeriesPiece for Williams-Max glow (wm) or not, and one field (oneField) or two.
-    template <bool wm, bool oneField>
+    /// pyramid: the one field is pyramid_ (BeginPyramidLine), not a series.
+    template <bool wm, bool oneField, bool pyramid = false>
     void SeriesPieceOf(double p0, double p1, RayComposite& composite);
+    /// Series mode for a linear pyramid whose one field drives both transfer functions,
+    /// without a series: the field in closed form (pyramid_), its optical depth's
+    /// antiderivative from partial fractions, the breakpoints' crossings as roots of
+    /// quadratics, each with a bound of its rounding. False (fall back to the series)
+    /// where that bound would exceed the series' own, or the pole is far (the series is
+    /// short there) or within 1/1024 of the segment.
+    bool BeginPyramidLine(int f, const Segment& seg);
+    /// The crossings of the breakpoints in the cell's range by pyramid_ into crossings_.
+    void PyramidCrossings(int f, const Segment& seg);
     bool Terminate(double t, RayComposite& composite);
     /// Field f (a point field) along a linear tetrahedron's segment from the face points
     /// `ends`: its values at the segment's ends and the bound of their error. False (and
@@ -385,6 +426,11 @@ class VolumeRayMarcher {
     double truncated_[2] = {0, 0};  ///< sum of the dropped coefficients of each series
     double unresolved_[2] = {0, 0};  ///< bound of the degree not sampled
     LegendreSeries depthLine_, derivative_;
+    /// A linear pyramid's field in closed form and its depth line (BeginPyramidLine):
+    /// pyramidLine_ in series mode.
+    bool pyramidLine_ = false;
+    PyramidLine pyramid_;
+    PyramidDepthLine pyramidDepth_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
