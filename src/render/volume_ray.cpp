@@ -486,6 +486,118 @@ void PyramidLevelCrossings(const PyramidLine& p, double level, double tEnter,
     }
 }
 
+namespace {
+#if defined(__AVX2__) && defined(__FMA__)
+/// PolyLineAt for four points t[0..3].
+inline void PolyLineAt4(const PolyLine& p, const double* t, double* out, double* depth) {
+    const __m256d x =
+        _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(t), _mm256_set1_pd(p.mid)),
+                      _mm256_set1_pd(p.inverseHalf));
+    // PolyLine::AtX's operations lane by lane (no fused multiply-adds).
+    __m256d f =
+        _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(p.m[3]), x), _mm256_set1_pd(p.m[2]));
+    f = _mm256_add_pd(_mm256_mul_pd(f, x), _mm256_set1_pd(p.m[1]));
+    f = _mm256_add_pd(_mm256_mul_pd(f, x), _mm256_set1_pd(p.m[0]));
+    _mm256_storeu_pd(out, f);
+    if (depth) {
+        __m256d v = _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(0.25 * p.m[3]), x),
+                                  _mm256_set1_pd(p.m[2] / 3));
+        v = _mm256_add_pd(_mm256_mul_pd(v, x), _mm256_set1_pd(0.5 * p.m[1]));
+        v = _mm256_mul_pd(v, _mm256_mul_pd(x, x));
+        _mm256_storeu_pd(depth, _mm256_mul_pd(_mm256_set1_pd(p.half), v));
+    }
+}
+#endif
+}  // namespace
+
+void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth) {
+#if defined(__AVX2__) && defined(__FMA__)
+    int i = 0;
+    for (; i + 4 <= n; i += 4)
+        PolyLineAt4(p, t + i, out + i, depth ? depth + i : nullptr);
+    if (i < n) {
+        // The rest through the same lanes: each value independent of its position.
+        const int rest = std::min(n - i, 3);
+        alignas(32) double t4[4] = {p.mid, p.mid, p.mid, p.mid}, out4[4], depth4[4];
+        for (int k = 0; k < rest; ++k) t4[k] = t[i + k];
+        PolyLineAt4(p, t4, out4, depth ? depth4 : nullptr);
+        for (int k = 0; k < rest; ++k) {
+            out[i + k] = out4[k];
+            if (depth) depth[i + k] = depth4[k];
+        }
+    }
+#else
+    for (int i = 0; i < n; ++i) {
+        const double x = (t[i] - p.mid) * p.inverseHalf;
+        out[i] = p.AtX(x);
+        if (depth)
+            depth[i] = p.half * ((((0.25 * p.m[3]) * x + p.m[2] / 3) * x + 0.5 * p.m[1]) *
+                                 (x * x));
+    }
+#endif
+}
+
+void PolyLevelCrossings(const PolyLine& p, double level, double tEnter, double tExit,
+                        std::vector<double>& out) {
+    const double* m = p.m;
+    // The critical points in (-1, 1): the roots of 3 m3 x^2 + 2 m2 x + m1, by the stable
+    // formula.
+    double points[4];
+    int count = 0;
+    points[count++] = -1;
+    {
+        const double a = 3 * m[3], b = 2 * m[2], c = m[1];
+        double crit[2];
+        int nc = 0;
+        if (a == 0) {
+            if (b != 0) crit[nc++] = -c / b;
+        } else {
+            const double disc = b * b - 4 * a * c;
+            if (disc > 0) {
+                const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+                crit[nc++] = q / a;
+                if (q != 0) crit[nc++] = c / q;
+            }
+        }
+        if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
+        for (int k = 0; k < nc; ++k)
+            if (crit[k] > points[count - 1] && crit[k] < 1) points[count++] = crit[k];
+    }
+    points[count++] = 1;
+    // Between them the polynomial is monotone: a level strictly between the end values is
+    // crossed once, found by Newton's method kept inside the bracket (bisection where it
+    // leaves it), to a step of a few ulps of [-1, 1].
+    auto g = [&](double x) { return p.AtX(x) - level; };
+    double ga = g(points[0]);
+    for (int k = 0; k + 1 < count; ++k) {
+        const double xa = points[k], xb = points[k + 1], gb = g(xb);
+        if ((ga < 0 && gb > 0) || (ga > 0 && gb < 0)) {
+            double lo = xa, hi = xb, glo = ga;
+            double x = xa - ga * (xb - xa) / (gb - ga);
+            if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+            for (int it = 0; it < 100; ++it) {
+                const double gx = g(x);
+                if (gx == 0) break;
+                if ((gx < 0) == (glo < 0)) {
+                    lo = x;
+                    glo = gx;
+                } else {
+                    hi = x;
+                }
+                const double d = (3 * m[3] * x + 2 * m[2]) * x + m[1];
+                double next = d != 0 ? x - gx / d : 0.5 * (lo + hi);
+                if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+                const bool done = std::abs(next - x) <= 4 * kEps || hi - lo <= 4 * kEps;
+                x = next;
+                if (done) break;
+            }
+            const double t = p.mid + p.half * x;
+            if (t > tEnter && t < tExit) out.push_back(t);
+        }
+        ga = gb;
+    }
+}
+
 void SeriesCrossings(const LegendreSeries& p, const double* levels, int count, double tol,
                      const double* sampleT, const double* sampleV, int samples,
                      std::vector<double>& scratch, std::vector<double>& points,
@@ -872,7 +984,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     kind_ = s.cellKind[seg.cell];
     crossings_.clear();
     mode_ = Mode::kClosed;
-    pyramidLine_ = false;
+    pyramidLine_ = polyLine_ = false;
     if (kind_ == VolumeSetup::kEmpty) return false;
     if (kind_ == VolumeSetup::kConstant) {
         BeginConstantCell(seg.cell);
@@ -915,7 +1027,9 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
         if (!sf.Affine()) st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
-        if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
+        if (fieldCount_ == 1 && sf.ExactAlongLine() && BeginPolyLine(f, seg)) {
+            // An affine linear hexahedron or wedge: its polynomial, or linear (st set).
+        } else if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
             st.valueEnter = sf(seg.tEnter);
             st.valueExit = sf(seg.tExit);
@@ -948,7 +1062,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
             st.error = std::max(st.error, pieces_[f][0].eps);
         }
         allLinear = allLinear && st.linear;
-        allSeries = allSeries && (st.linear || st.bySeries || st.pyramid);
+        allSeries = allSeries && (st.linear || st.bySeries || st.pyramid || st.poly);
         FindCrossings(f, seg, counters);
         sf.AddCountersTo(counters);
     }
@@ -956,9 +1070,11 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
     if (mode_ == Mode::kSeries) {
         for (int f = 0; f < fieldCount_; ++f) {
             const FieldState& st = state_[f];
-            if (st.pyramid) {
-                // lineError_[f] and the depth line set by BeginPyramidLine.
-                pyramidLine_ = true;
+            if (st.pyramid || st.poly) {
+                // lineError_[f] and the depth line set by BeginPyramidLine or
+                // BeginPolyLine.
+                pyramidLine_ = st.pyramid;
+                polyLine_ = st.poly;
                 continue;
             }
             // The projected series itself where there is one (not a copy), else line_[f].
@@ -1244,6 +1360,50 @@ bool VolumeRayMarcher::BeginPyramidLine(int f, const Segment& seg) {
     return true;
 }
 
+bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
+    const VolumeSetup& s = *setup_;
+    SegmentField& sf = field_[f];
+    const int n = sf.LineDegree();
+    if (s.projection.startDegree == s.projection.maxDegree || n < 2 || n > 3)
+        return false;
+    double mono[4], magnitude;
+    int degree = 0;
+    if (!sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude) || degree != n)
+        return false;
+    PolyLine& p = poly_;
+    p.mid = 0.5 * (seg.tEnter + seg.tExit);
+    p.half = 0.5 * (seg.tExit - seg.tEnter);
+    p.inverseHalf = 1 / p.half;
+    double sum = 0;
+    for (int k = 0; k < 4; ++k) {
+        p.m[k] = k <= n ? mono[k] : 0.0;
+        sum += std::abs(p.m[k]);
+    }
+    FieldState& st = state_[f];
+    // As SeriesFromPolynomial: every term of the sum factorisation is at most the largest
+    // nodal value, and the values are at most the sum of the coefficients.
+    const double eps = 64 * (n + 1) * kEps * std::max(magnitude, sum);
+    st.error = std::max(st.error, eps);
+    if (std::abs(p.m[2]) + std::abs(p.m[3]) <= eps) {
+        // Linear data on the cell (u = x + 2y + 3z on hexes, say): the closed form.
+        st.linear = true;
+        st.valueEnter = p.AtX(-1.0);
+        st.valueExit = p.AtX(1.0);
+        return true;
+    }
+    st.poly = true;
+    // The series' bounds: the samples' rounding, and the evaluation's (Horner's on [-1,
+    // 1] within 2 n eps of the sum of the coefficients) and the depth line's likewise.
+    const Interval& range = (*s.ranges[f])[seg.cell];
+    const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
+    lineError_[f] = kSampleRounding * kEps * cellScale + kSeriesRounding * kEps * sum;
+    depthLineError_ =
+        kSeriesRounding * kEps * p.half *
+        (0.5 * std::abs(p.m[1]) + std::abs(p.m[2]) / 3 + 0.25 * std::abs(p.m[3]));
+    depthLineT_ = std::numeric_limits<double>::quiet_NaN();
+    return true;
+}
+
 void VolumeRayMarcher::PyramidCrossings(int f, const Segment& seg) {
     const Interval& range = (*setup_->ranges[f])[seg.cell];
     const BreakpointSpan span = BreakpointsIn(f, range.lo, range.hi);
@@ -1253,7 +1413,10 @@ void VolumeRayMarcher::PyramidCrossings(int f, const Segment& seg) {
         if (!(b < range.hi)) break;
         if (!(b > range.lo) || b == last) continue;
         last = b;
-        PyramidLevelCrossings(pyramid_, b, seg.tEnter, seg.tExit, crossings_);
+        if (state_[f].poly)
+            PolyLevelCrossings(poly_, b, seg.tEnter, seg.tExit, crossings_);
+        else
+            PyramidLevelCrossings(pyramid_, b, seg.tEnter, seg.tExit, crossings_);
     }
 }
 
@@ -1328,7 +1491,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         LinearCrossings(f, seg);
         return;
     }
-    if (st.pyramid) {
+    if (st.pyramid || st.poly) {
         PyramidCrossings(f, seg);
         return;
     }
@@ -1384,6 +1547,7 @@ double VolumeRayMarcher::FieldAt(int f, double t) {
     }
     if (st.bySeries) return pieces_[f][0].p(t);
     if (st.pyramid) return pyramid_.At(t);
+    if (st.poly) return poly_.At(t);
     return field_[f](t);
 }
 
@@ -1555,11 +1719,16 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     // The glow model and whether one field drives both transfer functions as constants:
     // the branches on them compiled out of the piece's loops.
     const bool wm = setup_->glow == GlowModel::WilliamsMax, one = fieldCount_ == 1;
-    if (pyramidLine_) {
+    if (polyLine_) {
         if (wm)
-            SeriesPieceOf<true, true, true>(p0, p1, composite);
+            SeriesPieceOf<true, true, kPolyLine>(p0, p1, composite);
         else
-            SeriesPieceOf<false, true, true>(p0, p1, composite);
+            SeriesPieceOf<false, true, kPolyLine>(p0, p1, composite);
+    } else if (pyramidLine_) {
+        if (wm)
+            SeriesPieceOf<true, true, kPyramidLine>(p0, p1, composite);
+        else
+            SeriesPieceOf<false, true, kPyramidLine>(p0, p1, composite);
     } else if (wm && one)
         SeriesPieceOf<true, true>(p0, p1, composite);
     else if (wm)
@@ -1570,18 +1739,19 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
         SeriesPieceOf<false, false>(p0, p1, composite);
 }
 
-template <bool wm, bool oneField, bool pyramid>
+template <bool wm, bool oneField, int line>
 void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composite) {
-    static_assert(oneField || !pyramid);
+    constexpr bool pyramid = line == kPyramidLine, poly = line == kPolyLine;
+    static_assert(oneField || line == kSeriesLine);
     const VolumeSetup& s = *setup_;
     constexpr int fe = oneField ? 0 : 1;
-    // (Not read where pyramid.)
+    // (Not read where pyramid or poly.)
     const LegendreSeries& uc = *linePtr_[0];
     const LegendreSeries& ue = *linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
-    const double c0 = pyramid ? pyramid_.At(mid) : uc.At(mid);
+    const double c0 = pyramid ? pyramid_.At(mid) : poly ? poly_.At(mid) : uc.At(mid);
     const double em = fe == 0 ? c0 : ue.At(mid);
     double ac[3], bc[3], ae, be;
     s.colorTf.AffineOn3(s.colorTf.IntervalOf(c0), ac, bc);
@@ -1590,16 +1760,22 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
     // on the segment, V the antiderivative of w), phi(t) = tauM (t - p0) + be (V(t) -
     // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
     double tauM = ae, v0 = 0, v1 = 0;
-    if (pyramid && be != 0) {
-        tauM = ae + be * pyramidDepth_.mean;
+    if ((pyramid || poly) && be != 0) {
+        tauM = ae + be * (pyramid ? pyramidDepth_.mean : poly_.m[0]);
         // Pieces follow each other along the segment: the last end is this start. (V at
         // both ends in one call otherwise: the same lanes as at the nodes.)
         const bool known = p0 == depthLineT_;
         alignas(32) double ends[4] = {p0, p1, p1, p1}, f4[4], v4[4];
 #if defined(__AVX2__) && defined(__FMA__)
-        PyramidLineAt4(pyramid_, pyramidDepth_, ends, f4, v4);
+        if constexpr (pyramid)
+            PyramidLineAt4(pyramid_, pyramidDepth_, ends, f4, v4);
+        else
+            PolyLineAt4(poly_, ends, f4, v4);
 #else
-        PyramidLineAt(pyramid_, pyramidDepth_, ends, 2, f4, v4);
+        if constexpr (pyramid)
+            PyramidLineAt(pyramid_, pyramidDepth_, ends, 2, f4, v4);
+        else
+            PolyLineAt(poly_, ends, 2, f4, v4);
 #endif
         v0 = known ? depthLineV_ : v4[0];
         v1 = v4[1];
@@ -1685,6 +1861,9 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
             if constexpr (pyramid) {
                 PyramidLineAt(pyramid_, pyramidDepth_, nodeT + first, whole,
                               nodeU + first, be != 0 ? nodeDepth + first : nullptr);
+            } else if constexpr (poly) {
+                PolyLineAt(poly_, nodeT + first, whole, nodeU + first,
+                           be != 0 ? nodeDepth + first : nullptr);
             } else if (be == 0) {
                 many(uc, nodeU + first);
             } else if (fe == 0) {
@@ -1885,7 +2064,9 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         double tau[2], emission[2][3];
         const double ends[2] = {p0, p1};
         for (int k = 0; k < 2; ++k) {
-            const double vc = pyramid ? pyramid_.At(ends[k]) : uc(ends[k]);
+            const double vc = pyramid ? pyramid_.At(ends[k])
+                              : poly  ? poly_.At(ends[k])
+                                      : uc(ends[k]);
             const double ve = fe == 0 ? vc : ue(ends[k]);
             tau[k] = std::max(0.0, ae + be * ve);
             for (int c = 0; c < 3; ++c)

@@ -154,6 +154,27 @@ void ExpNegative(const double* x, int n, double* out);
 /// at a time where the build has AVX2).
 void NaturalLog(const double* x, int n, double* out);
 
+/// An affine linear hexahedron's or wedge's field along a segment [mid - half, mid +
+/// half] as its polynomial (SegmentField::LinearCellLine, degree 3 or 2): f = m0 + m1 x +
+/// m2 x^2
+/// + m3 x^3 at x = (t - mid) / half, and V = half (m1 x^2 / 2 + m2 x^3 / 3 + m3 x^4 / 4),
+/// the antiderivative in t of f - m0 (the series pieces' depth line).
+struct PolyLine {
+    double mid = 0, half = 0, inverseHalf = 0;
+    double m[4] = {0, 0, 0, 0};
+    double AtX(double x) const { return ((m[3] * x + m[2]) * x + m[1]) * x + m[0]; }
+    double At(double t) const { return AtX((t - mid) * inverseHalf); }
+};
+/// The field at the n points t (out) and, where depth is not null, V there (depth): four
+/// at a time in vector lanes where the build has AVX2 (each value independent of n).
+void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth);
+/// Appends to `out` the t in (tEnter, tExit) where p's field equals `level`: the
+/// polynomial's monotone stretches between its critical points (the derivative's roots in
+/// closed form), each holding at most one root, found by Newton's method within its
+/// bracket.
+void PolyLevelCrossings(const PolyLine& p, double level, double tEnter, double tExit,
+                        std::vector<double>& out);
+
 /// A linear pyramid's field along a segment in closed form (PyramidLine) as the volume
 /// integrates it: the antiderivative in t of the field less `mean`, V = half (a2 x^2 + g
 /// ln(1 + rho x)) at x = (t - mid) / half (the basis' R S / U in partial fractions), and
@@ -277,6 +298,7 @@ class VolumeRayMarcher {
         bool linear = false;    ///< value linear in t on the segment
         bool bySeries = false;  ///< exact Legendre series available (affine polynomial)
         bool pyramid = false;   ///< a linear pyramid's field in closed form (pyramid_)
+        bool poly = false;      ///< an affine linear hex's or wedge's polynomial (poly_)
         double valueEnter = 0, valueExit = 0;  ///< at tEnter and tExit (linear fields)
         double error = 0;  ///< bound of the absolute error of the values on the segment
     };
@@ -347,9 +369,18 @@ class VolumeRayMarcher {
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
     /// SeriesPiece for Williams-Max glow (wm) or not, and one field (oneField) or two.
-    /// pyramid: the one field is pyramid_ (BeginPyramidLine), not a series.
-    template <bool wm, bool oneField, bool pyramid = false>
+    /// How SeriesPieceOf's one field is held: a series (linePtr_), pyramid_
+    /// (BeginPyramidLine) or poly_ (BeginPolyLine).
+    enum LineKind { kSeriesLine, kPyramidLine, kPolyLine };
+    template <bool wm, bool oneField, int line = kSeriesLine>
     void SeriesPieceOf(double p0, double p1, RayComposite& composite);
+    /// Series mode for an affine linear hexahedron or wedge whose one field drives both
+    /// transfer functions, without a series: its polynomial along the segment (poly_,
+    /// monomials in x), the depth line its antiderivative, the crossings of the
+    /// breakpoints PolyLevelCrossings'; the rounding bounds as the series'. Sets the
+    /// field linear instead where the terms above degree 1 are within that rounding.
+    /// False where the cell is not such a one (or the projection is pinned).
+    bool BeginPolyLine(int f, const Segment& seg);
     /// Series mode for a linear pyramid whose one field drives both transfer functions,
     /// without a series: the field in closed form (pyramid_), its optical depth's
     /// antiderivative from partial fractions, the breakpoints' crossings as roots of
@@ -431,6 +462,10 @@ class VolumeRayMarcher {
     bool pyramidLine_ = false;
     PyramidLine pyramid_;
     PyramidDepthLine pyramidDepth_;
+    /// An affine linear hexahedron's or wedge's polynomial (BeginPolyLine): polyLine_ in
+    /// series mode.
+    bool polyLine_ = false;
+    PolyLine poly_;
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated

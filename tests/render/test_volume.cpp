@@ -1685,6 +1685,142 @@ TEST(VolumeLinearCells, LinearCellLineIsTheFieldAlongTheRay) {
     }
 }
 
+// PolyLine (an affine linear hexahedron's or wedge's polynomial along a segment, as the
+// volume integrates it) on random cubics and quadratics over [-1, 1]: PolyLineAt's lanes
+// are bitwise PolyLine::AtX for every count; its depth line's differences are the
+// polynomial's integral less m0 (long double) within the series' bound of their rounding;
+// PolyLevelCrossings finds every crossing of levels spread over the range and of levels
+// within 1e-9 of a critical value (two crossings close together, or none), each within
+// 1e-12 of a root bisected in long double (or what rounding of the values moves it by at
+// the slope there), and no other.
+TEST(VolumeLinearCells, PolyLineAgainstLongDoubleAndSampledCrossings) {
+    std::mt19937_64 rng(17);
+    std::uniform_real_distribution<double> coef(-2, 2), unit(0, 1);
+    int crossings = 0, nearTangent = 0;
+    double worstDepth = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        PolyLine p;
+        p.mid = coef(rng);
+        p.half = 0.01 + unit(rng);
+        p.inverseHalf = 1 / p.half;
+        const int degree = trial % 2 ? 3 : 2;
+        for (int k = 0; k <= degree; ++k) p.m[k] = coef(rng);
+        double sum = 0;
+        for (double c : p.m) sum += std::abs(c);
+        auto fieldLd = [&](LD x) {
+            return ((LD(p.m[3]) * x + p.m[2]) * x + p.m[1]) * x + p.m[0];
+        };
+        // Field and depth line at 1 to 9 points.
+        const int n = 1 + trial % 9;
+        std::vector<double> t(n), f(n), v(n);
+        for (double& ti : t) ti = p.mid + p.half * (2 * unit(rng) - 1);
+        t[0] = p.mid - p.half;
+        PolyLineAt(p, t.data(), n, f.data(), v.data());
+        const double bound =
+            2 * 8 * std::numeric_limits<double>::epsilon() * p.half *
+            (0.5 * std::abs(p.m[1]) + std::abs(p.m[2]) / 3 + 0.25 * std::abs(p.m[3]));
+        for (int i = 0; i < n; ++i) {
+            EXPECT_EQ(f[i], p.At(t[i])) << trial;
+            const LD x0 = (LD(t[0]) - p.mid) / p.half, x1 = (LD(t[i]) - p.mid) / p.half;
+            LD integral = 0;
+            for (int k = 1; k <= 3; ++k)
+                integral +=
+                    LD(p.m[k]) * (std::pow(x1, k + 1) - std::pow(x0, k + 1)) / (k + 1);
+            integral *= p.half;
+            const double miss = double(std::abs(LD(v[i]) - LD(v[0]) - integral));
+            EXPECT_LE(miss,
+                      bound + 4 * std::numeric_limits<double>::epsilon() * p.half * sum)
+                << trial;
+            worstDepth = std::max(worstDepth, miss / bound);
+        }
+        // Levels: three across the range on [-1, 1], and the values at the critical
+        // points shifted by +-1e-9.
+        std::vector<double> levels;
+        double lo = 1e300, hi = -1e300;
+        for (int k = 0; k <= 200; ++k) {
+            const double value = p.AtX(-1 + k / 100.0);
+            lo = std::min(lo, value);
+            hi = std::max(hi, value);
+        }
+        for (int k = 1; k <= 3; ++k) levels.push_back(lo + (hi - lo) * k / 4);
+        {
+            const LD a = 3 * LD(p.m[3]), b = 2 * LD(p.m[2]), c = p.m[1];
+            const LD disc = b * b - 4 * a * c;
+            if (a != 0 && disc > 0)
+                for (int s : {-1, 1}) {
+                    const LD xc = (-b + s * std::sqrt(disc)) / (2 * a);
+                    if (std::abs(xc) < 0.9) {
+                        levels.push_back(double(fieldLd(xc)) + 1e-9);
+                        levels.push_back(double(fieldLd(xc)) - 1e-9);
+                        nearTangent += 2;
+                    }
+                }
+        }
+        for (double level : levels) {
+            std::vector<double> found;
+            PolyLevelCrossings(p, level, p.mid - p.half, p.mid + p.half, found);
+            // Sign changes on a grid of 20000 steps that holds the critical points (in
+            // long double), bisected.
+            std::vector<LD> grid;
+            for (int i = 0; i <= 4000; ++i) grid.push_back(-1 + LD(2) * i / 4000);
+            {
+                const LD a = 3 * LD(p.m[3]), b = 2 * LD(p.m[2]), c = p.m[1];
+                const LD disc = b * b - 4 * a * c;
+                LD crit[2];
+                int nc = 0;
+                if (a != 0 && disc > 0)
+                    for (int s : {-1, 1})
+                        crit[nc++] = (-b + s * std::sqrt(disc)) / (2 * a);
+                if (a == 0 && b != 0) crit[nc++] = -c / b;
+                for (int k = 0; k < nc; ++k)
+                    if (crit[k] > -1 && crit[k] < 1) grid.push_back(crit[k]);
+            }
+            std::sort(grid.begin(), grid.end());
+            std::vector<LD> roots;
+            const std::size_t samples = grid.size() - 1;
+            LD xa = grid[0], fa = fieldLd(xa) - level;
+            for (std::size_t i = 1; i <= samples; ++i) {
+                const LD xb = grid[i], fb = fieldLd(xb) - level;
+                if ((fa < 0) != (fb < 0) && fa != 0 && i < samples) {
+                    LD a = xa, b = xb, va = fa;
+                    for (int it = 0; it < 100; ++it) {
+                        const LD m = (a + b) / 2, vm = fieldLd(m) - level;
+                        if ((vm < 0) == (va < 0)) {
+                            a = m;
+                            va = vm;
+                        } else {
+                            b = m;
+                        }
+                    }
+                    roots.push_back(LD(p.mid) + LD(p.half) * (a + b) / 2);
+                }
+                xa = xb;
+                fa = fb;
+            }
+            EXPECT_EQ(found.size(), roots.size()) << trial << " level " << level;
+            for (LD r : roots) {
+                // Within 1e-12, or what the rounding of the values (8 eps of the sum of
+                // the coefficients) moves a root at the slope there (near a critical
+                // value, two close roots are ill-conditioned).
+                const LD x = (r - p.mid) / p.half;
+                const LD slope =
+                    std::abs((3 * LD(p.m[3]) * x + 2 * LD(p.m[2])) * x + p.m[1]) / p.half;
+                const LD tol =
+                    1e-12L + 8 * std::numeric_limits<double>::epsilon() * sum / slope;
+                bool matched = false;
+                for (double tf : found) matched = matched || std::abs(LD(tf) - r) <= tol;
+                EXPECT_TRUE(matched)
+                    << trial << " level " << level << " root " << double(r);
+            }
+            crossings += int(found.size());
+        }
+    }
+    EXPECT_GT(crossings, 5000);
+    EXPECT_GT(nearTangent, 500);
+    EXPECT_GT(worstDepth, 1e-3);  // the bound is not vacuous
+    EXPECT_LE(worstDepth, 1.0);
+}
+
 // The volume over linear hexahedra, whose field (the closed form along each ray) is the
 // trilinear interpolant of the grid values in each cube, written here independently,
 // against the ODE reference: the error bar holds and the tolerance is met.
