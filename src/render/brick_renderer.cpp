@@ -308,6 +308,7 @@ class RayIntegrator {
     std::vector<std::vector<ProjectedPiece>> pieces_;  ///< per field
     std::vector<char> fieldUsed_;
     std::vector<double> isoValues_;
+    std::vector<double> polyRoots_;  ///< PolyRoots' roots
     ProjectionStats projectionStats_;
     /// Per field, the span of the segment the isosurface source projects the field on,
     /// and whether it has.
@@ -654,6 +655,107 @@ bool LinearRoot(SegmentField& field, double C, double scale, double t0, double t
 }
 }  // namespace
 
+/// The roots of field - C on [t0, t1] where the field is an affine linear hexahedron's or
+/// wedge's (a polynomial of degree 3 or 2 along the ray, SegmentField::LinearCellLine)
+/// and every decision is clear of rounding: true with the roots in `roots` (ascending,
+/// none possibly) where the polynomial keeps farther from C than its rounding and 1e-12
+/// of the field's scale at both ends and at its critical points (so each monotone stretch
+/// between them holds a root exactly when its end values lie on opposite sides, and it is
+/// simple), and each root at least 1e-9 of the span from either end; false otherwise (a
+/// tangent, a root near an end, another cell), where FindRoots decides.
+bool PolyRoots(SegmentField& field, double C, double scale, double t0, double t1,
+               std::vector<double>& roots) {
+    double mono[4], magnitude;
+    int degree = 0;
+    if (!(t1 > t0) || !field.LinearCellLine(t0, t1, mono, degree, magnitude))
+        return false;
+    PolyLine p;
+    p.mid = 0.5 * (t0 + t1);
+    p.half = 0.5 * (t1 - t0);
+    p.inverseHalf = 1 / p.half;
+    double sum = 0;
+    for (int k = 0; k < 4; ++k) {
+        p.m[k] = k <= degree ? mono[k] : 0.0;
+        sum += std::abs(p.m[k]);
+    }
+    // The coefficients' rounding (as the volume's series of them) and Horner's, with
+    // room.
+    const double clear = 1e-12 * scale + 256 * std::numeric_limits<double>::epsilon() *
+                                             std::max(sum, magnitude);
+    double points[4];
+    int count = 0;
+    points[count++] = -1;
+    count += PolyCriticalPoints(p, points + 1);
+    points[count++] = 1;
+    for (int k = 0; k < count; ++k)
+        if (!(std::abs(p.AtX(points[k]) - C) > clear)) return false;
+    roots.clear();
+    PolyLevelCrossings(p, C, t0, t1, roots);
+    const double margin = 1e-9 * (t1 - t0);
+    for (double t : roots)
+        if (!(t > t0 + margin && t < t1 - margin)) return false;
+    return true;
+}
+
+/// PolyRoots for an affine linear pyramid (SegmentField::PyramidLineOn: its field along
+/// the ray l0 + l1 x + k R S / U, U > 0): the critical points are the roots of the
+/// quadratic numerator of its derivative, l1 U^2 + k ((r1 S + R s1) U - R S u1); the
+/// roots those of the quadratic (f - C) U (PyramidLevelCrossings); and their count must
+/// be the number of sign changes of f - C over the ends and critical points.
+bool PyramidRoots(SegmentField& field, double C, double scale, double t0, double t1,
+                  std::vector<double>& roots) {
+    PyramidLine p;
+    if (!(t1 > t0) || !field.PyramidLineOn(t0, t1, p)) return false;
+    const double g0 = p.r1 * p.s0 + p.r0 * p.s1, g1 = 2 * p.r1 * p.s1;
+    const double n0 = p.l1 * p.u0 * p.u0 + p.k * (g0 * p.u0 - p.u1 * p.r0 * p.s0);
+    const double n1 = 2 * p.l1 * p.u0 * p.u1 + p.k * g1 * p.u0;
+    const double n2 = p.l1 * p.u1 * p.u1 + 0.5 * p.k * g1 * p.u1;
+    double points[4];
+    int count = 0;
+    points[count++] = -1;
+    {
+        double crit[2];
+        int nc = 0;
+        if (n2 == 0) {
+            if (n1 != 0) crit[nc++] = -n0 / n1;
+        } else {
+            const double disc = n1 * n1 - 4 * n2 * n0;
+            if (disc > 0) {
+                const double q = -0.5 * (n1 + std::copysign(std::sqrt(disc), n1));
+                crit[nc++] = q / n2;
+                if (q != 0) crit[nc++] = n0 / q;
+            }
+        }
+        if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
+        for (int k = 0; k < nc; ++k)
+            if (crit[k] > points[count - 1] && crit[k] < 1) points[count++] = crit[k];
+    }
+    points[count++] = 1;
+    // The evaluation's rounding (R / U, S / U, R S / U at most 1 in the cell), with room.
+    const double terms =
+        std::abs(p.l0) + std::abs(p.l1) +
+        std::abs(p.k) * (3 + std::abs(p.r0) + std::abs(p.r1) + std::abs(p.s0) +
+                         std::abs(p.s1) + std::abs(p.u0) + std::abs(p.u1));
+    const double clear =
+        1e-12 * scale + 256 * std::numeric_limits<double>::epsilon() * terms;
+    int changes = 0;
+    double previous = 0;
+    for (int k = 0; k < count; ++k) {
+        const double v = p.AtX(points[k]) - C;
+        if (!(std::abs(v) > clear)) return false;
+        if (k > 0 && (v < 0) != (previous < 0)) ++changes;
+        previous = v;
+    }
+    roots.clear();
+    PyramidLevelCrossings(p, C, t0, t1, roots);
+    if (int(roots.size()) != changes) return false;
+    std::sort(roots.begin(), roots.end());
+    const double margin = 1e-9 * (t1 - t0);
+    for (double t : roots)
+        if (!(t > t0 + margin && t < t1 - margin)) return false;
+    return true;
+}
+
 double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const Segment& seg,
                                 const RaySpan& span, RenderCounters& counters) {
     const std::size_t nIso = setup.isos.size();
@@ -762,6 +864,22 @@ double RayIntegrator::IsoSource(const BrickSetup& setup, const Ray& ray, const S
                 if (RootResult r; LinearRoot(field_, iso.value, setup.fieldScale[f],
                                              projectT0_[f], projectT1_[f], r)) {
                     if (r.kind != RootKind::None) onRoot(r);
+                    continue;
+                }
+                // An affine linear hexahedron's or wedge's polynomial, or a linear
+                // pyramid's rational field: its simple roots in closed form, each with
+                // its residual on the field.
+                if (PolyRoots(field_, iso.value, setup.fieldScale[f], projectT0_[f],
+                              projectT1_[f], polyRoots_) ||
+                    PyramidRoots(field_, iso.value, setup.fieldScale[f], projectT0_[f],
+                                 projectT1_[f], polyRoots_)) {
+                    for (const double t : polyRoots_) {
+                        RootResult r;
+                        r.kind = RootKind::Simple;
+                        r.t = t;
+                        r.residual = std::abs(field_(t) - iso.value);
+                        if (onRoot(r)) break;
+                    }
                     continue;
                 }
                 project();

@@ -537,32 +537,38 @@ void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* 
 #endif
 }
 
+int PolyCriticalPoints(const PolyLine& p, double out[2]) {
+    const double* m = p.m;
+    // The roots of 3 m3 x^2 + 2 m2 x + m1 by the stable formula.
+    const double a = 3 * m[3], b = 2 * m[2], c = m[1];
+    double crit[2];
+    int nc = 0;
+    if (a == 0) {
+        if (b != 0) crit[nc++] = -c / b;
+    } else {
+        const double disc = b * b - 4 * a * c;
+        if (disc > 0) {
+            const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
+            crit[nc++] = q / a;
+            if (q != 0) crit[nc++] = c / q;
+        }
+    }
+    if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
+    int count = 0;
+    for (int k = 0; k < nc; ++k)
+        if (crit[k] > -1 && crit[k] < 1 && (count == 0 || crit[k] > out[count - 1]))
+            out[count++] = crit[k];
+    return count;
+}
+
 void PolyLevelCrossings(const PolyLine& p, double level, double tEnter, double tExit,
                         std::vector<double>& out) {
     const double* m = p.m;
-    // The critical points in (-1, 1): the roots of 3 m3 x^2 + 2 m2 x + m1, by the stable
-    // formula.
+    // Split at the critical points in (-1, 1).
     double points[4];
     int count = 0;
     points[count++] = -1;
-    {
-        const double a = 3 * m[3], b = 2 * m[2], c = m[1];
-        double crit[2];
-        int nc = 0;
-        if (a == 0) {
-            if (b != 0) crit[nc++] = -c / b;
-        } else {
-            const double disc = b * b - 4 * a * c;
-            if (disc > 0) {
-                const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
-                crit[nc++] = q / a;
-                if (q != 0) crit[nc++] = c / q;
-            }
-        }
-        if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
-        for (int k = 0; k < nc; ++k)
-            if (crit[k] > points[count - 1] && crit[k] < 1) points[count++] = crit[k];
-    }
+    count += PolyCriticalPoints(p, points + 1);
     points[count++] = 1;
     // Between them the polynomial is monotone: a level strictly between the end values is
     // crossed once, found by Newton's method kept inside the bracket (bisection where it

@@ -168,6 +168,9 @@ struct PolyLine {
 /// The field at the n points t (out) and, where depth is not null, V there (depth): four
 /// at a time in vector lanes where the build has AVX2 (each value independent of n).
 void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth);
+/// The critical points of p's polynomial inside (-1, 1) (x, ascending) into out; their
+/// count.
+int PolyCriticalPoints(const PolyLine& p, double out[2]);
 /// Appends to `out` the t in (tEnter, tExit) where p's field equals `level`: the
 /// polynomial's monotone stretches between its critical points (the derivative's roots in
 /// closed form), each holding at most one root, found by Newton's method within its
