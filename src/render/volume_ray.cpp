@@ -1033,7 +1033,7 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         const Interval& range = (*s.ranges[f])[seg.cell];
         st.error = 8 * kEps * s.fieldScale[f];
         if (!sf.Affine()) st.error += 4 * s.mappingTolerance * (range.hi - range.lo);
-        if (fieldCount_ == 1 && sf.ExactAlongLine() && BeginPolyLine(f, seg)) {
+        if (sf.ExactAlongLine() && BeginPolyLine(f, seg)) {
             // An affine linear hexahedron or wedge: its polynomial, or linear (st set).
         } else if (sf.ExactAlongLine() && sf.LineDegree() <= 1) {
             st.linear = true;
@@ -1056,8 +1056,8 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
                     st.valueExit = p.p(seg.tExit);
                 }
             }
-        } else if (fieldCount_ == 1 && BeginPyramidLine(f, seg)) {
-            // A linear pyramid in closed form (one field drives both transfer functions).
+        } else if (BeginPyramidLine(f, seg)) {
+            // A linear pyramid in closed form.
             st.pyramid = true;
             st.error = std::max(st.error, lineError_[f]);
         } else if (double pole, gap, residue;
@@ -1071,6 +1071,33 @@ bool VolumeRayMarcher::BeginSegment(const Mesh& mesh, const MeshGeometry& geomet
         allSeries = allSeries && (st.linear || st.bySeries || st.pyramid || st.poly);
         FindCrossings(f, seg, counters);
         sf.AddCountersTo(counters);
+    }
+    if (fieldCount_ == 2 && !(state_[0].poly && state_[1].poly) &&
+        !(state_[0].pyramid && state_[1].pyramid) &&
+        (state_[0].poly || state_[1].poly || state_[0].pyramid || state_[1].pyramid)) {
+        // Two fields held differently (a closed form beside a series, a linear or a
+        // constant field): the closed forms as series, as without them (the crossings
+        // found stand).
+        allSeries = true;
+        for (int f = 0; f < 2; ++f) {
+            FieldState& st = state_[f];
+            if (st.poly) {
+                st.poly = false;
+                SeriesFromPolynomial(f, seg, field_[f].LineDegree(), poly_[f].m,
+                                     polyMagnitude_[f]);
+                st.bySeries = true;
+                st.error = std::max(st.error, pieces_[f][0].eps);
+            } else if (st.pyramid) {
+                st.pyramid = false;
+                if (double pole, gap, residue;
+                    field_[f].RationalPole(seg.tEnter, seg.tExit, pole, gap, residue) &&
+                    ProjectRational(f, seg, gap, residue)) {
+                    st.bySeries = true;
+                    st.error = std::max(st.error, pieces_[f][0].eps);
+                }
+            }
+            allSeries = allSeries && (st.linear || st.bySeries);
+        }
     }
     mode_ = allLinear ? Mode::kClosed : allSeries ? Mode::kSeries : Mode::kGeneric;
     if (mode_ == Mode::kSeries) {
@@ -1353,15 +1380,17 @@ bool VolumeRayMarcher::ProjectRational(int f, const Segment& seg, double gap,
 }
 
 bool VolumeRayMarcher::BeginPyramidLine(int f, const Segment& seg) {
-    if (!field_[f].PyramidLineOn(seg.tEnter, seg.tExit, pyramid_)) return false;
+    if (!field_[f].PyramidLineOn(seg.tEnter, seg.tExit, pyramid_[f])) return false;
     const Interval& range = (*setup_->ranges[f])[seg.cell];
     const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
     const double* v = field_[f].NodalValues();
     double sumV = 0;
     for (int i = 0; i < 5; ++i) sumV += std::abs(v[i]);
-    if (!MakePyramidDepthLine(pyramid_, cellScale, sumV, pyramidDepth_)) return false;
-    depthLineError_ = pyramidDepth_.depthError;
-    lineError_[f] = pyramidDepth_.fieldError;
+    if (!MakePyramidDepthLine(pyramid_[f], cellScale, sumV, pyramidDepth_[f]))
+        return false;
+    // The depth line is the extinction field's (the last).
+    if (f == fieldCount_ - 1) depthLineError_ = pyramidDepth_[f].depthError;
+    lineError_[f] = pyramidDepth_[f].fieldError;
     depthLineT_ = std::numeric_limits<double>::quiet_NaN();
     return true;
 }
@@ -1376,7 +1405,7 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     int degree = 0;
     if (!sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude) || degree != n)
         return false;
-    PolyLine& p = poly_;
+    PolyLine& p = poly_[f];
     p.mid = 0.5 * (seg.tEnter + seg.tExit);
     p.half = 0.5 * (seg.tExit - seg.tEnter);
     p.inverseHalf = 1 / p.half;
@@ -1390,7 +1419,8 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     // nodal value, and the values are at most the sum of the coefficients.
     const double eps = 64 * (n + 1) * kEps * std::max(magnitude, sum);
     st.error = std::max(st.error, eps);
-    if (std::abs(p.m[2]) + std::abs(p.m[3]) <= eps) {
+    polyMagnitude_[f] = magnitude;
+    if (fieldCount_ == 1 && std::abs(p.m[2]) + std::abs(p.m[3]) <= eps) {
         // Linear data on the cell (u = x + 2y + 3z on hexes, say): the closed form.
         st.linear = true;
         st.valueEnter = p.AtX(-1.0);
@@ -1403,9 +1433,11 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     const Interval& range = (*s.ranges[f])[seg.cell];
     const double cellScale = std::max(std::abs(range.lo), std::abs(range.hi));
     lineError_[f] = kSampleRounding * kEps * cellScale + kSeriesRounding * kEps * sum;
-    depthLineError_ =
-        kSeriesRounding * kEps * p.half *
-        (0.5 * std::abs(p.m[1]) + std::abs(p.m[2]) / 3 + 0.25 * std::abs(p.m[3]));
+    // The depth line is the extinction field's (the last).
+    if (f == fieldCount_ - 1)
+        depthLineError_ =
+            kSeriesRounding * kEps * p.half *
+            (0.5 * std::abs(p.m[1]) + std::abs(p.m[2]) / 3 + 0.25 * std::abs(p.m[3]));
     depthLineT_ = std::numeric_limits<double>::quiet_NaN();
     return true;
 }
@@ -1420,9 +1452,9 @@ void VolumeRayMarcher::PyramidCrossings(int f, const Segment& seg) {
         if (!(b > range.lo) || b == last) continue;
         last = b;
         if (state_[f].poly)
-            PolyLevelCrossings(poly_, b, seg.tEnter, seg.tExit, crossings_);
+            PolyLevelCrossings(poly_[f], b, seg.tEnter, seg.tExit, crossings_);
         else
-            PyramidLevelCrossings(pyramid_, b, seg.tEnter, seg.tExit, crossings_);
+            PyramidLevelCrossings(pyramid_[f], b, seg.tEnter, seg.tExit, crossings_);
     }
 }
 
@@ -1552,8 +1584,8 @@ double VolumeRayMarcher::FieldAt(int f, double t) {
         return (1 - x) * st.valueEnter + x * st.valueExit;
     }
     if (st.bySeries) return pieces_[f][0].p(t);
-    if (st.pyramid) return pyramid_.At(t);
-    if (st.poly) return poly_.At(t);
+    if (st.pyramid) return pyramid_[f].At(t);
+    if (st.poly) return poly_[f].At(t);
     return field_[f](t);
 }
 
@@ -1726,15 +1758,23 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
     // the branches on them compiled out of the piece's loops.
     const bool wm = setup_->glow == GlowModel::WilliamsMax, one = fieldCount_ == 1;
     if (polyLine_) {
-        if (wm)
+        if (wm && one)
             SeriesPieceOf<true, true, kPolyLine>(p0, p1, composite);
-        else
+        else if (wm)
+            SeriesPieceOf<true, false, kPolyLine>(p0, p1, composite);
+        else if (one)
             SeriesPieceOf<false, true, kPolyLine>(p0, p1, composite);
-    } else if (pyramidLine_) {
-        if (wm)
-            SeriesPieceOf<true, true, kPyramidLine>(p0, p1, composite);
         else
+            SeriesPieceOf<false, false, kPolyLine>(p0, p1, composite);
+    } else if (pyramidLine_) {
+        if (wm && one)
+            SeriesPieceOf<true, true, kPyramidLine>(p0, p1, composite);
+        else if (wm)
+            SeriesPieceOf<true, false, kPyramidLine>(p0, p1, composite);
+        else if (one)
             SeriesPieceOf<false, true, kPyramidLine>(p0, p1, composite);
+        else
+            SeriesPieceOf<false, false, kPyramidLine>(p0, p1, composite);
     } else if (wm && one)
         SeriesPieceOf<true, true>(p0, p1, composite);
     else if (wm)
@@ -1748,17 +1788,23 @@ void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite
 template <bool wm, bool oneField, int line>
 void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composite) {
     constexpr bool pyramid = line == kPyramidLine, poly = line == kPolyLine;
-    static_assert(oneField || line == kSeriesLine);
     const VolumeSetup& s = *setup_;
     constexpr int fe = oneField ? 0 : 1;
-    // (Not read where pyramid or poly.)
+    // (Null, and not read, where pyramid or poly.)
     const LegendreSeries& uc = *linePtr_[0];
     const LegendreSeries& ue = *linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
-    const double c0 = pyramid ? pyramid_.At(mid) : poly ? poly_.At(mid) : uc.At(mid);
-    const double em = fe == 0 ? c0 : ue.At(mid);
+    // The fields at t (colour, extinction), however they are held.
+    auto colorAt = [&](double t) {
+        return pyramid ? pyramid_[0].At(t) : poly ? poly_[0].At(t) : uc.At(t);
+    };
+    auto extinctionAt = [&](double t) {
+        return pyramid ? pyramid_[fe].At(t) : poly ? poly_[fe].At(t) : ue.At(t);
+    };
+    const double c0 = colorAt(mid);
+    const double em = fe == 0 ? c0 : extinctionAt(mid);
     double ac[3], bc[3], ae, be;
     s.colorTf.AffineOn3(s.colorTf.IntervalOf(c0), ac, bc);
     s.extinctionTf.AffineOn1(s.extinctionTf.IntervalOf(em), ae, be);
@@ -1767,21 +1813,21 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
     // V(p0)) for tauM = ae + be m. Taking the mean out keeps V small, and so its rounding.
     double tauM = ae, v0 = 0, v1 = 0;
     if ((pyramid || poly) && be != 0) {
-        tauM = ae + be * (pyramid ? pyramidDepth_.mean : poly_.m[0]);
+        tauM = ae + be * (pyramid ? pyramidDepth_[fe].mean : poly_[fe].m[0]);
         // Pieces follow each other along the segment: the last end is this start. (V at
         // both ends in one call otherwise: the same lanes as at the nodes.)
         const bool known = p0 == depthLineT_;
         alignas(32) double ends[4] = {p0, p1, p1, p1}, f4[4], v4[4];
 #if defined(__AVX2__) && defined(__FMA__)
         if constexpr (pyramid)
-            PyramidLineAt4(pyramid_, pyramidDepth_, ends, f4, v4);
+            PyramidLineAt4(pyramid_[fe], pyramidDepth_[fe], ends, f4, v4);
         else
-            PolyLineAt4(poly_, ends, f4, v4);
+            PolyLineAt4(poly_[fe], ends, f4, v4);
 #else
         if constexpr (pyramid)
-            PyramidLineAt(pyramid_, pyramidDepth_, ends, 2, f4, v4);
+            PyramidLineAt(pyramid_[fe], pyramidDepth_[fe], ends, 2, f4, v4);
         else
-            PolyLineAt(poly_, ends, 2, f4, v4);
+            PolyLineAt(poly_[fe], ends, 2, f4, v4);
 #endif
         v0 = known ? depthLineV_ : v4[0];
         v1 = v4[1];
@@ -1865,11 +1911,19 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
                              nodeDepth + first);
             };
             if constexpr (pyramid) {
-                PyramidLineAt(pyramid_, pyramidDepth_, nodeT + first, whole,
-                              nodeU + first, be != 0 ? nodeDepth + first : nullptr);
+                // The colour field, then (if another) the extinction field and its depth.
+                double* depth = be != 0 ? nodeDepth + first : nullptr;
+                PyramidLineAt(pyramid_[0], pyramidDepth_[0], nodeT + first, whole,
+                              nodeU + first, fe == 0 ? depth : nullptr);
+                if (fe != 0)
+                    PyramidLineAt(pyramid_[fe], pyramidDepth_[fe], nodeT + first, whole,
+                                  nodeE + first, depth);
             } else if constexpr (poly) {
-                PolyLineAt(poly_, nodeT + first, whole, nodeU + first,
-                           be != 0 ? nodeDepth + first : nullptr);
+                double* depth = be != 0 ? nodeDepth + first : nullptr;
+                PolyLineAt(poly_[0], nodeT + first, whole, nodeU + first,
+                           fe == 0 ? depth : nullptr);
+                if (fe != 0)
+                    PolyLineAt(poly_[fe], nodeT + first, whole, nodeE + first, depth);
             } else if (be == 0) {
                 many(uc, nodeU + first);
             } else if (fe == 0) {
@@ -2070,10 +2124,8 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         double tau[2], emission[2][3];
         const double ends[2] = {p0, p1};
         for (int k = 0; k < 2; ++k) {
-            const double vc = pyramid ? pyramid_.At(ends[k])
-                              : poly  ? poly_.At(ends[k])
-                                      : uc(ends[k]);
-            const double ve = fe == 0 ? vc : ue(ends[k]);
+            const double vc = colorAt(ends[k]);
+            const double ve = fe == 0 ? vc : extinctionAt(ends[k]);
             tau[k] = std::max(0.0, ae + be * ve);
             for (int c = 0; c < 3; ++c)
                 emission[k][c] = std::max(0.0, ac[c] + bc[c] * vc) * (wm ? tau[k] : 1.0);

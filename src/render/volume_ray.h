@@ -377,19 +377,21 @@ class VolumeRayMarcher {
     enum LineKind { kSeriesLine, kPyramidLine, kPolyLine };
     template <bool wm, bool oneField, int line = kSeriesLine>
     void SeriesPieceOf(double p0, double p1, RayComposite& composite);
-    /// Series mode for an affine linear hexahedron or wedge whose one field drives both
-    /// transfer functions, without a series: its polynomial along the segment (poly_,
+    /// Series mode for an affine linear hexahedron's or wedge's field f (for two fields,
+    /// as BeginPyramidLine), without a series: its polynomial along the segment (poly_,
     /// monomials in x), the depth line its antiderivative, the crossings of the
-    /// breakpoints PolyLevelCrossings'; the rounding bounds as the series'. Sets the
-    /// field linear instead where the terms above degree 1 are within that rounding.
+    /// breakpoints PolyLevelCrossings'; the rounding bounds as the series'. With one
+    /// field, sets it linear instead where the terms above degree 1 are within that
+    /// rounding.
     /// False where the cell is not such a one (or the projection is pinned).
     bool BeginPolyLine(int f, const Segment& seg);
-    /// Series mode for a linear pyramid whose one field drives both transfer functions,
-    /// without a series: the field in closed form (pyramid_), its optical depth's
-    /// antiderivative from partial fractions, the breakpoints' crossings as roots of
-    /// quadratics, each with a bound of its rounding. False (fall back to the series)
-    /// where that bound would exceed the series' own, or the pole is far (the series is
-    /// short there) or within 1/1024 of the segment.
+    /// Series mode for a linear pyramid's field f (for two fields, both the same kind:
+    /// BeginSegment makes series of them otherwise), without a series: the field in
+    /// closed form (pyramid_), its optical depth's antiderivative from partial fractions,
+    /// the breakpoints' crossings as roots of quadratics, each with a bound of its
+    /// rounding. False (fall back to the series) where that bound would exceed the
+    /// series' own, or the pole is far (the series is short there) or within 1/1024 of
+    /// the segment.
     bool BeginPyramidLine(int f, const Segment& seg);
     /// The crossings of the breakpoints in the cell's range by pyramid_ into crossings_.
     void PyramidCrossings(int f, const Segment& seg);
@@ -463,12 +465,13 @@ class VolumeRayMarcher {
     /// A linear pyramid's field in closed form and its depth line (BeginPyramidLine):
     /// pyramidLine_ in series mode.
     bool pyramidLine_ = false;
-    PyramidLine pyramid_;
-    PyramidDepthLine pyramidDepth_;
-    /// An affine linear hexahedron's or wedge's polynomial (BeginPolyLine): polyLine_ in
-    /// series mode.
+    PyramidLine pyramid_[2];
+    PyramidDepthLine pyramidDepth_[2];
+    /// An affine linear hexahedron's or wedge's polynomial per field (BeginPolyLine):
+    /// polyLine_ in series mode; with LinearCellLine's bound of its terms.
     bool polyLine_ = false;
-    PolyLine poly_;
+    PolyLine poly_[2];
+    double polyMagnitude_[2] = {0, 0};
     bool haveDepthLine_ = false;
     double depthLineError_ = 0;
     double depthLineT_ = 0, depthLineV_ = 0;  ///< the last end where it was evaluated
