@@ -299,6 +299,40 @@ TEST(VolumeExp, ExpNegativeWithinThreeUlpsOfLongDouble) {
     EXPECT_GT(worst, 0.0);  // the comparison saw the rounding
 }
 
+// A series piece's opacity and attenuation against long double's expm1 and exp, in ulps
+// of each: within 3 below depth 0.5, where the Taylor
+// series by Estrin's scheme gives both, and above, where exp does; 0 gives 0 and 1.
+TEST(VolumeExp, PieceOpacityWithinItsUlpsOfLongDouble) {
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<double> small(0, 0.5), exponent(-30, 5.7);
+    double worstOpacity = 0, worstAttenuation = 0;
+    auto ulps = [](double got, long double truth) {
+        const double near = static_cast<double>(truth);
+        const double ulp = std::nextafter(near, 2 * near + 1) - near;
+        return double(std::abs(got - truth) / ulp);
+    };
+    for (int round = 0; round < 400000; ++round) {
+        double d = round % 2 ? small(rng) : std::pow(2.0, exponent(rng));
+        if (round == 0) d = 0.5;
+        if (round == 1) d = std::nextafter(0.5, 0.0);
+        double opacity, attenuation;
+        PieceOpacity(d, opacity, attenuation);
+        const long double o = -std::expm1(-static_cast<long double>(d));
+        const long double a = std::exp(-static_cast<long double>(d));
+        worstOpacity = std::max(worstOpacity, ulps(opacity, o));
+        worstAttenuation = std::max(worstAttenuation, ulps(attenuation, a));
+    }
+    std::printf("worst: opacity %.3g ulps, attenuation %.3g ulps\n", worstOpacity,
+                worstAttenuation);
+    EXPECT_LE(worstOpacity, 3.0);
+    EXPECT_LE(worstAttenuation, 3.0);
+    EXPECT_GT(worstOpacity, 0.0);  // the comparison saw the rounding
+    double opacity = -1, attenuation = -1;
+    PieceOpacity(0, opacity, attenuation);
+    EXPECT_EQ(opacity, 0.0);
+    EXPECT_EQ(attenuation, 1.0);
+}
+
 // The logarithms of a linear pyramid's optical depth (at its quadrature nodes) against
 // long double's: within 2 eps of the larger of 1 and |ln x| (the pyramid's depth bound
 // takes 4), over the range the depth line feeds it ([1/1024, 2)), the mantissa's split
