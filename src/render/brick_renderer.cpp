@@ -669,15 +669,9 @@ bool PolyRoots(SegmentField& field, double C, double scale, double t0, double t1
     int degree = 0;
     if (!(t1 > t0) || !field.LinearCellLine(t0, t1, mono, degree, magnitude))
         return false;
-    PolyLine p;
-    p.mid = 0.5 * (t0 + t1);
-    p.half = 0.5 * (t1 - t0);
-    p.inverseHalf = 1 / p.half;
+    const PolyLine p = MakePolyLine(t0, t1, mono, degree);
     double sum = 0;
-    for (int k = 0; k < 4; ++k) {
-        p.m[k] = k <= degree ? mono[k] : 0.0;
-        sum += std::abs(p.m[k]);
-    }
+    for (const double c : p.m) sum += std::abs(c);
     // The coefficients' rounding (as the volume's series of them) and Horner's, with
     // room.
     const double clear = 1e-12 * scale + 256 * std::numeric_limits<double>::epsilon() *
@@ -713,23 +707,7 @@ bool PyramidRoots(SegmentField& field, double C, double scale, double t0, double
     double points[4];
     int count = 0;
     points[count++] = -1;
-    {
-        double crit[2];
-        int nc = 0;
-        if (n2 == 0) {
-            if (n1 != 0) crit[nc++] = -n0 / n1;
-        } else {
-            const double disc = n1 * n1 - 4 * n2 * n0;
-            if (disc > 0) {
-                const double q = -0.5 * (n1 + std::copysign(std::sqrt(disc), n1));
-                crit[nc++] = q / n2;
-                if (q != 0) crit[nc++] = n0 / q;
-            }
-        }
-        if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
-        for (int k = 0; k < nc; ++k)
-            if (crit[k] > points[count - 1] && crit[k] < 1) points[count++] = crit[k];
-    }
+    count += QuadraticRootsInside(n2, n1, n0, points + 1);
     points[count++] = 1;
     // The evaluation's rounding (R / U, S / U, R S / U at most 1 in the cell), with room.
     const double terms =

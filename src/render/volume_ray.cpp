@@ -440,23 +440,35 @@ inline void PyramidLineAt4(const PyramidLine& p, const PyramidDepthLine& d,
 #endif
 }  // namespace
 
-void PyramidLineAt(const PyramidLine& p, const PyramidDepthLine& d, const double* t,
-                   int n, double* out, double* depth) {
+namespace {
 #if defined(__AVX2__) && defined(__FMA__)
+/// at4(t, out, depth) for the n points t (four at a time; the rest through the same
+/// lanes, padded with `filler`: each value independent of its position).
+template <typename At4>
+inline void InLanesOfFour(const double* t, int n, double* out, double* depth,
+                          double filler, At4&& at4) {
     int i = 0;
-    for (; i + 4 <= n; i += 4)
-        PyramidLineAt4(p, d, t + i, out + i, depth ? depth + i : nullptr);
+    for (; i + 4 <= n; i += 4) at4(t + i, out + i, depth ? depth + i : nullptr);
     if (i < n) {
-        // The rest through the same lanes: each value independent of its position.
         const int rest = std::min(n - i, 3);
-        alignas(32) double t4[4] = {p.mid, p.mid, p.mid, p.mid}, out4[4], depth4[4];
+        alignas(32) double t4[4] = {filler, filler, filler, filler}, out4[4], depth4[4];
         for (int k = 0; k < rest; ++k) t4[k] = t[i + k];
-        PyramidLineAt4(p, d, t4, out4, depth ? depth4 : nullptr);
+        at4(t4, out4, depth ? depth4 : nullptr);
         for (int k = 0; k < rest; ++k) {
             out[i + k] = out4[k];
             if (depth) depth[i + k] = depth4[k];
         }
     }
+}
+#endif
+}  // namespace
+
+void PyramidLineAt(const PyramidLine& p, const PyramidDepthLine& d, const double* t,
+                   int n, double* out, double* depth) {
+#if defined(__AVX2__) && defined(__FMA__)
+    InLanesOfFour(t, n, out, depth, p.mid, [&](const double* t4, double* o4, double* d4) {
+        PyramidLineAt4(p, d, t4, o4, d4);
+    });
 #else
     for (int i = 0; i < n; ++i) {
         const double x = (t[i] - p.mid) * p.inverseHalf;
@@ -534,20 +546,9 @@ inline void PolyLineAt4(const PolyLine& p, const double* t, double* out, double*
 
 void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth) {
 #if defined(__AVX2__) && defined(__FMA__)
-    int i = 0;
-    for (; i + 4 <= n; i += 4)
-        PolyLineAt4(p, t + i, out + i, depth ? depth + i : nullptr);
-    if (i < n) {
-        // The rest through the same lanes: each value independent of its position.
-        const int rest = std::min(n - i, 3);
-        alignas(32) double t4[4] = {p.mid, p.mid, p.mid, p.mid}, out4[4], depth4[4];
-        for (int k = 0; k < rest; ++k) t4[k] = t[i + k];
-        PolyLineAt4(p, t4, out4, depth ? depth4 : nullptr);
-        for (int k = 0; k < rest; ++k) {
-            out[i + k] = out4[k];
-            if (depth) depth[i + k] = depth4[k];
-        }
-    }
+    InLanesOfFour(t, n, out, depth, p.mid, [&](const double* t4, double* o4, double* d4) {
+        PolyLineAt4(p, t4, o4, d4);
+    });
 #else
     for (int i = 0; i < n; ++i) {
         const double x = (t[i] - p.mid) * p.inverseHalf;
@@ -559,28 +560,39 @@ void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* 
 #endif
 }
 
-int PolyCriticalPoints(const PolyLine& p, double out[2]) {
-    const double* m = p.m;
-    // The roots of 3 m3 x^2 + 2 m2 x + m1 by the stable formula.
-    const double a = 3 * m[3], b = 2 * m[2], c = m[1];
-    double crit[2];
-    int nc = 0;
+int QuadraticRootsInside(double a, double b, double c, double out[2]) {
+    // The stable formula (no cancellation between -b and the root of the discriminant).
+    double x[2];
+    int n = 0;
     if (a == 0) {
-        if (b != 0) crit[nc++] = -c / b;
+        if (b != 0) x[n++] = -c / b;
     } else {
         const double disc = b * b - 4 * a * c;
         if (disc > 0) {
             const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
-            crit[nc++] = q / a;
-            if (q != 0) crit[nc++] = c / q;
+            x[n++] = q / a;
+            if (q != 0) x[n++] = c / q;
         }
     }
-    if (nc == 2 && crit[1] < crit[0]) std::swap(crit[0], crit[1]);
+    if (n == 2 && x[1] < x[0]) std::swap(x[0], x[1]);
     int count = 0;
-    for (int k = 0; k < nc; ++k)
-        if (crit[k] > -1 && crit[k] < 1 && (count == 0 || crit[k] > out[count - 1]))
-            out[count++] = crit[k];
+    for (int k = 0; k < n; ++k)
+        if (x[k] > -1 && x[k] < 1 && (count == 0 || x[k] > out[count - 1]))
+            out[count++] = x[k];
     return count;
+}
+
+int PolyCriticalPoints(const PolyLine& p, double out[2]) {
+    return QuadraticRootsInside(3 * p.m[3], 2 * p.m[2], p.m[1], out);
+}
+
+PolyLine MakePolyLine(double t0, double t1, const double* mono, int degree) {
+    PolyLine p;
+    p.mid = 0.5 * (t0 + t1);
+    p.half = 0.5 * (t1 - t0);
+    p.inverseHalf = 1 / p.half;
+    for (int k = 0; k < 4; ++k) p.m[k] = k <= degree ? mono[k] : 0.0;
+    return p;
 }
 
 void PolyLevelCrossings(const PolyLine& p, double level, double tEnter, double tExit,
@@ -1428,14 +1440,9 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     if (!sf.LinearCellLine(seg.tEnter, seg.tExit, mono, degree, magnitude) || degree != n)
         return false;
     PolyLine& p = poly_[f];
-    p.mid = 0.5 * (seg.tEnter + seg.tExit);
-    p.half = 0.5 * (seg.tExit - seg.tEnter);
-    p.inverseHalf = 1 / p.half;
+    p = MakePolyLine(seg.tEnter, seg.tExit, mono, n);
     double sum = 0;
-    for (int k = 0; k < 4; ++k) {
-        p.m[k] = k <= n ? mono[k] : 0.0;
-        sum += std::abs(p.m[k]);
-    }
+    for (const double c : p.m) sum += std::abs(c);
     FieldState& st = state_[f];
     // As SeriesFromPolynomial: every term of the sum factorisation is at most the largest
     // nodal value, and the values are at most the sum of the coefficients.

@@ -175,6 +175,11 @@ struct PolyLine {
 /// The field at the n points t (out) and, where depth is not null, V there (depth): four
 /// at a time in vector lanes where the build has AVX2 (each value independent of n).
 void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth);
+/// The PolyLine on [t0, t1] of mono[0..degree] (degree <= 3; monomials in x).
+PolyLine MakePolyLine(double t0, double t1, const double* mono, int degree);
+/// The distinct roots of a x^2 + b x + c strictly inside (-1, 1), ascending, into out (a
+/// linear equation where a = 0; none for a double root); their count.
+int QuadraticRootsInside(double a, double b, double c, double out[2]);
 /// The critical points of p's polynomial inside (-1, 1) (x, ascending) into out; their
 /// count.
 int PolyCriticalPoints(const PolyLine& p, double out[2]);

@@ -1302,6 +1302,28 @@ struct PyramidGridTruth {
     }
 };
 
+// The trilinear interpolant, in the cube of the n^3 grid holding p, of g's values (in
+// double, as the mesh holds them) at the cube's corners.
+template <typename G>
+LD TrilinearGridTruth(int n, const G& g, const std::array<LD, 3>& p) {
+    int cube[3];
+    LD w[3];
+    for (int a = 0; a < 3; ++a) {
+        const LD s = p[a] * n;
+        cube[a] = std::clamp(int(std::floor(double(s))), 0, n - 1);
+        w[a] = s - cube[a];
+    }
+    LD f = 0;
+    for (int c = 0; c < 8; ++c) {
+        const int i = c & 1, j = c >> 1 & 1, k = c >> 2 & 1;
+        const LD corner =
+            g(double(cube[0] + i) / n, double(cube[1] + j) / n, double(cube[2] + k) / n);
+        f += corner * (i ? w[0] : 1 - w[0]) * (j ? w[1] : 1 - w[1]) *
+             (k ? w[2] : 1 - w[2]);
+    }
+    return f;
+}
+
 }  // namespace
 
 TEST(VolumePyramids, RationalFieldAgainstTheOdeReference) {
@@ -2038,24 +2060,7 @@ TEST(VolumeLinearCells, TrilinearFieldAgainstTheOdeReference) {
     mesh.pointFields.push_back(std::move(u));
     // The trilinear interpolant of g's (double) values at the corners of the cube
     // holding p.
-    auto truth = [&](const std::array<LD, 3>& p) {
-        int cube[3];
-        LD w[3];
-        for (int a = 0; a < 3; ++a) {
-            const LD s = p[a] * n;
-            cube[a] = std::clamp(int(std::floor(double(s))), 0, n - 1);
-            w[a] = s - cube[a];
-        }
-        LD f = 0;
-        for (int c = 0; c < 8; ++c) {
-            const int i = c & 1, j = c >> 1 & 1, k = c >> 2 & 1;
-            const LD corner = g(double(cube[0] + i) / n, double(cube[1] + j) / n,
-                                double(cube[2] + k) / n);
-            f += corner * (i ? w[0] : 1 - w[0]) * (j ? w[1] : 1 - w[1]) *
-                 (k ? w[2] : 1 - w[2]);
-        }
-        return f;
-    };
+    auto truth = [&](const std::array<LD, 3>& p) { return TrilinearGridTruth(n, g, p); };
     RenderCounters counters;
     const OdeCheck check = CheckAgainstTheOdeReference(
         mesh, 60, counters, [](int, testing::Vec3&) {}, truth,
@@ -2113,22 +2118,7 @@ accuracy: {volume_tolerance: 1e-10}
                         n, [&](LD x, LD y, LD z) {
                             return LD(g(double(x), double(y), double(z)));
                         }}(p);
-                int cube[3];
-                LD w[3];
-                for (int a = 0; a < 3; ++a) {
-                    const LD s = p[a] * n;
-                    cube[a] = std::clamp(int(std::floor(double(s))), 0, n - 1);
-                    w[a] = s - cube[a];
-                }
-                LD f = 0;
-                for (int c = 0; c < 8; ++c) {
-                    const int i = c & 1, j = c >> 1 & 1, k = c >> 2 & 1;
-                    const LD corner = g(double(cube[0] + i) / n, double(cube[1] + j) / n,
-                                        double(cube[2] + k) / n);
-                    f += corner * (i ? w[0] : 1 - w[0]) * (j ? w[1] : 1 - w[1]) *
-                         (k ? w[2] : 1 - w[2]);
-                }
-                return f;
+                return TrilinearGridTruth(n, g, p);
             };
         };
         RenderCounters counters;
