@@ -491,17 +491,7 @@ void PyramidLevelCrossings(const PyramidLine& p, double level, double tEnter,
     const double a1 = c * p.u1 + p.l1 * p.u0 + p.k * (p.r0 * p.s1 + p.r1 * p.s0);
     const double a0 = c * p.u0 + p.k * (p.r0 * p.s0);
     double roots[2];
-    int count = 0;
-    if (a2 == 0) {
-        if (a1 != 0) roots[count++] = -a0 / a1;
-    } else {
-        const double disc = a1 * a1 - 4 * a2 * a0;
-        if (disc >= 0) {
-            const double q = -0.5 * (a1 + std::copysign(std::sqrt(disc), a1));
-            roots[count++] = q / a2;
-            if (q != 0) roots[count++] = a0 / q;
-        }
-    }
+    const int count = QuadraticRoots(a2, a1, a0, roots);
     for (int r = 0; r < count; ++r) {
         double x = roots[r];
         if (!(std::abs(x) < 1.001)) continue;
@@ -560,20 +550,25 @@ void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* 
 #endif
 }
 
-int QuadraticRootsInside(double a, double b, double c, double out[2]) {
+int QuadraticRoots(double a, double b, double c, double out[2]) {
     // The stable formula (no cancellation between -b and the root of the discriminant).
-    double x[2];
     int n = 0;
     if (a == 0) {
-        if (b != 0) x[n++] = -c / b;
+        if (b != 0) out[n++] = -c / b;
     } else {
         const double disc = b * b - 4 * a * c;
-        if (disc > 0) {
+        if (disc >= 0) {
             const double q = -0.5 * (b + std::copysign(std::sqrt(disc), b));
-            x[n++] = q / a;
-            if (q != 0) x[n++] = c / q;
+            out[n++] = q / a;
+            if (q != 0) out[n++] = c / q;
         }
     }
+    return n;
+}
+
+int QuadraticRootsInside(double a, double b, double c, double out[2]) {
+    double x[2];
+    const int n = QuadraticRoots(a, b, c, x);
     if (n == 2 && x[1] < x[0]) std::swap(x[0], x[1]);
     int count = 0;
     for (int k = 0; k < n; ++k)
@@ -1782,36 +1777,28 @@ void VolumeRayMarcher::QueueLinearTetPiece(double p0, double p1, bool varying) {
     return stop;
 }
 
-void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
-    // The glow model and whether one field drives both transfer functions as constants:
-    // the branches on them compiled out of the piece's loops.
+template <int line>
+void VolumeRayMarcher::SeriesPieceFor(double p0, double p1, RayComposite& composite) {
     const bool wm = setup_->glow == GlowModel::WilliamsMax, one = fieldCount_ == 1;
-    if (polyLine_) {
-        if (wm && one)
-            SeriesPieceOf<true, true, kPolyLine>(p0, p1, composite);
-        else if (wm)
-            SeriesPieceOf<true, false, kPolyLine>(p0, p1, composite);
-        else if (one)
-            SeriesPieceOf<false, true, kPolyLine>(p0, p1, composite);
-        else
-            SeriesPieceOf<false, false, kPolyLine>(p0, p1, composite);
-    } else if (pyramidLine_) {
-        if (wm && one)
-            SeriesPieceOf<true, true, kPyramidLine>(p0, p1, composite);
-        else if (wm)
-            SeriesPieceOf<true, false, kPyramidLine>(p0, p1, composite);
-        else if (one)
-            SeriesPieceOf<false, true, kPyramidLine>(p0, p1, composite);
-        else
-            SeriesPieceOf<false, false, kPyramidLine>(p0, p1, composite);
-    } else if (wm && one)
-        SeriesPieceOf<true, true>(p0, p1, composite);
+    if (wm && one)
+        SeriesPieceOf<true, true, line>(p0, p1, composite);
     else if (wm)
-        SeriesPieceOf<true, false>(p0, p1, composite);
+        SeriesPieceOf<true, false, line>(p0, p1, composite);
     else if (one)
-        SeriesPieceOf<false, true>(p0, p1, composite);
+        SeriesPieceOf<false, true, line>(p0, p1, composite);
     else
-        SeriesPieceOf<false, false>(p0, p1, composite);
+        SeriesPieceOf<false, false, line>(p0, p1, composite);
+}
+
+void VolumeRayMarcher::SeriesPiece(double p0, double p1, RayComposite& composite) {
+    // How the fields are held, the glow model and whether one field drives both transfer
+    // functions as constants: the branches on them compiled out of the piece's loops.
+    if (polyLine_)
+        SeriesPieceFor<kPolyLine>(p0, p1, composite);
+    else if (pyramidLine_)
+        SeriesPieceFor<kPyramidLine>(p0, p1, composite);
+    else
+        SeriesPieceFor<kSeriesLine>(p0, p1, composite);
 }
 
 template <bool wm, bool oneField, int line>

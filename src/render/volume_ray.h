@@ -177,8 +177,11 @@ struct PolyLine {
 void PolyLineAt(const PolyLine& p, const double* t, int n, double* out, double* depth);
 /// The PolyLine on [t0, t1] of mono[0..degree] (degree <= 3; monomials in x).
 PolyLine MakePolyLine(double t0, double t1, const double* mono, int degree);
-/// The distinct roots of a x^2 + b x + c strictly inside (-1, 1), ascending, into out (a
-/// linear equation where a = 0; none for a double root); their count.
+/// The real roots of a x^2 + b x + c by the stable formula (a linear equation where a =
+/// 0), into out in no order (a double root twice); their count.
+int QuadraticRoots(double a, double b, double c, double out[2]);
+/// The distinct roots of a x^2 + b x + c strictly inside (-1, 1), ascending, into out;
+/// their count.
 int QuadraticRootsInside(double a, double b, double c, double out[2]);
 /// The critical points of p's polynomial inside (-1, 1) (x, ascending) into out; their
 /// count.
@@ -389,6 +392,9 @@ class VolumeRayMarcher {
     enum LineKind { kSeriesLine, kPyramidLine, kPolyLine };
     template <bool wm, bool oneField, int line = kSeriesLine>
     void SeriesPieceOf(double p0, double p1, RayComposite& composite);
+    /// SeriesPieceOf for the glow model and field count in use.
+    template <int line>
+    void SeriesPieceFor(double p0, double p1, RayComposite& composite);
     /// Series mode for an affine linear hexahedron's or wedge's field f (for two fields,
     /// as BeginPyramidLine), without a series: its polynomial along the segment (poly_,
     /// monomials in x), the depth line its antiderivative, the crossings of the

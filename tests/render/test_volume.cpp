@@ -1302,6 +1302,30 @@ struct PyramidGridTruth {
     }
 };
 
+// The t where the ray o + t d crosses a face of the n^3 grid of unit cubes, and with
+// `pyramids` a face of the pyramids each cube is cut into (x_i - c_i = +-(x_j - c_j)
+// about its centre c): the kinks of a cell-wise field along the ray.
+void GridCuts(int n, bool pyramids, const std::array<double, 3>& o,
+              const std::array<double, 3>& d, std::vector<LD>& cuts) {
+    for (int axis = 0; axis < 3; ++axis)
+        for (int k = 0; k <= n; ++k)
+            if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
+    if (!pyramids) return;
+    for (int cz = 0; cz < n; ++cz)
+        for (int cy = 0; cy < n; ++cy)
+            for (int cx = 0; cx < n; ++cx) {
+                const LD c[3] = {(cx + LD(0.5)) / n, (cy + LD(0.5)) / n,
+                                 (cz + LD(0.5)) / n};
+                for (int i = 0; i < 3; ++i)
+                    for (int j = i + 1; j < 3; ++j)
+                        for (int s : {-1, 1}) {
+                            const LD den = d[i] - s * d[j];
+                            if (den != 0)
+                                cuts.push_back((c[i] - o[i] - s * (c[j] - o[j])) / den);
+                        }
+            }
+}
+
 // The trilinear interpolant, in the cube of the n^3 grid holding p, of g's values (in
 // double, as the mesh holds them) at the cube's corners.
 template <typename G>
@@ -1354,26 +1378,7 @@ TEST(VolumePyramids, RationalFieldAgainstTheOdeReference) {
         },
         [&](const std::array<LD, 3>& p) { return truth(p); },
         [&](const std::array<double, 3>& o, const std::array<double, 3>& d,
-            std::vector<LD>& cuts) {
-            // The cube faces and the pyramids' faces (x_i - c_i = +-(x_j - c_j)).
-            for (int axis = 0; axis < 3; ++axis)
-                for (int k = 0; k <= n; ++k)
-                    if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
-            for (int cz = 0; cz < n; ++cz)
-                for (int cy = 0; cy < n; ++cy)
-                    for (int cx = 0; cx < n; ++cx) {
-                        const LD c[3] = {(cx + LD(0.5)) / n, (cy + LD(0.5)) / n,
-                                         (cz + LD(0.5)) / n};
-                        for (int i = 0; i < 3; ++i)
-                            for (int j = i + 1; j < 3; ++j)
-                                for (int s : {-1, 1}) {
-                                    const LD den = d[i] - s * d[j];
-                                    if (den != 0)
-                                        cuts.push_back((c[i] - o[i] - s * (c[j] - o[j])) /
-                                                       den);
-                                }
-                    }
-        });
+            std::vector<LD>& cuts) { GridCuts(n, true, o, d, cuts); });
     EXPECT_EQ(check.checked, 60);
     EXPECT_GT(check.worst, 0);
     EXPECT_EQ(counters.inversionFailures, 0);
@@ -1642,26 +1647,12 @@ TEST(VolumePyramids, ClosedFormAgainstTheBasisAndQuadrature) {
                 PyramidLevelCrossings(p, c, seg.tEnter, seg.tExit, found);
                 // Sign changes of the field (long double) at 4001 points, bisected.
                 const int samples = 4000;
+                std::vector<LD> grid;
+                for (int i = 0; i <= samples; ++i)
+                    grid.push_back(-1 + LD(2) * i / samples);
                 std::vector<LD> roots;
-                LD xa = -1, fa = fieldLd(xa) - c;
-                for (int i = 1; i <= samples; ++i) {
-                    LD xb = -1 + LD(2) * i / samples, fb = fieldLd(xb) - c;
-                    if ((fa < 0) != (fb < 0) && fa != 0) {
-                        LD a = xa, b = xb, va = fa;
-                        for (int it = 0; it < 80; ++it) {
-                            const LD m = (a + b) / 2, vm = fieldLd(m) - c;
-                            if ((vm < 0) == (va < 0)) {
-                                a = m;
-                                va = vm;
-                            } else {
-                                b = m;
-                            }
-                        }
-                        roots.push_back(LD(p.mid) + LD(p.half) * (a + b) / 2);
-                    }
-                    xa = xb;
-                    fa = fb;
-                }
+                testing::GridCrossings(fieldLd, c, grid, roots);
+                for (LD& x : roots) x = LD(p.mid) + LD(p.half) * x;
                 EXPECT_EQ(found.size(), roots.size()) << trial << " level " << c;
                 const double tol = 1e-9 * (seg.tExit - seg.tEnter);
                 for (LD r : roots) {
@@ -1847,26 +1838,8 @@ TEST(VolumeLinearCells, PolyLineAgainstLongDoubleAndSampledCrossings) {
             }
             std::sort(grid.begin(), grid.end());
             std::vector<LD> roots;
-            const std::size_t samples = grid.size() - 1;
-            LD xa = grid[0], fa = fieldLd(xa) - level;
-            for (std::size_t i = 1; i <= samples; ++i) {
-                const LD xb = grid[i], fb = fieldLd(xb) - level;
-                if ((fa < 0) != (fb < 0) && fa != 0 && i < samples) {
-                    LD a = xa, b = xb, va = fa;
-                    for (int it = 0; it < 100; ++it) {
-                        const LD m = (a + b) / 2, vm = fieldLd(m) - level;
-                        if ((vm < 0) == (va < 0)) {
-                            a = m;
-                            va = vm;
-                        } else {
-                            b = m;
-                        }
-                    }
-                    roots.push_back(LD(p.mid) + LD(p.half) * (a + b) / 2);
-                }
-                xa = xb;
-                fa = fb;
-            }
+            testing::GridCrossings(fieldLd, level, grid, roots);
+            for (LD& x : roots) x = LD(p.mid) + LD(p.half) * x;
             EXPECT_EQ(found.size(), roots.size()) << trial << " level " << level;
             for (LD r : roots) {
                 // Within 1e-12, or what the rounding of the values (8 eps of the sum of
@@ -2127,24 +2100,7 @@ accuracy: {volume_tolerance: 1e-10}
             interpolant(gv),
             [&](const std::array<double, 3>& o, const std::array<double, 3>& d,
                 std::vector<LD>& cuts) {
-                for (int axis = 0; axis < 3; ++axis)  // the cube faces
-                    for (int k = 0; k <= n; ++k)
-                        if (d[axis] != 0) cuts.push_back((LD(k) / n - o[axis]) / d[axis]);
-                if (cut != testing::CubeCut::Pyramids) return;
-                for (int cz = 0; cz < n; ++cz)  // the pyramids' faces
-                    for (int cy = 0; cy < n; ++cy)
-                        for (int cx = 0; cx < n; ++cx) {
-                            const LD c[3] = {(cx + LD(0.5)) / n, (cy + LD(0.5)) / n,
-                                             (cz + LD(0.5)) / n};
-                            for (int i = 0; i < 3; ++i)
-                                for (int j = i + 1; j < 3; ++j)
-                                    for (int s : {-1, 1}) {
-                                        const LD den = d[i] - s * d[j];
-                                        if (den != 0)
-                                            cuts.push_back(
-                                                (c[i] - o[i] - s * (c[j] - o[j])) / den);
-                                    }
-                        }
+                GridCuts(n, cut == testing::CubeCut::Pyramids, o, d, cuts);
             });
         EXPECT_EQ(check.checked, 40) << int(cut);
         EXPECT_GT(check.worst, 0) << int(cut);

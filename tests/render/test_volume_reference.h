@@ -416,13 +416,13 @@ inline RefPixel NkSincSeriesReference(NkSincTruth& truth, const std::array<doubl
     return out;
 }
 
-/// The t in (t0, t1) where a field along a ray crosses `level`, by sampling and bisection
-/// (the field is smooth between t0 and t1).
-inline void SampledCrossings(const std::function<LD(LD)>& f, LD t0, LD t1, LD level,
-                             int samples, std::vector<LD>& out) {
-    LD a = t0, fa = f(t0) - level;
-    for (int k = 1; k <= samples; ++k) {
-        const LD b = t0 + (t1 - t0) * k / samples, fb = f(b) - level;
+/// The t where f crosses `level` between consecutive points of `grid` (ascending): each
+/// sign change, bisected.
+inline void GridCrossings(const std::function<LD(LD)>& f, LD level,
+                          const std::vector<LD>& grid, std::vector<LD>& out) {
+    LD a = grid[0], fa = f(a) - level;
+    for (std::size_t k = 1; k < grid.size(); ++k) {
+        const LD b = grid[k], fb = f(b) - level;
         if ((fa < 0) != (fb < 0)) {
             LD lo = a, hi = b, flo = fa;
             for (int it = 0; it < 80; ++it) {
@@ -439,6 +439,16 @@ inline void SampledCrossings(const std::function<LD(LD)>& f, LD t0, LD t1, LD le
         a = b;
         fa = fb;
     }
+}
+
+/// The t in (t0, t1) where a field along a ray crosses `level`, by sampling and bisection
+/// (the field is smooth between t0 and t1).
+inline void SampledCrossings(const std::function<LD(LD)>& f, LD t0, LD t1, LD level,
+                             int samples, std::vector<LD>& out) {
+    std::vector<LD> grid(std::size_t(samples) + 1);
+    for (int k = 0; k <= samples; ++k)
+        grid[std::size_t(k)] = t0 + (t1 - t0) * k / samples;
+    GridCrossings(f, level, grid, out);
 }
 
 }  // namespace hpray::testing
