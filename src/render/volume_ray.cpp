@@ -1428,7 +1428,8 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     const VolumeSetup& s = *setup_;
     SegmentField& sf = field_[f];
     const int n = sf.LineDegree();
-    if (s.projection.startDegree == s.projection.maxDegree || n < 2 || n > 3)
+    if (s.projection.startDegree == s.projection.maxDegree || n < 2 || n > 3 ||
+        !(seg.tExit > seg.tEnter))
         return false;
     double mono[4], magnitude;
     int degree = 0;
