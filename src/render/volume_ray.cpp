@@ -1467,7 +1467,7 @@ bool VolumeRayMarcher::BeginPolyLine(int f, const Segment& seg) {
     return true;
 }
 
-void VolumeRayMarcher::PyramidCrossings(int f, const Segment& seg) {
+void VolumeRayMarcher::ClosedLineCrossings(int f, const Segment& seg) {
     const Interval& range = (*setup_->ranges[f])[seg.cell];
     const BreakpointSpan span = BreakpointsIn(f, range.lo, range.hi);
     double last = std::numeric_limits<double>::quiet_NaN();
@@ -1555,7 +1555,7 @@ void VolumeRayMarcher::FindCrossings(int f, const Segment& seg,
         return;
     }
     if (st.pyramid || st.poly) {
-        PyramidCrossings(f, seg);
+        ClosedLineCrossings(f, seg);
         return;
     }
     const Interval& range = (*s.ranges[f])[seg.cell];
@@ -1807,18 +1807,18 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
     constexpr bool pyramid = line == kPyramidLine, poly = line == kPolyLine;
     const VolumeSetup& s = *setup_;
     constexpr int fe = oneField ? 0 : 1;
-    // (Null, and not read, where pyramid or poly.)
-    const LegendreSeries& uc = *linePtr_[0];
-    const LegendreSeries& ue = *linePtr_[fe];
+    // The series of the fields (not set, and not read, where pyramid or poly).
+    const LegendreSeries* uc = linePtr_[0];
+    const LegendreSeries* ue = linePtr_[fe];
     const double length = p1 - p0, mid = 0.5 * (p0 + p1);
     // Each transfer function is affine on the piece (its ends are breakpoints up to
     // rounding): the piece holding the field at the midpoint, extended to both ends.
     // The fields at t (colour, extinction), however they are held.
     auto colorAt = [&](double t) {
-        return pyramid ? pyramid_[0].At(t) : poly ? poly_[0].At(t) : uc.At(t);
+        return pyramid ? pyramid_[0].At(t) : poly ? poly_[0].At(t) : uc->At(t);
     };
     auto extinctionAt = [&](double t) {
-        return pyramid ? pyramid_[fe].At(t) : poly ? poly_[fe].At(t) : ue.At(t);
+        return pyramid ? pyramid_[fe].At(t) : poly ? poly_[fe].At(t) : ue->At(t);
     };
     const double c0 = colorAt(mid);
     const double em = fe == 0 ? c0 : extinctionAt(mid);
@@ -1852,14 +1852,14 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
         depthLineV_ = v1;
     } else if (be != 0) {
         if (!haveDepthLine_) {
-            ue.Antiderivative(depthLine_, /*withoutMean=*/true);
+            ue->Antiderivative(depthLine_, /*withoutMean=*/true);
             double sum = 0;
             for (double c : depthLine_.c) sum += std::abs(c);
             depthLineError_ = kSeriesRounding * kEps * sum;
             haveDepthLine_ = true;
             depthLineT_ = std::numeric_limits<double>::quiet_NaN();
         }
-        tauM = ae + be * ue.c[0];
+        tauM = ae + be * ue->c[0];
         // Pieces follow each other along the segment: the last end is this start.
         if (p0 == depthLineT_) {
             v0 = depthLineV_;
@@ -1943,12 +1943,12 @@ void VolumeRayMarcher::SeriesPieceOf(double p0, double p1, RayComposite& composi
                 if (fe != 0)
                     PolyLineAt(poly_[fe], nodeT + first, whole, nodeE + first, depth);
             } else if (be == 0) {
-                many(uc, nodeU + first);
+                many(*uc, nodeU + first);
             } else if (fe == 0) {
-                pair(uc, nodeU + first);
+                pair(*uc, nodeU + first);
             } else {
-                many(uc, nodeU + first);
-                pair(ue, nodeE + first);
+                many(*uc, nodeU + first);
+                pair(*ue, nodeE + first);
             }
             quadratureNodes_ += count;
             // Whole vectors of four (the arrays are padded; the filler's results are not

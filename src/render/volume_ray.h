@@ -386,10 +386,11 @@ class VolumeRayMarcher {
     std::vector<LinearPieceIntegrals> pieceIntegrals_;
     void KronrodPiece(double p0, double p1, RayComposite& composite);
     void SeriesPiece(double p0, double p1, RayComposite& composite);
-    /// SeriesPiece for Williams-Max glow (wm) or not, and one field (oneField) or two.
-    /// How SeriesPieceOf's one field is held: a series (linePtr_), pyramid_
-    /// (BeginPyramidLine) or poly_ (BeginPolyLine).
+    /// How SeriesPieceOf's fields are held: as series (linePtr_), as pyramid_
+    /// (BeginPyramidLine) or as poly_ (BeginPolyLine).
     enum LineKind { kSeriesLine, kPyramidLine, kPolyLine };
+    /// SeriesPiece for Williams-Max glow (wm) or not, one field (oneField) or two, and
+    /// the fields held as `line` says.
     template <bool wm, bool oneField, int line = kSeriesLine>
     void SeriesPieceOf(double p0, double p1, RayComposite& composite);
     /// SeriesPieceOf for the glow model and field count in use.
@@ -411,8 +412,9 @@ class VolumeRayMarcher {
     /// series' own, or the pole is far (the series is short there) or within 1/1024 of
     /// the segment.
     bool BeginPyramidLine(int f, const Segment& seg);
-    /// The crossings of the breakpoints in the cell's range by pyramid_ into crossings_.
-    void PyramidCrossings(int f, const Segment& seg);
+    /// The crossings of the breakpoints in the cell's range by field f held in closed
+    /// form (poly_[f] or pyramid_[f]) into crossings_.
+    void ClosedLineCrossings(int f, const Segment& seg);
     bool Terminate(double t, RayComposite& composite);
     /// Field f (a point field) along a linear tetrahedron's segment from the face points
     /// `ends`: its values at the segment's ends and the bound of their error. False (and
@@ -550,7 +552,8 @@ class VolumeRayMarcher {
     int sampleCount_[2] = {0, 0};
     double samples_[2][2 * (kMaxLegendreDegree + 1)];
     /// The series SeriesPiece reads for each field: pieces_[f][0].p where the field was
-    /// projected, else line_[f] (set by BeginSegment in series mode).
+    /// projected, else line_[f] (set by BeginSegment in series mode; not where the field
+    /// is held in closed form).
     const LegendreSeries* linePtr_[2] = {nullptr, nullptr};
 };
 

@@ -2,6 +2,7 @@
 // ones of render/legendre.h, bitwise, on random series, intervals and points.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -14,6 +15,28 @@ namespace hpray {
 namespace {
 
 bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// EvalPair(p, q) and p.EvalMany at the points t, and the kernels' (the whole-block ones
+// where `whole`): whether each value is bitwise the generic one, per point (p, q, many).
+std::vector<std::array<bool, 3>> KernelsMatch(const LegendreSeries& p,
+                                              const LegendreSeries& q,
+                                              const std::vector<double>& t, bool whole) {
+    const int count = int(t.size());
+    std::vector<double> gp(count), gq(count), gm(count), kp(count, 7), kq(count, 7),
+        km(count, 7);
+    EvalPair(p, q, t.data(), count, gp.data(), gq.data());
+    p.EvalMany(t.data(), count, gm.data());
+    const bool ran =
+        whole ? EvalPairKernelWhole(p, q, t.data(), count, kp.data(), kq.data()) &&
+                    EvalManyKernelWhole(p, t.data(), count, km.data())
+              : EvalPairKernel(p, q, t.data(), count, kp.data(), kq.data()) &&
+                    EvalManyKernel(p, t.data(), count, km.data());
+    std::vector<std::array<bool, 3>> same(count);
+    for (int s = 0; s < count; ++s)
+        same[s] = {ran && SameBits(gp[s], kp[s]), ran && SameBits(gq[s], kq[s]),
+                   ran && SameBits(gm[s], km[s])};
+    return same;
+}
 
 TEST(SeriesEvalKernel, BitwiseTheGenericEvaluations) {
 #if !(defined(__AVX2__) && defined(__FMA__))
@@ -34,20 +57,11 @@ TEST(SeriesEvalKernel, BitwiseTheGenericEvaluations) {
         std::vector<double> t(count);
         for (double& v : t)
             v = p.a + (p.b - p.a) * (0.5 + 0.55 * u(rng));  // some outside
-        std::vector<double> gp(count), gq(count), kp(count, 7), kq(count, 7),
-            km(count, 7);
-        EvalPair(p, q, t.data(), count, gp.data(), gq.data());
-        ASSERT_TRUE(EvalPairKernel(p, q, t.data(), count, kp.data(), kq.data()));
-        std::vector<double> gm(count);
-        p.EvalMany(t.data(), count, gm.data());
-        ASSERT_TRUE(EvalManyKernel(p, t.data(), count, km.data()));
+        const auto same = KernelsMatch(p, q, t, false);
         for (int s = 0; s < count; ++s) {
-            EXPECT_TRUE(SameBits(gp[s], kp[s]))
-                << seed << " " << s << " " << gp[s] - kp[s];
-            EXPECT_TRUE(SameBits(gq[s], kq[s]))
-                << seed << " " << s << " " << gq[s] - kq[s];
-            EXPECT_TRUE(SameBits(gm[s], km[s]))
-                << seed << " " << s << " " << gm[s] - km[s];
+            EXPECT_TRUE(same[s][0]) << seed << " " << s;
+            EXPECT_TRUE(same[s][1]) << seed << " " << s;
+            EXPECT_TRUE(same[s][2]) << seed << " " << s;
             ++compared;
         }
     }
@@ -82,18 +96,11 @@ TEST(SeriesEvalKernel, WholeBlocksAtEveryLowDegreeAreTheGenericEvaluations) {
         const int count = 8 * (1 + seed % 4);
         std::vector<double> t(count);
         for (double& v : t) v = p.a + (p.b - p.a) * (0.5 + 0.55 * u(rng));
-        std::vector<double> gp(count), gq(count), gm(count), kp(count, 7), kq(count, 7),
-            km(count, 7);
-        EvalPair(p, q, t.data(), count, gp.data(), gq.data());
-        p.EvalMany(t.data(), count, gm.data());
-        ASSERT_TRUE(EvalPairKernelWhole(p, q, t.data(), count, kp.data(), kq.data()));
-        ASSERT_TRUE(EvalManyKernelWhole(p, t.data(), count, km.data()));
+        const auto same = KernelsMatch(p, q, t, true);
         for (int s = 0; s < count; ++s) {
-            ASSERT_TRUE(SameBits(gp[s], kp[s]))
-                << seed << " " << np << " " << nq << " " << s;
-            ASSERT_TRUE(SameBits(gq[s], kq[s]))
-                << seed << " " << np << " " << nq << " " << s;
-            ASSERT_TRUE(SameBits(gm[s], km[s])) << seed << " " << np << " " << s;
+            ASSERT_TRUE(same[s][0]) << seed << " " << np << " " << nq << " " << s;
+            ASSERT_TRUE(same[s][1]) << seed << " " << np << " " << nq << " " << s;
+            ASSERT_TRUE(same[s][2]) << seed << " " << np << " " << s;
             ++compared;
         }
     }
